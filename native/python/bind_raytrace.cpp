@@ -1,0 +1,5 @@
+#include "arrays.h"
+
+namespace canopy_ao::py_bind {
+void bind_raytrace(py::module_& m) {}
+}  // namespace canopy_ao::py_bind

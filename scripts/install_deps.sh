@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs the Debian packages Canopy AO needs, only those missing. Safe to re-run.
+# Usage: scripts/install_deps.sh [--with-bench]
+set -euo pipefail
+
+pkgs=(
+  build-essential cmake git pkg-config
+  python3 python3-dev python3-numpy python3-pytest
+  pybind11-dev libembree-dev libopenimageio-dev libtbb-dev
+  libgtest-dev libbenchmark-dev
+  blender
+)
+if [[ "${1:-}" == "--with-bench" ]]; then
+  pkgs+=(python3-matplotlib)
+fi
+
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if ((${#missing[@]})); then
+  echo "canopy-ao: installing ${missing[*]}"
+  SUDO=""
+  [[ $(id -u) -eq 0 ]] || SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
