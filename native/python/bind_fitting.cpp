@@ -1,5 +1,249 @@
+// Canopy AO — Python bindings for the proxy types (Sphere, Ellipsoid) and the fitting functions.
+//
+// The types are registered here, first (module.cpp calls bind_fitting before the other areas),
+// so every other binding can take `const Sphere&` / `const Ellipsoid&` / `std::vector<Ellipsoid>`
+// arguments directly.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <sstream>
+#include <string>
+#include <vector>
+
 #include "arrays.h"
+#include "canopy_ao/geometry.h"
 
 namespace canopy_ao::py_bind {
-void bind_fitting(py::module_& m) {}
+
+namespace {
+
+py::array_t<float> vec3_array(Vec3 v) {
+  py::array_t<float> a(3);
+  auto r = a.mutable_unchecked<1>();
+  for (int i = 0; i < 3; ++i) r(i) = v[i];
+  return a;
+}
+
+float radius_arg(double r, const char* name) {
+  if (!std::isfinite(r) || r < 0) {
+    std::ostringstream s;
+    s << name << " must be a finite number >= 0, got " << r;
+    throw py::value_error(s.str());
+  }
+  return static_cast<float>(r);
+}
+
+Vec3 radii_arg(const py::object& o) {
+  const Vec3 r = vec3_arg(o, "radii");
+  if (!(r.x > 0 && r.y > 0 && r.z > 0)) {
+    std::ostringstream s;
+    s << "radii must be > 0, got (" << r.x << ", " << r.y << ", " << r.z << ")";
+    throw py::value_error(s.str());
+  }
+  return r;
+}
+
+// Axes from a (3, 3) array whose columns are the unit axes. Accepted if orthonormal within
+// 1e-3 (float64 rotation matrices, float32 round-off); then re-orthonormalised exactly
+// (Gram-Schmidt in double) and made right-handed by flipping the third axis, which leaves the
+// ellipsoid's shape unchanged (it is symmetric about every axis).
+void axes_arg(const py::object& o, Vec3 axes[3]) {
+  py::array_t<double, py::array::c_style | py::array::forcecast> a(o);
+  if (a.ndim() != 2 || a.shape(0) != 3 || a.shape(1) != 3) {
+    throw py::value_error("axes must have shape (3, 3) (columns = unit axes), got " +
+                          shape_str(a));
+  }
+  double q[3][3];  // q[k] = k-th axis (column k)
+  for (int k = 0; k < 3; ++k)
+    for (int i = 0; i < 3; ++i) {
+      q[k][i] = a.at(i, k);
+      if (!std::isfinite(q[k][i])) throw py::value_error("axes has a non-finite value");
+    }
+  for (int k = 0; k < 3; ++k)
+    for (int l = 0; l < 3; ++l) {
+      const double d = q[k][0] * q[l][0] + q[k][1] * q[l][1] + q[k][2] * q[l][2];
+      if (std::abs(d - (k == l ? 1.0 : 0.0)) > 1e-3) {
+        throw py::value_error(
+            "axes must be orthonormal (columns = unit axes, within 1e-3); got a column dot "
+            "product of " +
+            std::to_string(d) + " for columns " + std::to_string(k) + ", " + std::to_string(l));
+      }
+    }
+  for (int k = 0; k < 3; ++k) {
+    for (int l = 0; l < k; ++l) {
+      const double d = q[k][0] * q[l][0] + q[k][1] * q[l][1] + q[k][2] * q[l][2];
+      for (int i = 0; i < 3; ++i) q[k][i] -= d * q[l][i];
+    }
+    const double n = std::sqrt(q[k][0] * q[k][0] + q[k][1] * q[k][1] + q[k][2] * q[k][2]);
+    for (int i = 0; i < 3; ++i) q[k][i] /= n;
+  }
+  const double det = q[0][0] * (q[1][1] * q[2][2] - q[1][2] * q[2][1]) -
+                     q[0][1] * (q[1][0] * q[2][2] - q[1][2] * q[2][0]) +
+                     q[0][2] * (q[1][0] * q[2][1] - q[1][1] * q[2][0]);
+  if (det < 0)
+    for (int i = 0; i < 3; ++i) q[2][i] = 0.0 - q[2][i];  // 0 - x: no -0 in output
+  for (int k = 0; k < 3; ++k)
+    axes[k] = Vec3{static_cast<float>(q[k][0]), static_cast<float>(q[k][1]),
+                   static_cast<float>(q[k][2])};
+}
+
+py::array_t<float> axes_array(const Ellipsoid& e) {
+  py::array_t<float> a({3, 3});
+  auto r = a.mutable_unchecked<2>();
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) r(i, k) = e.axes[k][i];
+  return a;
+}
+
+Ellipsoid make_ellipsoid(const py::object& center, const py::object& axes,
+                         const py::object& radii) {
+  Ellipsoid e;
+  e.center = vec3_arg(center, "center");
+  axes_arg(axes, e.axes);
+  e.radii = radii_arg(radii);
+  return e;
+}
+
+// Containment in double with a relative slack of `tol` on the squared unit-frame norm, so a
+// point on the surface (up to float32 round-off) counts as inside.
+py::array_t<bool> contains_points(const py::array& points, double tol,
+                                  bool (*inside)(const void*, const float*, double),
+                                  const void* shape) {
+  const PointsView p = points_arg(points, "points", /*allow_empty=*/true);
+  if (!std::isfinite(tol) || tol < 0) throw py::value_error("tol must be finite and >= 0");
+  py::array_t<bool> out(static_cast<py::ssize_t>(p.size));
+  bool* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    for (std::size_t i = 0; i < p.size; ++i) o[i] = inside(shape, p.data + 3 * i, tol);
+  }
+  return out;
+}
+
+bool sphere_inside(const void* shape, const float* x, double tol) {
+  const auto& s = *static_cast<const Sphere*>(shape);
+  double d2 = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double d = double(x[k]) - double(s.center[k]);
+    d2 += d * d;
+  }
+  const double r = s.radius;
+  return d2 <= r * r * (1 + tol) + 1e-30;
+}
+
+bool ellipsoid_inside(const void* shape, const float* x, double tol) {
+  const auto& e = *static_cast<const Ellipsoid*>(shape);
+  double d[3], u2 = 0;
+  for (int k = 0; k < 3; ++k) d[k] = double(x[k]) - double(e.center[k]);
+  for (int k = 0; k < 3; ++k) {
+    const double u = (e.axes[k].x * d[0] + e.axes[k].y * d[1] + e.axes[k].z * d[2]) /
+                     double(e.radii[k]);
+    u2 += u * u;
+  }
+  return u2 <= 1 + tol;
+}
+
+std::string fmt(Vec3 v) {
+  std::ostringstream s;
+  s << "(" << v.x << ", " << v.y << ", " << v.z << ")";
+  return s.str();
+}
+
+}  // namespace
+
+void bind_fitting(py::module_& m) {
+  // === Types
+  py::class_<Sphere>(m, "Sphere",
+                     "A sphere proxy: .center (3,) float32, .radius float (>= 0).")
+      .def(py::init([](const py::object& center, double radius) {
+             Sphere s;
+             s.center = vec3_arg(center, "center");
+             s.radius = radius_arg(radius, "radius");
+             return s;
+           }),
+           py::arg("center"), py::arg("radius"),
+           "Sphere(center, radius): center 3 finite numbers, radius finite >= 0.")
+      .def_property(
+          "center", [](const Sphere& s) { return vec3_array(s.center); },
+          [](Sphere& s, const py::object& c) { s.center = vec3_arg(c, "center"); },
+          "Centre, a new (3,) float32 array (assign 3 numbers to change it).")
+      .def_property(
+          "radius", [](const Sphere& s) { return double(s.radius); },
+          [](Sphere& s, double r) { s.radius = radius_arg(r, "radius"); }, "Radius (>= 0).")
+      .def(
+          "contains",
+          [](const Sphere& s, const py::array& points, double tol) {
+            return contains_points(points, tol, &sphere_inside, &s);
+          },
+          py::arg("points"), py::arg("tol") = 1e-5,
+          "contains(points, tol=1e-5) -> bool (N,): |p - center|^2 <= radius^2 (1 + tol); "
+          "points float32 (N, 3).")
+      .def("__repr__",
+           [](const Sphere& s) {
+             std::ostringstream o;
+             o << "Sphere(center=" << fmt(s.center) << ", radius=" << s.radius << ")";
+             return o.str();
+           })
+      .def(py::pickle(
+          [](const Sphere& s) { return py::make_tuple(vec3_array(s.center), double(s.radius)); },
+          [](const py::tuple& t) {
+            if (t.size() != 2) throw py::value_error("bad Sphere pickle state");
+            Sphere s;
+            s.center = vec3_arg(t[0], "center");
+            s.radius = radius_arg(t[1].cast<double>(), "radius");
+            return s;
+          }));
+
+  py::class_<Ellipsoid>(
+      m, "Ellipsoid",
+      "An ellipsoid proxy { x : |diag(1/radii) axes^T (x - center)| <= 1 }: .center (3,), "
+      ".axes (3, 3) whose columns are the unit axes (orthonormal, right-handed), .radii (3,) "
+      "> 0. All float32.")
+      .def(py::init(&make_ellipsoid), py::arg("center"), py::arg("axes"), py::arg("radii"),
+           "Ellipsoid(center, axes, radii): axes (3, 3), columns = unit axes, orthonormal "
+           "within 1e-3 (re-orthonormalised; a left-handed set has its third axis flipped, "
+           "which leaves the shape unchanged); radii 3 numbers > 0.")
+      .def_static("from_sphere", &Ellipsoid::from_sphere, py::arg("sphere"),
+                  "The ellipsoid equal to a sphere (identity axes, equal radii).")
+      .def_property(
+          "center", [](const Ellipsoid& e) { return vec3_array(e.center); },
+          [](Ellipsoid& e, const py::object& c) { e.center = vec3_arg(c, "center"); },
+          "Centre, a new (3,) float32 array.")
+      .def_property(
+          "axes", [](const Ellipsoid& e) { return axes_array(e); },
+          [](Ellipsoid& e, const py::object& a) { axes_arg(a, e.axes); },
+          "(3, 3) float32, columns = unit axes (a new array each time).")
+      .def_property(
+          "radii", [](const Ellipsoid& e) { return vec3_array(e.radii); },
+          [](Ellipsoid& e, const py::object& r) { e.radii = radii_arg(r); },
+          "Semi-axis lengths along each axis, (3,) float32, > 0.")
+      .def("volume", &Ellipsoid::volume, "4/3 pi a b c.")
+      .def(
+          "contains",
+          [](const Ellipsoid& e, const py::array& points, double tol) {
+            return contains_points(points, tol, &ellipsoid_inside, &e);
+          },
+          py::arg("points"), py::arg("tol") = 1e-5,
+          "contains(points, tol=1e-5) -> bool (N,): |diag(1/r) Q^T (p - c)|^2 <= 1 + tol; "
+          "points float32 (N, 3).")
+      .def("__repr__",
+           [](const Ellipsoid& e) {
+             std::ostringstream o;
+             o << "Ellipsoid(center=" << fmt(e.center) << ", axes=[" << fmt(e.axes[0]) << ", "
+               << fmt(e.axes[1]) << ", " << fmt(e.axes[2]) << "], radii=" << fmt(e.radii)
+               << ")";
+             return o.str();
+           })
+      .def(py::pickle(
+          [](const Ellipsoid& e) {
+            return py::make_tuple(vec3_array(e.center), axes_array(e), vec3_array(e.radii));
+          },
+          [](const py::tuple& t) {
+            if (t.size() != 3) throw py::value_error("bad Ellipsoid pickle state");
+            return make_ellipsoid(t[0], t[1], t[2]);
+          }));
+}
+
 }  // namespace canopy_ao::py_bind
