@@ -1,0 +1,121 @@
+// Canopy AO — ray-traced ambient occlusion with Embree 3: the exact answer (up to sampling
+// noise), the reference every approximate model is checked against, and the source of
+// calibration samples (DESIGN 3.7, 5).
+//
+// What it computes (DESIGN 2, Cycles' meaning, DESIGN 9):
+//
+//     AO(x, n) = (1/π) ∫_hemisphere(n) V_D(x, ω) (ω·n) dω        in [0, 1], 1 = open sky
+//
+// estimated with `samples` cosine-weighted directions per point (Malley's method: uniform
+// points on the unit disk lifted to the hemisphere, so AO = unblocked rays / samples).
+// V_D(x, ω) = 1 when the ray from x along ω hits no triangle closer than `distance` (a hard
+// cut-off, Cycles' world.light_settings.distance; no falloff). Triangles are two-sided: a ray
+// stops at a leaf from either side, whatever the winding.
+//
+// Sampling: each point gets the same low-discrepancy set (a Fibonacci lattice on [0,1)², mapped
+// to the cosine-weighted hemisphere around an orthonormal basis built from n with the branchless
+// construction of Duff et al., "Building an Orthonormal Basis, Revisited", JCGT 6(1), 2017),
+// shifted by a Cranley–Patterson rotation seeded from hash(row index, seed). So every point's
+// estimate is unbiased, stratified, and depends only on (its row index, seed, its own data):
+// never on the thread count, the block split or other points. No rand(), no global state.
+//
+// Origins: x + offset · n̂, rays from t = 0 to t = distance. offset < 0 (the default) means
+// automatic: 1e-4 × the scene's bounding-box diagonal + 1e-6 × the largest absolute vertex
+// coordinate (float precision far from the origin). A leaf's own vertex therefore does not see
+// its own triangle.
+//
+// Edge cases (measured, never NaN, never a crash — DESIGN 8):
+//  - empty mesh (0 triangles, any vertex count including 0): nothing occludes, AO = 1 everywhere;
+//  - zero-length normal: no hemisphere is defined; AO = 1 (documented fallback);
+//  - normals need not be unit length: they are normalised;
+//  - non-finite vertex, point or normal coordinates: std::invalid_argument;
+//  - triangle index outside [0, V): std::invalid_argument;
+//  - samples < 1, distance ≤ 0 or NaN, offset NaN: std::invalid_argument;
+//  - a failure reported by Embree (out of memory, ...): canopy_ao::Error with Embree's message.
+//
+// Thread safety: a built RayTracer is immutable; ao() may be called from several threads at
+// once. Work inside one call runs on all cores (canopy_ao::parallel_for_blocks, capped by
+// set_max_threads); the BVH build honours the same cap.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "canopy_ao/geometry.h"
+
+namespace canopy_ao {
+
+// === Options
+/// Per-call settings of the ray-traced AO. Defaults match the Python API.
+struct RayTraceOptions {
+  /// Cosine-weighted rays per point (≥ 1). The standard error at AO = a is at most
+  /// sqrt(a(1−a)/samples) and, thanks to stratification, usually well below it.
+  int samples = 64;
+  /// AO distance D in scene units (> 0; +inf = unlimited): occluders farther than D along a ray
+  /// do not count (Cycles' world.light_settings.distance, a hard cut-off).
+  float distance = std::numeric_limits<float>::infinity();
+  /// Seed of the per-point rotations. Same seed → bit-identical results; another seed → other
+  /// noise with the same expectation.
+  std::uint32_t seed = 0;
+  /// Ray origin offset along the normal, scene units (≥ 0), or < 0 for automatic (see above).
+  float offset = -1.0f;
+};
+
+/// How the Embree scene is built (tuning, not semantics: results are the same up to float
+/// rounding at triangle edges).
+struct RayTracerBuildOptions {
+  /// RTC_BUILD_QUALITY_HIGH (spatial splits: slower build, faster traversal) instead of MEDIUM.
+  bool high_quality = false;
+  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed, DESIGN 9).
+  bool robust = false;
+};
+
+// === Ray tracer
+/// An Embree scene of two-sided triangles, built once (expensive: reuse it for many queries).
+class RayTracer {
+ public:
+  // === Constructor
+  /// vertices: #V by 3 positions (packed xyz, finite); triangles: #M by 3 vertex indices in
+  /// [0, V), row-major (`triangles[3*j + k]`). The data are copied: the arrays may be freed
+  /// afterwards. M may be 0 (then AO = 1 everywhere).
+  /// Throws std::invalid_argument on bad input, canopy_ao::Error if Embree fails.
+  RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+            const RayTracerBuildOptions& build = {});
+  ~RayTracer();
+  RayTracer(RayTracer&&) noexcept;
+  RayTracer& operator=(RayTracer&&) noexcept;
+  RayTracer(const RayTracer&) = delete;
+  RayTracer& operator=(const RayTracer&) = delete;
+
+  // === Methods
+  /// AO at N query points with normals (each #N by 3), written to out[0..N). Normals need not
+  /// be unit length; a zero normal gives 1. `out` must hold N floats.
+  void ao(PointsView points, PointsView normals, const RayTraceOptions& options,
+          float* out) const;
+  /// Same, returning a new vector of N values in [0, 1].
+  std::vector<float> ao(PointsView points, PointsView normals,
+                        const RayTraceOptions& options = {}) const;
+  /// AO at every vertex of the mesh itself (#V values), with the given #V by 3 vertex normals.
+  std::vector<float> ao_at_vertices(PointsView normals, const RayTraceOptions& options = {}) const;
+
+  /// The offset used when RayTraceOptions::offset < 0.
+  float auto_offset() const;
+  std::size_t vertex_count() const;
+  std::size_t triangle_count() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// === One-off
+/// Builds a RayTracer and evaluates AO once (the build dominates for few points: keep a
+/// RayTracer when calling repeatedly). Shapes and errors as RayTracer and RayTracer::ao.
+std::vector<float> ao_raytrace(PointsView vertices, const std::int32_t* triangles,
+                               std::size_t triangle_count, PointsView points, PointsView normals,
+                               const RayTraceOptions& options = {});
+
+}  // namespace canopy_ao
