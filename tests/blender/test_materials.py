@@ -1,0 +1,132 @@
+"""materials.py: wiring is idempotent and unwire restores the material exactly."""
+import bpy
+import pytest
+
+import helpers_materials as H
+from canopy_ao import materials
+
+
+@pytest.fixture
+def scene():
+    return H.empty_scene()
+
+
+def _source(mat):
+    return [n for n in mat.node_tree.nodes if n.get("canopy_ao") == "source"]
+
+
+def test_wire_twice_adds_nothing(scene):
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    n0 = len(mat.node_tree.nodes)
+    added = materials.wire_vertex_ao(obj, "CanopyAO")
+    assert added == 3  # attribute, multiply, AOV output
+    assert len(mat.node_tree.nodes) == n0 + 3
+    links1 = len(mat.node_tree.links)
+    assert materials.wire_vertex_ao(obj, "CanopyAO") == 0
+    assert len(mat.node_tree.nodes) == n0 + 3
+    assert len(mat.node_tree.links) == links1
+    src = _source(mat)[0]
+    assert src.bl_idname == "ShaderNodeVertexColor" and src.layer_name == "CanopyAO"
+    # AO reaches Base Color through the multiply node
+    base = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"]
+    assert base.is_linked and base.links[0].from_node.get("canopy_ao") == "mix"
+    aov = next(n for n in mat.node_tree.nodes if n.get("canopy_ao") == "aov")
+    assert aov.bl_idname == "ShaderNodeOutputAOV"
+    assert getattr(aov, "aov_name", aov.name) == "BakedAO"
+
+
+def test_unwire_restores_unlinked_base_color(scene):
+    obj = H.add_plane()
+    mat = H.add_material(obj, color=(0.1, 0.2, 0.3, 1.0))
+    before = H.tree_snapshot(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    assert materials.unwire(obj) == 3
+    assert H.tree_snapshot(mat) == before
+    base = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"]
+    assert not base.is_linked
+    assert tuple(base.default_value) == pytest.approx((0.1, 0.2, 0.3, 1.0))
+    assert materials.unwire(obj) == 0
+
+
+def test_unwire_restores_original_link(scene):
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    nt = mat.node_tree
+    rgb = nt.nodes.new("ShaderNodeRGB")
+    nt.links.new(rgb.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Base Color"])
+    before = H.tree_snapshot(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    # the user's colour now feeds the multiply node, not Base Color directly
+    assert nt.nodes["Principled BSDF"].inputs["Base Color"].links[0].from_node != rgb
+    materials.unwire(obj)
+    assert H.tree_snapshot(mat) == before
+    assert nt.nodes["Principled BSDF"].inputs["Base Color"].links[0].from_node == rgb
+
+
+def test_object_without_material_gets_ours_and_loses_it(scene):
+    obj = H.add_plane()
+    assert len(obj.material_slots) == 0
+    n_mats = len(bpy.data.materials)
+    assert materials.wire_vertex_ao(obj, "CanopyAO") == 3
+    mat = obj.material_slots[0].material
+    assert mat.get("canopy_ao")
+    materials.unwire(obj)
+    assert len(obj.material_slots) == 0
+    assert len(bpy.data.materials) == n_mats
+
+
+def test_two_materials_shared(scene):
+    a = H.add_plane(name="A")
+    b = H.add_plane(location=(3, 0, 0), name="B")
+    m1 = H.add_material(a, "M1")
+    m2 = H.add_material(a, "M2")
+    b.data.materials.append(m1)
+    assert materials.wire_vertex_ao(a, "CanopyAO") == 6
+    assert materials.wire_vertex_ao(b, "CanopyAO") == 0  # shares M1, already wired
+    materials.unwire(a)
+    assert not any(n.get("canopy_ao") for m in (m1, m2) for n in m.node_tree.nodes)
+
+
+def test_switch_vertex_to_texel_and_back(scene):
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    before = H.tree_snapshot(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    img = bpy.data.images.new("img", 4, 4, float_buffer=True)
+    assert materials.wire_texel_ao(obj, img, "UVMap") == 2  # image + UV map (replaces attribute)
+    src = _source(mat)
+    assert len(src) == 1 and src[0].bl_idname == "ShaderNodeTexImage" and src[0].image == img
+    uv = [n for n in mat.node_tree.nodes if n.get("canopy_ao") == "uv"]
+    assert len(uv) == 1 and uv[0].uv_map == "UVMap"
+    assert materials.wire_texel_ao(obj, img, "UVMap") == 0
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    assert not [n for n in mat.node_tree.nodes if n.get("canopy_ao") == "uv"]
+    materials.unwire(obj)
+    assert H.tree_snapshot(mat) == before
+
+
+def test_mix_node_type(scene):
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    mix = next(n for n in mat.node_tree.nodes if n.get("canopy_ao") == "mix")
+    expected = "ShaderNodeMix" if hasattr(bpy.types, "ShaderNodeMix") else "ShaderNodeMixRGB"
+    assert mix.bl_idname == expected and mix.blend_type == "MULTIPLY"
+
+
+def test_material_without_nodes(scene):
+    obj = H.add_plane()
+    mat = bpy.data.materials.new("Plain")
+    mat.use_nodes = False
+    obj.data.materials.append(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    assert mat.use_nodes
+    materials.unwire(obj)
+    assert not mat.use_nodes
+
+
+def test_non_mesh_refused(scene):
+    bpy.ops.object.empty_add()
+    with pytest.raises(ValueError, match="not a mesh"):
+        materials.wire_vertex_ao(bpy.context.object, "CanopyAO")
