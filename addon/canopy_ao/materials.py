@@ -359,7 +359,19 @@ def remove_view_layer_aov(scene, aov_name):
     """Remove the view-layer AOV named aov_name from every view layer. Returns how many."""
     n = 0
     for vl in scene.view_layers:
-        for aov in [a for a in vl.aovs if a.name == aov_name]:
-            vl.aovs.remove(aov)
+        while True:
+            idx = next((i for i, a in enumerate(vl.aovs) if a.name == aov_name), None)
+            if idx is None:
+                break
+            if hasattr(vl.aovs, "remove"):  # 4.x
+                vl.aovs.remove(vl.aovs[idx])
+            else:  # 3.4 has no collection remove(); the operator removes the active AOV
+                vl.active_aov_index = idx
+                before = len(vl.aovs)
+                with bpy.context.temp_override(scene=scene, view_layer=vl):
+                    bpy.ops.scene.view_layer_remove_aov()
+                if len(vl.aovs) == before:
+                    raise RuntimeError(f"Could not remove AOV '{aov_name}' from view layer "
+                                       f"'{vl.name}'; remove it in View Layer > Shader AOV")
             n += 1
     return n
