@@ -1,0 +1,500 @@
+"""The bake, in numpy and the native core; no bpy (issue 3, item 3; DESIGN 3, 5, 7).
+
+Input: scene items (name, role, tree, world positions, world normals, triangles) and
+:class:`BakeSettings`. Output: one float32 AO array per item (1 = open sky) and a report: fitted
+proxies per tree, τ, the method chosen and why, timings.
+
+How each role is lit (DESIGN 3):
+- CANOPY / TRUNK of tree t: points inside t's shells get the in-shell model (sphere, ellipsoid or
+  several shells, Hegeman Eq. 4-6); points outside them see t's shells as occluders; every other
+  tree's shells and trunks are occluders.
+- GROUND: every tree's shells (as semi-transparent occluders) and every trunk (a solid ellipsoid
+  fitted to the trunk) are occluders.
+- GRASS: Hegeman Eq. 9 with ground level and blade height found from the blades (connected
+  components) × the same occluders as the ground.
+- method "raytrace": Embree rays against every non-ignored triangle of the scene.
+
+The work is split so a modal operator can do one object per tick: :func:`prepare` fits the
+proxies and calibrates; :func:`evaluate_item` bakes one item; :func:`bake` does both.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import roles as _roles
+
+try:  # the add-on must load without it; the caller reports why (see core_status()).
+    from . import _core
+    _CORE_ERROR = None
+except Exception as exc:  # ImportError, or an undefined symbol from a stale build
+    _core = None
+    _CORE_ERROR = f"{type(exc).__name__}: {exc}"
+
+# Method ladder, cheapest first (DESIGN 3). "grid" exists only when the core has DensityGrid.
+ANALYTIC_METHODS = ("sphere", "ellipsoid", "shells")
+METHODS = ("auto",) + ANALYTIC_METHODS + ("reeves_blau", "grid", "raytrace")
+RECEIVER_ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS")
+DEFAULT_TAU = 1.5
+UP = np.array([0.0, 0.0, 1.0], dtype=np.float32)
+
+
+# Native functions this process had to replace with numpy stand-ins (see _fallback.py).
+FALLBACKS_USED: set = set()
+
+
+class EngineError(RuntimeError):
+    """A bake that cannot be done, with a message a user can act on."""
+
+
+def core_status() -> tuple[bool, str]:
+    """(available, message). The message says how to fix a missing or broken module."""
+    if _core is not None:
+        return True, f"native core loaded ({_core.__file__})"
+    import sys
+    return False, (
+        f"Canopy AO's native module could not be loaded ({_CORE_ERROR}). It must be built for "
+        f"this Blender's Python {sys.version_info.major}.{sys.version_info.minor}: run "
+        "'cmake -S . -B build-addon && cmake --build build-addon -j2' in the Canopy AO source "
+        "tree (it copies _core*.so into addon/canopy_ao/), then restart Blender.")
+
+
+def available_methods() -> tuple[str, ...]:
+    """Methods the loaded core can run."""
+    out = [m for m in METHODS if m != "grid"]
+    if _core is not None and hasattr(_core, "DensityGrid"):
+        out.insert(out.index("raytrace"), "grid")
+    return tuple(out)
+
+
+def _need(name: str):
+    if _core is None:
+        raise EngineError(core_status()[1])
+    fn = getattr(_core, name, None)
+    if fn is None:
+        from . import _fallback
+        fn = getattr(_fallback, name, None)
+        if fn is not None:
+            FALLBACKS_USED.add(name)
+            return fn
+        raise EngineError(
+            f"the native module has no '{name}' yet (built from an older source?): rebuild with "
+            "'cmake --build build-addon -j2' and restart Blender")
+    return fn
+
+
+# === Data ====================================================================================
+
+@dataclass
+class SceneItem:
+    """One mesh object, in world space. positions/normals: float32 (N, 3); triangles int32 (M, 3)."""
+
+    name: str
+    role: str
+    tree: str
+    positions: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+
+    def __post_init__(self):
+        self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
+        self.normals = np.ascontiguousarray(self.normals, dtype=np.float32).reshape(-1, 3)
+        self.triangles = np.ascontiguousarray(self.triangles, dtype=np.int32).reshape(-1, 3)
+        if self.role not in _roles.ROLES:
+            raise EngineError(f"{self.name}: unknown role {self.role!r} (one of {_roles.ROLES})")
+        if len(self.positions) != len(self.normals):
+            raise EngineError(f"{self.name}: {len(self.positions)} positions but "
+                              f"{len(self.normals)} normals")
+
+
+@dataclass
+class BakeSettings:
+    """method: one of METHODS. tau: optical depth (AO at a shell's centre = exp(-tau)); None =
+    calibrate. distance: AO distance in scene units, 0 = unlimited (Cycles' meaning: a hard
+    cut-off on ray length; the analytic models ignore it). samples: rays per point for
+    "raytrace". shells: k for "shells". calibration_points: reference points traced for "auto"."""
+
+    method: str = "auto"
+    tau: float | None = None
+    distance: float = 0.0
+    samples: int = 64
+    shells: int = 4
+    trim: float = 0.0
+    calibration_points: int = 256
+    calibration_samples: int = 128
+    seed: int = 0
+
+
+@dataclass
+class Plan:
+    """What prepare() decided: proxies per tree, method, τ, and the shared state for the bake."""
+
+    settings: BakeSettings
+    method: str
+    tau: float
+    fits: dict = field(default_factory=dict)  # tree -> (Sphere, Ellipsoid, [Ellipsoid] shells)
+    proxies: dict = field(default_factory=dict)  # tree -> [Ellipsoid] the chosen method's shells
+    trunks: dict = field(default_factory=dict)  # tree -> list of _core.Ellipsoid (solid)
+    grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
+    tracer: object = None
+    grid: object = None
+    calibration: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+
+@dataclass
+class ItemResult:
+    name: str
+    role: str
+    tree: str
+    method: str
+    ao: np.ndarray
+    seconds: float
+
+    @property
+    def vertices(self) -> int:
+        return int(len(self.ao))
+
+
+# === Proxies =================================================================================
+
+def _fit_tree(points: np.ndarray, settings: BakeSettings):
+    """Fitted canopy proxies for one tree: (sphere, [ellipsoid], [k shells])."""
+    sphere = _need("fit_sphere")(points, trim=settings.trim)
+    ell = _need("fit_ellipsoid")(points, trim=settings.trim)
+    k = max(1, min(settings.shells, len(points) // 64))
+    if k > 1 and hasattr(_core, "fit_shells"):
+        shells, _labels = _core.fit_shells(points, k, kind="ellipsoid", trim=settings.trim,
+                                           seed=settings.seed)
+        shells = list(shells)
+    else:
+        shells = [ell]
+    return sphere, ell, shells
+
+
+def proxy_dicts(plan: Plan) -> dict:
+    """Proxies as plain data {tree: [{"center", "axes", "radii"}]} for display and JSON."""
+    out = {}
+    for tree, shells in plan.proxies.items():
+        out[tree] = [{"center": np.asarray(e.center, float).tolist(),
+                      "axes": np.asarray(e.axes, float).tolist(),
+                      "radii": np.asarray(e.radii, float).tolist()} for e in shells]
+    return out
+
+
+# === Evaluation ==============================================================================
+
+def _occluders(p, n, shells, tau, solid=False):
+    if not shells or len(p) == 0:
+        return np.ones(len(p), np.float32)
+    return _need("ao_occluders")(p, n, list(shells), float(tau), solid=solid)
+
+
+def _in_shell(p, n, tree_fit, method, tau):
+    """The in-shell model for a tree's own receivers (DESIGN 3.1-3.3, 3.7)."""
+    sphere, ell, shells = tree_fit
+    if method == "sphere":
+        return _need("ao_canopy_sphere")(p, n, sphere, float(tau))
+    if method == "ellipsoid":
+        return _need("ao_canopy_ellipsoid")(p, n, ell, float(tau))
+    if method == "reeves_blau":
+        return _need("ao_reeves_blau")(p, n, ell, float(tau))
+    if method == "shells":
+        if len(shells) == 1:
+            return _need("ao_canopy_ellipsoid")(p, n, shells[0], float(tau))
+        return _need("ao_canopy_shells")(p, n, list(shells), float(tau), combine="product")
+    raise EngineError(f"unknown analytic method {method!r}")
+
+
+def _own_shells(plan, tree, method):
+    sphere, ell, shells = plan.fits[tree]
+    if method == "sphere":
+        return [_core.Ellipsoid.from_sphere(sphere)]
+    if method in ("ellipsoid", "reeves_blau"):
+        return [ell]
+    return list(shells)
+
+
+def _evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
+                     p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
+    """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree."""
+    if len(p) == 0:
+        return np.ones(0, np.float32)
+    if method == "raytrace":
+        return _trace(plan, p, n, plan.settings.samples)
+    if method == "grid":
+        return np.asarray(plan.grid.ao(p, n), dtype=np.float32)
+    ao = np.ones(len(p), np.float32)
+    # Other trees' canopies and trunks (own tree handled below).
+    others = [e for t in plan.fits if t != tree for e in _own_shells(plan, t, method)]
+    ao *= _occluders(p, n, others, tau)
+    solids = [e for t, es in plan.trunks.items() if t != tree or role in ("GROUND", "GRASS")
+              for e in es]
+    ao *= _occluders(p, n, solids, tau, solid=True)
+    if role in ("CANOPY", "TRUNK"):
+        if tree in plan.fits:
+            own = _own_shells(plan, tree, method)
+            inside = np.zeros(len(p), bool)
+            for e in own:
+                inside |= np.asarray(e.contains(p), bool)
+            part = np.ones(len(p), np.float32)
+            if inside.any():
+                pi = np.ascontiguousarray(p[inside])
+                ni = np.ascontiguousarray(n[inside])
+                part[inside] = _in_shell(pi, ni, plan.fits[tree], method, tau)
+            if (~inside).any():
+                po = np.ascontiguousarray(p[~inside])
+                no = np.ascontiguousarray(n[~inside])
+                part[~inside] = _occluders(po, no, own, tau)
+            ao *= part
+    elif role == "GROUND":
+        ao *= _occluders(p, n, [e for t in plan.fits for e in _own_shells(plan, t, method)], tau)
+    elif role == "GRASS":
+        ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
+        ao *= _need("ao_grass")(p, n, float(ground), float(blade))
+        ao *= _occluders(p, n, [e for t in plan.fits for e in _own_shells(plan, t, method)], tau)
+    return np.clip(ao, 0.0, 1.0).astype(np.float32, copy=False)
+
+
+def _trace(plan: Plan, p, n, samples):
+    if plan.tracer is None:
+        raise EngineError("ray tracing needs the scene's triangles; none were given")
+    d = plan.settings.distance
+    return plan.tracer.ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
+                          seed=plan.settings.seed)
+
+
+# === Calibration (DESIGN 5) ==================================================================
+
+def _sample_receivers(items, count, seed):
+    """Up to ``count`` receiver points spread over the items in proportion to their size, at
+    least a few per item so small objects (a trunk) are represented."""
+    rng = np.random.default_rng(seed)
+    receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
+    total = sum(len(it.positions) for it in receivers)
+    picks = []
+    for it in receivers:
+        m = min(len(it.positions), max(16, int(round(count * len(it.positions) / max(total, 1)))))
+        idx = np.sort(rng.choice(len(it.positions), size=m, replace=False))
+        picks.append((it, idx))
+    return picks
+
+
+def _golden_min(f, lo, hi, iters=24):
+    """Minimise a unimodal f on [lo, hi] by golden-section search."""
+    g = (math.sqrt(5) - 1) / 2
+    a, b = lo, hi
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(iters):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)
+    return (c, fc) if fc < fd else (d, fd)
+
+
+def calibrate(plan: Plan, items, candidates, tau_fixed=None):
+    """Pick τ (unless fixed) and a method among ``candidates`` against ray-traced samples.
+
+    Traces a few hundred receiver points (DESIGN 5), then for each candidate finds the τ that
+    minimises the mean squared error (golden-section search on log τ in [0.02, 50]) and walks up
+    the ladder only while the error drops by more than 10 %. Returns (method, tau, info dict).
+    Kept apart so a better search can replace it.
+    """
+    s = plan.settings
+    picks = _sample_receivers(items, s.calibration_points, s.seed)
+    t0 = time.perf_counter()
+    refs, groups = [], []
+    for it, idx in picks:
+        p = np.ascontiguousarray(it.positions[idx])
+        n = np.ascontiguousarray(it.normals[idx])
+        refs.append(_trace(plan, p, n, s.calibration_samples))
+        groups.append((it, p, n))
+    ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
+    t_trace = time.perf_counter() - t0
+
+    def err(method, tau):
+        got = [_evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
+               for it, p, n in groups]
+        got = np.concatenate(got) if got else np.zeros(0, np.float32)
+        return float(np.mean((got - ref) ** 2)) if len(ref) else 0.0
+
+    results = {}
+    for m in candidates:
+        if tau_fixed is not None:
+            results[m] = (float(tau_fixed), err(m, tau_fixed))
+        else:
+            lt, e = _golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
+            results[m] = (math.exp(lt), e)
+    chosen = candidates[0]
+    for m in candidates[1:]:
+        if results[m][1] < 0.9 * results[chosen][1]:
+            chosen = m
+    info = {
+        "points": int(len(ref)),
+        "reference_samples": s.calibration_samples,
+        "trace_seconds": t_trace,
+        "seconds": time.perf_counter() - t0,
+        "candidates": {m: {"tau": t, "rmse": math.sqrt(e)} for m, (t, e) in results.items()},
+        "chosen": chosen,
+        "why": (f"{chosen}: lowest rung whose sample RMSE {math.sqrt(results[chosen][1]):.3f} "
+                "is not beaten by more than 10 % by a richer one"),
+    }
+    return chosen, results[chosen][0], info
+
+
+# === Public entry points =====================================================================
+
+def prepare(items, settings: BakeSettings) -> Plan:
+    """Fit the proxies, build the ray tracer if needed, calibrate. Raises EngineError."""
+    if settings.method not in METHODS:
+        raise EngineError(f"unknown method {settings.method!r}; one of {', '.join(METHODS)}")
+    if settings.method not in available_methods():
+        raise EngineError(f"method {settings.method!r} is not available in this build")
+    if settings.tau is not None and not (settings.tau > 0 and math.isfinite(settings.tau)):
+        raise EngineError(f"tau must be a finite number > 0, got {settings.tau}")
+    items = list(items)
+    t_start = time.perf_counter()
+    plan = Plan(settings=settings, method=settings.method,
+                tau=settings.tau if settings.tau is not None else DEFAULT_TAU)
+    # Proxies per tree, from its canopy points (trunk points are receivers, not shape: DESIGN 4).
+    t0 = time.perf_counter()
+    trees = {}
+    for it in items:
+        if it.role == "CANOPY" and len(it.positions):
+            trees.setdefault(it.tree, []).append(it.positions)
+    for tree, pts in trees.items():
+        pts = np.ascontiguousarray(np.concatenate(pts), dtype=np.float32)
+        sphere, ell, shells = _fit_tree(pts, settings)
+        plan.fits[tree] = (sphere, ell, shells)
+    for it in items:
+        if it.role == "TRUNK" and len(it.positions) >= 4:
+            plan.trunks.setdefault(it.tree, []).append(_need("fit_ellipsoid")(it.positions))
+        if it.role == "GRASS":
+            plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
+    plan.timings["fit"] = time.perf_counter() - t0
+
+    needs_tracer = settings.method == "raytrace" or (
+        settings.method == "auto" or settings.tau is None) and bool(plan.fits)
+    if needs_tracer:
+        t0 = time.perf_counter()
+        try:
+            plan.tracer = _build_tracer(items)
+        except EngineError as exc:
+            if settings.method == "raytrace":
+                raise
+            plan.notes.append(f"calibration skipped: {exc}")
+        plan.timings["tracer"] = time.perf_counter() - t0
+
+    if settings.method == "grid":
+        plan.grid = _build_grid(items, settings)
+
+    # Method and τ for the analytic rungs.
+    analytic = settings.method in ANALYTIC_METHODS + ("reeves_blau", "auto")
+    if analytic and plan.fits:
+        candidates = list(ANALYTIC_METHODS) if settings.method == "auto" else [settings.method]
+        if plan.tracer is not None and (settings.method == "auto" or settings.tau is None):
+            method, tau, info = calibrate(plan, items, candidates, settings.tau)
+            plan.method, plan.tau, plan.calibration = method, tau, info
+        else:
+            plan.method = "ellipsoid" if settings.method == "auto" else settings.method
+            if settings.tau is None:
+                plan.notes.append(f"tau not calibrated; using the default {DEFAULT_TAU}")
+    elif analytic:
+        plan.method = "ellipsoid" if settings.method == "auto" else settings.method
+        plan.notes.append("no CANOPY object: no proxies fitted")
+    plan.proxies = {t: _own_shells(plan, t, plan.method) for t in plan.fits}
+    plan.timings["prepare"] = time.perf_counter() - t_start
+    return plan
+
+
+def _build_tracer(items):
+    cls = _need("RayTracer")
+    verts, tris, base = [], [], 0
+    for it in items:
+        if it.role == "IGNORE" or not len(it.triangles):
+            continue
+        verts.append(it.positions)
+        tris.append(it.triangles + base)
+        base += len(it.positions)
+    if not verts:
+        raise EngineError("the scene has no triangles to trace against")
+    return cls(np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
+               np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
+
+
+def _build_grid(items, settings):
+    """The density grid of DESIGN 3.6, built from the canopy triangles (API of the grid helper)."""
+    cls = _need("DensityGrid")
+    leaves = [it for it in items if it.role == "CANOPY" and len(it.triangles)]
+    if not leaves:
+        raise EngineError("method 'grid' needs at least one CANOPY object")
+    verts, tris, base = [], [], 0
+    for it in leaves:
+        verts.append(it.positions)
+        tris.append(it.triangles + base)
+        base += len(it.positions)
+    try:
+        return cls(np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
+                   np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
+    except TypeError as exc:
+        raise EngineError(f"this build's DensityGrid has an interface the add-on does not "
+                          f"know yet: {exc}") from exc
+
+
+def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
+    """Bake one item with the plan's method and τ."""
+    t0 = time.perf_counter()
+    if item.role == "IGNORE":
+        ao = np.ones(len(item.positions), np.float32)
+    else:
+        ao = _evaluate_points(plan, item.role, item.tree, item.name, item.positions,
+                              item.normals, plan.method, plan.tau)
+    if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
+        raise EngineError(f"{item.name}: the {plan.method} model gave invalid values")
+    return ItemResult(item.name, item.role, item.tree, plan.method, ao,
+                      time.perf_counter() - t0)
+
+
+def report(plan: Plan, results) -> dict:
+    """A JSON-ready summary of a bake."""
+    return {
+        "method": plan.method,
+        "requested_method": plan.settings.method,
+        "tau": plan.tau,
+        "distance": plan.settings.distance,
+        "samples": plan.settings.samples,
+        "proxies": proxy_dicts(plan),
+        "calibration": plan.calibration,
+        "timings": dict(plan.timings),
+        "notes": list(plan.notes) + (
+            [f"numpy stand-ins used for missing native functions: {sorted(FALLBACKS_USED)}"]
+            if FALLBACKS_USED else []),
+        "objects": {r.name: {"role": r.role, "tree": r.tree, "method": r.method,
+                             "vertices": r.vertices, "seconds": r.seconds,
+                             "ao_mean": float(r.ao.mean()) if r.vertices else None}
+                    for r in results},
+    }
+
+
+def bake(items, settings: BakeSettings, progress=None):
+    """prepare + evaluate every item. progress(i, n, name) is called before each item.
+    Returns (list[ItemResult], report dict)."""
+    items = list(items)
+    plan = prepare(items, settings)
+    results = []
+    for i, it in enumerate(items):
+        if progress is not None:
+            progress(i, len(items), it.name)
+        results.append(evaluate_item(plan, it))
+    return results, report(plan, results)

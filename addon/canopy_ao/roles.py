@@ -1,0 +1,159 @@
+"""Guess what part a mesh plays in a vegetation scene from its geometry alone (no bpy).
+
+Roles (DESIGN 1, issue 3 item 2):
+- ``CANOPY``: leaves; its points fit the proxies, and it receives.
+- ``TRUNK``: receives, and occludes the ground as a solid.
+- ``GROUND``: a flat, wide surface; receives only.
+- ``GRASS``: many small disconnected blades standing on one plane; receives (Hegeman Eq. 9).
+- ``IGNORE``: takes no part.
+
+Everything here works on whole numpy arrays; there is no per-vertex Python loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS", "IGNORE")
+
+# A piece is "many small disconnected pieces" when the mesh has at least this many components.
+MANY_COMPONENTS = 24
+# Flat: the thinnest extent is below this fraction of the widest.
+FLAT_RATIO = 0.05
+
+
+def connected_components(n_vertices: int, triangles: np.ndarray) -> np.ndarray:
+    """Label each vertex with its connected component.
+
+    n_vertices: V. triangles: #F by 3 int array of vertex indices in [0, V).
+    Returns int64 (V,) labels in [0, #components), numbered in order of first vertex.
+    Vertices used by no triangle are components of their own.
+
+    Union-find done in bulk (Shiloach-Vishkin style): every round hooks the larger root of each
+    edge onto the smaller one, then compresses paths by pointer jumping, until no edge joins two
+    roots. Rounds grow with log V, not with the mesh's diameter.
+    """
+    parent = np.arange(n_vertices, dtype=np.int64)
+    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if n_vertices == 0:
+        return parent
+    if len(tris):
+        a = np.concatenate([tris[:, 0], tris[:, 1]])
+        b = np.concatenate([tris[:, 1], tris[:, 2]])
+        while True:
+            ra, rb = parent[a], parent[b]
+            differ = ra != rb
+            if not differ.any():
+                break
+            a, b = a[differ], b[differ]  # edges already inside one component never matter again
+            ra, rb = ra[differ], rb[differ]
+            np.minimum.at(parent, np.maximum(ra, rb), np.minimum(ra, rb))
+            # INV: parent[i] <= i, so pointer jumping terminates.
+            while True:
+                grand = parent[parent]
+                if np.array_equal(grand, parent):
+                    break
+                parent = grand
+    _, labels = np.unique(parent, return_inverse=True)
+    return labels.astype(np.int64)
+
+
+@dataclass
+class MeshStats:
+    """Geometry facts a role guess rests on (world space)."""
+
+    n_vertices: int
+    n_components: int
+    extent: np.ndarray  # (3,) bounding-box size, sorted largest first
+    z_extent: float
+    xy_extent: float
+    component_size_ratio: float  # median component diagonal / object diagonal
+    base_spread: float  # spread of component lowest z, relative to the object's diagonal
+    component_aspect: float  # median component height / width (blades are tall and thin)
+    labels: np.ndarray = field(repr=False, default=None)
+
+
+def mesh_stats(positions: np.ndarray, triangles: np.ndarray) -> MeshStats:
+    """Compute :class:`MeshStats` for world-space positions (V by 3) and triangles (F by 3)."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    n = len(p)
+    if n == 0:
+        z = np.zeros(3)
+        return MeshStats(0, 0, z, 0.0, 0.0, 0.0, 0.0, 0.0, np.zeros(0, np.int64))
+    labels = connected_components(n, triangles)
+    k = int(labels.max()) + 1
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    ext = hi - lo
+    diag = float(np.linalg.norm(ext)) or 1.0
+    # Per-component bounding boxes, all at once.
+    cmin = np.full((k, 3), np.inf)
+    cmax = np.full((k, 3), -np.inf)
+    np.minimum.at(cmin, labels, p)
+    np.maximum.at(cmax, labels, p)
+    cext = cmax - cmin
+    cdiag = np.linalg.norm(cext, axis=1)
+    cwidth = np.maximum(np.hypot(cext[:, 0], cext[:, 1]), 1e-12)
+    return MeshStats(
+        n_vertices=n,
+        n_components=k,
+        extent=np.sort(ext)[::-1],
+        z_extent=float(ext[2]),
+        xy_extent=float(max(ext[0], ext[1])),
+        component_size_ratio=float(np.median(cdiag) / diag),
+        base_spread=float(np.std(cmin[:, 2]) / diag),
+        component_aspect=float(np.median(cext[:, 2] / cwidth)),
+        labels=labels,
+    )
+
+
+def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
+    """Guess a role for a mesh. Returns (role, reason) where reason is a short human sentence.
+
+    - flat and wide (z extent < 5 % of the xy extent, few pieces) → GROUND;
+    - many small pieces whose lowest points lie near one plane, taller than wide, the whole
+      object low and wide → GRASS;
+    - many small pieces in a blob → CANOPY;
+    - otherwise (one or a few solid pieces) → TRUNK.
+    """
+    s = mesh_stats(positions, triangles)
+    if s.n_vertices == 0:
+        return "IGNORE", "empty mesh"
+    flat = s.z_extent < FLAT_RATIO * max(s.xy_extent, 1e-12)
+    many = s.n_components >= MANY_COMPONENTS and s.component_size_ratio < 0.25
+    if flat and not many:
+        return "GROUND", f"flat (height {s.z_extent:.3g} vs width {s.xy_extent:.3g})"
+    if many:
+        low_and_wide = s.z_extent < 0.5 * s.xy_extent
+        if low_and_wide and s.base_spread < 0.05 and s.component_aspect > 1.0:
+            return "GRASS", f"{s.n_components} upright blades on one plane"
+        return "CANOPY", f"{s.n_components} small pieces in a blob"
+    if flat:
+        return "GROUND", "flat"
+    return "TRUNK", f"{s.n_components} solid piece(s)"
+
+
+def blade_heights(positions: np.ndarray, triangles: np.ndarray, up=(0.0, 0.0, 1.0)):
+    """Ground level and blade height of a grass mesh, from its connected components.
+
+    Returns (ground_height, blade_height): the median lowest point and the median height of the
+    blades along ``up`` (Hegeman Eq. 9 needs both; DESIGN 3.5 says find them, do not ask).
+    """
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return 0.0, 1.0
+    u = np.asarray(up, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    h = p @ u
+    labels = connected_components(len(p), triangles)
+    k = int(labels.max()) + 1
+    lo = np.full(k, np.inf)
+    hi = np.full(k, -np.inf)
+    np.minimum.at(lo, labels, h)
+    np.maximum.at(hi, labels, h)
+    ground = float(np.median(lo))
+    blade = float(np.median(hi - lo))
+    if not blade > 0:
+        blade = float(h.max() - h.min()) or 1.0
+    return ground, blade
