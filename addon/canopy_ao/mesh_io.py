@@ -1,0 +1,171 @@
+"""bpy ↔ numpy: evaluated meshes in, color attributes out (DESIGN 7, 9).
+
+Only foreach_get / foreach_set on preallocated float32 / int32 buffers; no per-vertex Python
+loops. float32 and FLOAT_COLOR because they are the fast paths (DESIGN 9: float64 is ~40×
+slower to move, BYTE_COLOR ~25×).
+"""
+
+import json
+
+import bpy
+import numpy as np
+
+# Object custom property listing the attributes Canopy AO made (a JSON list of names): only
+# those may be replaced without the user's say-so.
+OWNED_PROP = "canopy_ao_attributes"
+
+
+class MeshIOError(RuntimeError):
+    pass
+
+
+def _vertex_normals(mesh, n):
+    out = np.empty(n * 3, dtype=np.float32)
+    if hasattr(mesh, "vertex_normals"):  # Blender 3.5+ / 4.1+ (vertices.normal removed in 4.1)
+        mesh.vertex_normals.foreach_get("vector", out)
+    else:
+        mesh.vertices.foreach_get("normal", out)
+    return out.reshape(n, 3)
+
+
+def evaluated_arrays(obj, depsgraph):
+    """World-space arrays of an object's evaluated mesh (modifiers applied).
+
+    Returns (positions float32 (V, 3), normals float32 (V, 3) unit, triangles int32 (F, 3)).
+    Raises MeshIOError when the evaluated mesh has a different vertex count from the original
+    (a per-vertex result could not be stored on the original mesh).
+    """
+    ob_eval = obj.evaluated_get(depsgraph)
+    mesh = ob_eval.to_mesh()
+    try:
+        n = len(mesh.vertices)
+        if n != len(obj.data.vertices):
+            raise MeshIOError(
+                f"{obj.name}: its modifiers change the vertex count ({len(obj.data.vertices)} → "
+                f"{n}), so a per-vertex result cannot be stored on the mesh; apply the "
+                "modifiers or bake per texel")
+        co = np.empty(n * 3, dtype=np.float32)
+        mesh.vertices.foreach_get("co", co)
+        co = co.reshape(n, 3)
+        nor = _vertex_normals(mesh, n)
+        mesh.calc_loop_triangles()
+        tris = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+        mesh.loop_triangles.foreach_get("vertices", tris)
+        tris = tris.reshape(-1, 3)
+    finally:
+        ob_eval.to_mesh_clear()
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    pos = (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+    # Normals transform by the inverse transpose (non-uniform scale).
+    try:
+        nm = np.linalg.inv(m[:3, :3]).T
+    except np.linalg.LinAlgError:
+        nm = np.eye(3)
+    nor = nor.astype(np.float64) @ nm.T
+    ln = np.linalg.norm(nor, axis=1, keepdims=True)
+    nor = np.where(ln > 1e-20, nor / np.maximum(ln, 1e-20), [0.0, 0.0, 1.0]).astype(np.float32)
+    return np.ascontiguousarray(pos), np.ascontiguousarray(nor), np.ascontiguousarray(tris)
+
+
+def owned_attributes(obj):
+    """Names of the attributes Canopy AO made on this object."""
+    raw = obj.get(OWNED_PROP)
+    if not raw:
+        return []
+    try:
+        names = json.loads(raw)
+    except (TypeError, ValueError):
+        return []
+    return [s for s in names if isinstance(s, str)]
+
+
+def _mark_owned(obj, name):
+    names = owned_attributes(obj)
+    if name not in names:
+        names.append(name)
+    obj[OWNED_PROP] = json.dumps(names)
+
+
+def check_attribute(obj, name, overwrite):
+    """None if ``name`` may be written on obj, else the reason it may not (nothing changed)."""
+    if not name:
+        return "the attribute name is empty"
+    attr = obj.data.attributes.get(name)
+    if attr is None or overwrite or name in owned_attributes(obj):
+        return None
+    return (f"{obj.name}: it already has an attribute '{name}' that Canopy AO did not make; "
+            "choose another name or tick Overwrite")
+
+
+def write_ao_attribute(obj, name, ao, overwrite=False):
+    """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
+
+    Replaces an attribute Canopy AO made (or any, with overwrite); refuses otherwise.
+    """
+    why = check_attribute(obj, name, overwrite)
+    if why:
+        raise MeshIOError(why)
+    mesh = obj.data
+    n = len(mesh.vertices)
+    ao = np.asarray(ao, dtype=np.float32).reshape(-1)
+    if len(ao) != n:
+        raise MeshIOError(f"{obj.name}: {len(ao)} AO values for {n} vertices")
+    attr = mesh.attributes.get(name)
+    if attr is not None and (attr.data_type != 'FLOAT_COLOR' or attr.domain != 'POINT'):
+        mesh.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = mesh.color_attributes.new(name=name, type='FLOAT_COLOR', domain='POINT')
+    rgba = np.empty((n, 4), dtype=np.float32)
+    rgba[:, :3] = ao[:, None]
+    rgba[:, 3] = 1.0
+    attr.data.foreach_set("color", rgba.reshape(-1))
+    mesh.update()
+    _mark_owned(obj, name)
+    return attr
+
+
+def read_ao_attribute(obj, name):
+    """The red channel of a POINT color attribute as float32 (V,) (for tests and checks)."""
+    attr = obj.data.attributes[name]
+    buf = np.empty(len(obj.data.vertices) * 4, dtype=np.float32)
+    attr.data.foreach_get("color", buf)
+    return buf.reshape(-1, 4)[:, 0].copy()
+
+
+# === Proxies in the viewport ================================================================
+
+PROXY_COLLECTION = "Canopy AO Proxies"
+PROXY_PROP = "canopy_ao_proxy"
+
+
+def show_proxies(scene, proxies):
+    """Replace the empties in the 'Canopy AO Proxies' collection with one sphere empty per shell,
+    scaled and rotated to the ellipsoid. proxies: {tree: [{"center", "axes", "radii"}]}."""
+    from mathutils import Matrix
+
+    coll = bpy.data.collections.get(PROXY_COLLECTION)
+    if coll is None:
+        coll = bpy.data.collections.new(PROXY_COLLECTION)
+    if coll.name not in scene.collection.children:
+        scene.collection.children.link(coll)
+    for ob in list(coll.objects):
+        if ob.get(PROXY_PROP):  # ours only: leave anything the user put there
+            bpy.data.objects.remove(ob, do_unlink=True)
+    made = []
+    for tree, shells in proxies.items():
+        for i, e in enumerate(shells):
+            q = np.asarray(e["axes"], dtype=np.float64) * np.asarray(e["radii"], np.float64)
+            m = np.eye(4)
+            m[:3, :3] = q
+            m[:3, 3] = e["center"]
+            ob = bpy.data.objects.new(f"CanopyAO_{tree}_{i}", None)
+            ob.empty_display_type = 'SPHERE'
+            ob.empty_display_size = 1.0
+            ob.matrix_world = Matrix(m.tolist())
+            ob[PROXY_PROP] = tree
+            ob.hide_render = True
+            ob.hide_select = True
+            coll.objects.link(ob)
+            made.append(ob)
+    return made

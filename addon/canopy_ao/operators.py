@@ -1,0 +1,416 @@
+"""The bake operator and the job behind it (shared with the command line, cli.py)."""
+
+import time
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+
+from . import engine, mesh_io, roles
+from .properties import method_items
+
+
+class BakeError(RuntimeError):
+    """A bake refused before anything was changed, with the reason for the user."""
+
+
+# === Scene → items ===========================================================================
+
+def tree_of(obj):
+    """Which tree an object belongs to: the user's name, else the root of its parent chain (a
+    trunk parenting its leaves), else its first collection (the scene's own collection makes
+    one tree of everything loose in it)."""
+    if obj.canopy_ao.tree:
+        return obj.canopy_ao.tree
+    if obj.parent is not None or obj.children:
+        root = obj
+        while root.parent is not None:
+            root = root.parent
+        return root.canopy_ao.tree or root.name
+    if obj.users_collection:
+        return obj.users_collection[0].name
+    return "Scene"
+
+
+def role_of(obj, positions, triangles):
+    """(role, how) — the user's override, or a guess from the geometry."""
+    if obj.canopy_ao.role != 'AUTO':
+        return obj.canopy_ao.role, "set"
+    role, why = roles.guess_role(positions, triangles)
+    return role, f"guessed: {why}"
+
+
+def _is_candidate(obj):
+    return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
+
+
+def scene_settings_opts(scene):
+    """The bake options as the scene's panel has them."""
+    s = scene.canopy_ao
+    return dict(method=s.method, tau=None if s.tau_auto else s.tau, distance=s.distance,
+                samples=s.samples, attribute=s.attribute_name, overwrite=s.overwrite,
+                wire_material=s.wire_material, add_aov=s.add_aov, aov_name=s.aov_name,
+                mode=s.mode, uv_map=s.uv_map, resolution=s.resolution, image_dir=s.image_dir,
+                show_proxies=s.show_proxies, check_cycles=s.check_cycles,
+                cycles_samples=s.cycles_samples)
+
+
+class BakeJob:
+    """One bake: gather and check (nothing changed on failure), prepare, evaluate one target at
+    a time, then commit every write at once, so a cancelled or failed bake changes nothing."""
+
+    def __init__(self, context, object_names, opts):
+        self.opts = opts
+        self.scene = context.scene
+        self.results = []
+        self.lines = []
+        ok, msg = engine.core_status()
+        if not ok:
+            raise BakeError(msg)
+        if opts["mode"] == 'TEXEL':
+            try:
+                from . import texel  # noqa: F401  (written when the texel path lands)
+            except ImportError:
+                raise BakeError("per-texel output is not available in this build yet (no "
+                                "canopy_ao.texel); bake per vertex") from None
+        if opts["method"] not in engine.available_methods():
+            raise BakeError(f"method '{opts['method']}' is not available; one of "
+                            f"{', '.join(engine.available_methods())}")
+        view_layer = context.view_layer
+        if object_names:
+            missing = [n for n in object_names if n not in self.scene.objects]
+            if missing:
+                raise BakeError(f"no object named {', '.join(missing)} in scene "
+                                f"'{self.scene.name}'")
+            targets = [self.scene.objects[n] for n in object_names]
+            bad = [o.name for o in targets if o.type != 'MESH']
+            if bad:
+                raise BakeError(f"not a mesh: {', '.join(bad)}")
+        else:
+            targets = [o for o in context.selected_objects if _is_candidate(o)]
+            if not targets:
+                targets = [o for o in self.scene.objects
+                           if _is_candidate(o) and o.visible_get(view_layer=view_layer)]
+        if not targets:
+            raise BakeError("nothing to bake: no mesh objects selected or visible")
+        # The whole visible scene takes part (trees shade a selected ground), targets receive.
+        members = {o.name: o for o in self.scene.objects
+                   if _is_candidate(o) and o.visible_get(view_layer=view_layer)}
+        for o in targets:
+            members.setdefault(o.name, o)
+        depsgraph = context.evaluated_depsgraph_get()
+        self.items, self.objects, self.how = [], {}, {}
+        for name, obj in members.items():
+            try:
+                pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph)
+            except mesh_io.MeshIOError as exc:
+                if obj in targets:
+                    raise BakeError(str(exc)) from None
+                continue  # a non-target still occludes in a later version; skip it for now
+            role, how = role_of(obj, pos, tris)
+            if role == "IGNORE":
+                continue
+            self.items.append(engine.SceneItem(name, role, tree_of(obj), pos, nor, tris))
+            self.objects[name] = obj
+            self.how[name] = how
+        self.targets = [it for it in self.items if it.name in {o.name for o in targets}]
+        if not self.targets:
+            raise BakeError("every object to bake has the role Ignore")
+        for it in self.targets:
+            why = mesh_io.check_attribute(self.objects[it.name], opts["attribute"],
+                                          opts["overwrite"])
+            if why:
+                raise BakeError(why + " (nothing was changed)")
+        self.settings = engine.BakeSettings(
+            method=opts["method"], tau=opts["tau"], distance=opts["distance"],
+            samples=opts["samples"])
+        self.plan = None
+        self.index = 0
+
+    @property
+    def steps(self):
+        return len(self.targets) + 1
+
+    def prepare(self):
+        try:
+            self.plan = engine.prepare(self.items, self.settings)
+        except (engine.EngineError, ValueError, RuntimeError) as exc:
+            raise BakeError(f"bake failed: {exc}") from exc
+
+    def step(self):
+        """Bake the next target; returns the line to report, or None when all are done."""
+        if self.index >= len(self.targets):
+            return None
+        it = self.targets[self.index]
+        self.index += 1
+        try:
+            r = engine.evaluate_item(self.plan, it)
+        except (engine.EngineError, ValueError, RuntimeError) as exc:
+            raise BakeError(f"{it.name}: bake failed: {exc}") from exc
+        self.results.append(r)
+        line = (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method {r.method}, "
+                f"{r.vertices} vertices, {r.seconds:.3f} s")
+        return line
+
+    def run(self, progress=None):
+        self.prepare()
+        while True:
+            if progress:
+                progress(self.index)
+            if self.step() is None:
+                break
+
+    def commit(self, context):
+        """Write every result, then the optional extras. Returns the JSON-ready report."""
+        o = self.opts
+        for r in self.results:
+            obj = self.objects[r.name]
+            mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
+        if o["mode"] == 'TEXEL':
+            from . import texel
+            texel.bake_objects(context, self.plan, self.targets, o)
+        if o["show_proxies"]:
+            mesh_io.show_proxies(self.scene, engine.proxy_dicts(self.plan))
+        rep = engine.report(self.plan, self.results)
+        rep["attribute"] = o["attribute"]
+        for r in self.results:
+            rep["objects"][r.name]["role_source"] = self.how[r.name]
+        if o["wire_material"] or o["add_aov"]:
+            self._wire(rep)
+        if o["check_cycles"]:
+            self._check_cycles(context, rep)
+        for r in self.results:
+            e = rep["objects"][r.name]
+            text = (f"{e['role']}, {e['method']}, {e['vertices']} verts, {e['seconds']:.3f} s, "
+                    f"mean AO {e['ao_mean']:.3f}")
+            if "cycles" in e:
+                text += f", vs Cycles MAE {e['cycles'].get('mae', float('nan')):.3f}"
+            self.objects[r.name].canopy_ao.last_result = text
+        self.scene.canopy_ao.last_report = (
+            f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)")
+        self.report_dict = rep
+        return rep
+
+    def _wire(self, rep):
+        o = self.opts
+        try:
+            from . import materials
+        except ImportError:
+            rep["notes"].append("material wiring not available in this build")
+            return
+        if o["wire_material"]:
+            for r in self.results:
+                materials.wire_vertex_ao(self.objects[r.name], o["attribute"], o["aov_name"])
+        if o["add_aov"]:
+            materials.ensure_view_layer_aov(self.scene, o["aov_name"])
+
+    def _check_cycles(self, context, rep):
+        try:
+            from . import cycles_check, metrics
+        except ImportError:
+            raise BakeError("the Cycles check is not available in this build") from None
+        objs = [self.objects[r.name] for r in self.results]
+        d = self.opts["distance"]
+        ref = cycles_check.bake_cycles_vertex_ao(context, objs, d if d > 0 else 1.0e6,
+                                                 self.opts["cycles_samples"])
+        for r in self.results:
+            if r.name in ref:
+                rep["objects"][r.name]["cycles"] = {
+                    k: float(v) for k, v in metrics.compare(r.ao, ref[r.name]).items()}
+
+
+# === The operator ============================================================================
+
+class CANOPY_AO_OT_bake(bpy.types.Operator):
+    """Bake approximate ambient occlusion into a color attribute of the selected objects (or
+    every visible mesh), from proxies fitted to the canopies"""
+
+    bl_idname = "canopy_ao.bake"
+    bl_label = "Bake Canopy AO"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    # Every setting can be given as an argument; one left unset takes the scene's panel value.
+    objects: StringProperty(name="Objects", default="",
+                            description="Comma-separated object names; empty = the selection, "
+                                        "or every visible mesh")
+    method: EnumProperty(name="Method", items=method_items)
+    tau: FloatProperty(name="τ", default=0.0, min=0.0,
+                       description="Optical depth; 0 = calibrate automatically")
+    distance: FloatProperty(name="AO Distance", default=10.0, min=0.0)
+    samples: IntProperty(name="Samples", default=64, min=1)
+    attribute: StringProperty(name="Attribute", default="CanopyAO")
+    overwrite: BoolProperty(name="Overwrite", default=False)
+    show_proxies: BoolProperty(name="Show Proxies", default=True)
+    wire_material: BoolProperty(name="Wire Material", default=False)
+    add_aov: BoolProperty(name="Add AOV", default=False)
+    aov_name: StringProperty(name="AOV Name", default="BakedAO")
+    check_cycles: BoolProperty(name="Check with Cycles", default=False)
+    cycles_samples: IntProperty(name="Cycles Samples", default=64, min=1)
+
+    _timer = None
+    _job = None
+
+    @classmethod
+    def poll(cls, context):
+        ok, _ = engine.core_status()
+        if not ok:
+            cls.poll_message_set("The native module is not loaded: see the Canopy AO panel "
+                                 "(N panel) for how to build it")
+            return False
+        if context.scene is None or not any(o.type == 'MESH' for o in context.scene.objects):
+            cls.poll_message_set("The scene has no mesh objects to bake")
+            return False
+        return True
+
+    def _opts(self, context):
+        opts = scene_settings_opts(context.scene)
+        keymap = {"attribute": "attribute", "method": "method", "distance": "distance",
+                  "samples": "samples", "overwrite": "overwrite", "show_proxies": "show_proxies",
+                  "wire_material": "wire_material", "add_aov": "add_aov",
+                  "aov_name": "aov_name", "check_cycles": "check_cycles",
+                  "cycles_samples": "cycles_samples"}
+        for prop, key in keymap.items():
+            if self.properties.is_property_set(prop):
+                opts[key] = getattr(self, prop)
+        if self.properties.is_property_set("tau"):
+            opts["tau"] = self.tau if self.tau > 0 else None
+        return opts
+
+    def _names(self):
+        return [s.strip() for s in self.objects.split(",") if s.strip()]
+
+    def _report_error(self, exc):
+        self.report({'ERROR'}, str(exc))
+        return {'CANCELLED'}
+
+    def _finish(self, context, job):
+        try:
+            job.commit(context)
+        except (BakeError, mesh_io.MeshIOError, RuntimeError) as exc:
+            return self._report_error(exc)
+        rep = job.report_dict
+        for line in job.lines:
+            self.report({'INFO'}, line)
+        self.report({'INFO'}, f"Canopy AO: {rep['method']}, τ {rep['tau']:.3g}, "
+                              f"{len(job.results)} object(s) baked into '{rep['attribute']}'")
+        for note in rep["notes"]:
+            self.report({'WARNING'}, note)
+        return {'FINISHED'}
+
+    def execute(self, context):
+        wm = context.window_manager
+        try:
+            job = BakeJob(context, self._names(), self._opts(context))
+            wm.progress_begin(0, job.steps)
+            try:
+                job.prepare()
+                while True:
+                    wm.progress_update(job.index + 1)
+                    line = job.step()
+                    if line is None:
+                        break
+                    job.lines.append(line)
+            finally:
+                wm.progress_end()
+        except BakeError as exc:
+            return self._report_error(exc)
+        return self._finish(context, job)
+
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        try:
+            self._job = BakeJob(context, self._names(), self._opts(context))
+        except BakeError as exc:
+            return self._report_error(exc)
+        wm = context.window_manager
+        wm.progress_begin(0, self._job.steps)
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.modal_handler_add(self)
+        context.workspace.status_text_set("Canopy AO: baking… (Esc to cancel)")
+        return {'RUNNING_MODAL'}
+
+    def _stop(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == 'ESC':
+            self._stop(context)
+            self.report({'WARNING'}, "Canopy AO bake cancelled; nothing was changed")
+            return {'CANCELLED'}
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        job = self._job
+        try:
+            if job.plan is None:
+                job.prepare()  # fitting and calibration: one tick
+            else:
+                line = job.step()
+                if line is None:
+                    self._stop(context)
+                    return self._finish(context, job)
+                job.lines.append(line)
+                self.report({'INFO'}, line)
+            context.window_manager.progress_update(job.index + 1)
+        except BakeError as exc:
+            self._stop(context)
+            return self._report_error(exc)
+        return {'RUNNING_MODAL'}
+
+
+class CANOPY_AO_OT_guess_roles(bpy.types.Operator):
+    """Set each selected mesh's role to the one guessed from its geometry, so it can be
+    reviewed and changed"""
+
+    bl_idname = "canopy_ao.guess_roles"
+    bl_label = "Guess Roles"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        if not any(o.type == 'MESH' for o in context.selected_objects):
+            cls.poll_message_set("Select mesh objects")
+            return False
+        return True
+
+    def execute(self, context):
+        depsgraph = context.evaluated_depsgraph_get()
+        for obj in context.selected_objects:
+            if obj.type != 'MESH':
+                continue
+            try:
+                pos, _nor, tris = mesh_io.evaluated_arrays(obj, depsgraph)
+            except mesh_io.MeshIOError as exc:
+                self.report({'WARNING'}, str(exc))
+                continue
+            role, why = roles.guess_role(pos, tris)
+            obj.canopy_ao.role = role
+            self.report({'INFO'}, f"{obj.name}: {role} ({why})")
+        return {'FINISHED'}
+
+
+classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
+
+
+def run_bake(context, object_names, opts):
+    """Synchronous bake for scripts and the CLI. Returns (job, report); raises BakeError."""
+    t0 = time.perf_counter()
+    job = BakeJob(context, object_names, opts)
+    job.run()
+    rep = job.commit(context)
+    rep["seconds"] = time.perf_counter() - t0
+    return job, rep

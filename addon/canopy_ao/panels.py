@@ -1,0 +1,108 @@
+"""3D View → sidebar (N) → "Canopy AO"."""
+
+import bpy
+
+from . import engine
+
+
+class CANOPY_AO_PT_main(bpy.types.Panel):
+    bl_idname = "CANOPY_AO_PT_main"
+    bl_label = "Canopy AO"
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "Canopy AO"
+
+    def draw(self, context):
+        layout = self.layout
+        ok, msg = engine.core_status()
+        if not ok:
+            box = layout.box()
+            box.alert = True
+            box.label(text="Native module not loaded", icon='ERROR')
+            col = box.column(align=True)
+            # Wrap the long message into lines the sidebar can show.
+            words, line = msg.split(), ""
+            for w in words:
+                if len(line) + len(w) > 38:
+                    col.label(text=line)
+                    line = ""
+                line += w + " "
+            if line:
+                col.label(text=line)
+            return
+        s = context.scene.canopy_ao
+        col = layout.column()
+        col.prop(s, "method")
+        row = col.row(align=True)
+        row.prop(s, "tau_auto", toggle=True)
+        sub = row.row(align=True)
+        sub.enabled = not s.tau_auto
+        sub.prop(s, "tau")
+        col.prop(s, "distance")
+        if s.method == "raytrace":
+            col.prop(s, "samples")
+        col.separator()
+        col.prop(s, "mode")
+        col.prop(s, "attribute_name")
+        col.prop(s, "overwrite")
+        if s.mode == 'TEXEL':
+            col.prop(s, "uv_map")
+            col.prop(s, "resolution")
+            col.prop(s, "image_dir")
+        col.separator()
+        col.prop(s, "show_proxies")
+        col.prop(s, "wire_material")
+        row = col.row(align=True)
+        row.prop(s, "add_aov")
+        sub = row.row(align=True)
+        sub.enabled = s.add_aov or s.wire_material
+        sub.prop(s, "aov_name", text="")
+        row = col.row(align=True)
+        row.prop(s, "check_cycles")
+        sub = row.row(align=True)
+        sub.enabled = s.check_cycles
+        sub.prop(s, "cycles_samples", text="Samples")
+        col.separator()
+        n_sel = sum(1 for o in context.selected_objects if o.type == 'MESH')
+        label = f"Bake {n_sel} Selected" if n_sel else "Bake All Visible"
+        col.operator("canopy_ao.bake", text=label, icon='RENDER_STILL')
+        if s.last_report:
+            col.label(text=f"Last: {s.last_report}", icon='INFO')
+
+
+class CANOPY_AO_PT_object(bpy.types.Panel):
+    bl_idname = "CANOPY_AO_PT_object"
+    bl_label = "Object Role"
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "Canopy AO"
+    bl_parent_id = "CANOPY_AO_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == 'MESH'
+
+    def draw(self, context):
+        layout = self.layout
+        obj = context.active_object
+        layout.label(text=obj.name, icon='OBJECT_DATA')
+        layout.prop(obj.canopy_ao, "role")
+        layout.prop(obj.canopy_ao, "tree")
+        layout.operator("canopy_ao.guess_roles")
+        if obj.canopy_ao.last_result:
+            box = layout.box()
+            for part in obj.canopy_ao.last_result.split(", "):
+                box.label(text=part)
+
+
+classes = (CANOPY_AO_PT_main, CANOPY_AO_PT_object)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
