@@ -1,0 +1,380 @@
+"""Speed against accuracy of every AO method on every benchmark scene (issue 5, items 2-3).
+
+    /usr/bin/python3 bench/accuracy.py [--quick] [--scenes round_tree grove ...] [--no-cycles]
+
+Pure Python over numpy, ``canopy_ao._core`` and the add-on's bpy-free ``engine`` (the same code
+path as a bake in Blender, minus bpy I/O). For each scene (examples/canopy_scenes.py):
+
+1. Reference: Embree (``_core.RayTracer``) at ``--ref-samples`` cosine-weighted rays per vertex
+   (1024; 256 with --quick), AO distance D = the scene's bbox diagonal, seed 12345 so its noise
+   is independent of the methods' own ray-traced runs. Cached in
+   bench/out/cache/embree_<scene>[_quick]_<samples>.npz (keyed by a hash of the geometry).
+   Cycles' bake (bench/cycles_reference.py, run in Blender) is read from the same cache folder
+   when present; its highest sample count is the second reference.
+2. Methods, each timed on the whole scene (prepare = fits + calibration, eval = every vertex):
+   - reeves_blau, sphere, ellipsoid, shells (k = 2, 4, 8): the engine's product path with τ
+     calibrated by the engine against a few hundred ray-traced points ("calibrated"), and the
+     same model with the τ that minimises the MSE against the reference on a 4000-vertex sample
+     ("best τ": an upper bound on what calibration can reach; its prepare time excludes the
+     search).
+   - auto: the engine's own ladder walk.
+   - grid: the density grid, when the core has DensityGrid.
+   - raytrace at 1, 4, 16, 64, 256 rays (prepare = BVH build).
+   - cycles at every cached sample count below the Cycles reference (time = the bake call).
+3. Errors per object role (canopy, trunk, ground, grass, all) against each reference: MAE,
+   RMSE, p95, correlation, bias (canopy_ao.metrics.compare) → bench/out/results.csv; per-vertex
+   AO of every method → bench/out/ao/<scene>.npz (float16) for the picture strip.
+
+Times are wall-clock (time.perf_counter), best of --repeats runs when a run is short, on a
+shared 2-core machine: read them as orders of magnitude.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import math
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(REPO, "examples"))
+sys.path.insert(0, os.path.join(REPO, "addon"))
+
+import numpy as np  # noqa: E402
+
+import canopy_scenes as cs  # noqa: E402
+from canopy_ao import _core  # noqa: E402
+from canopy_ao import engine  # noqa: E402
+from canopy_ao.metrics import compare  # noqa: E402
+
+OUT = os.path.join(HERE, "out")
+CACHE = os.path.join(OUT, "cache")
+REF_SEED = 12345
+ROLES = ("canopy", "trunk", "ground", "grass")
+DEFAULT_SCENES = [n for n in cs.SCENES if n != "large_tree"]
+FIELDS = ["scene", "vertices", "family", "method", "setting", "tau", "tau_mode", "reference",
+          "role", "mae", "rmse", "p95", "corr", "bias", "n", "t_prepare", "t_eval", "t_total",
+          "note"]
+
+
+def log(*a):
+    print(*a, flush=True)
+
+
+def geometry_hash(scene) -> str:
+    """Same hash as bench/cycles_reference.py (names, vertex and triangle bytes)."""
+    h = hashlib.sha1()
+    for p in scene:
+        h.update(p.name.encode())
+        h.update(np.ascontiguousarray(p.vertices).tobytes())
+        h.update(np.ascontiguousarray(p.triangles).tobytes())
+    return h.hexdigest()
+
+
+# === Scene preparation ========================================================================
+
+class Prepared:
+    """A scene with normals, engine items, merged mesh and per-role masks over all vertices."""
+
+    def __init__(self, scene, quick):
+        self.scene = scene
+        self.quick = quick
+        self.name = scene.name
+        self.hash = geometry_hash(scene)
+        self.distance = scene.ao_distance()
+        self.normals = [cs.vertex_normals(p.vertices, p.triangles) for p in scene]
+        self.items = [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices, n,
+                                       p.triangles) for p, n in zip(scene, self.normals)]
+        self.V, self.T, self.part = scene.merged()
+        self.N = np.concatenate(self.normals)
+        self.role = np.concatenate([np.full(p.n_vertices, p.role, dtype=object) for p in scene])
+        self.offsets = np.cumsum([0] + [p.n_vertices for p in scene])
+
+    def split(self, ao_all):
+        return {p.name: ao_all[a:b] for p, a, b in zip(self.scene, self.offsets[:-1],
+                                                        self.offsets[1:])}
+
+    def join(self, per_part):
+        return np.concatenate([np.asarray(per_part[p.name], np.float32) for p in self.scene])
+
+
+def cache_name(kind, prep, samples):
+    return os.path.join(CACHE, f"{kind}_{prep.name}{'_quick' if prep.quick else ''}_{samples}.npz")
+
+
+def embree_reference(prep, samples):
+    """(ao over all vertices, seconds), cached on disk."""
+    path = cache_name("embree", prep, samples)
+    if os.path.exists(path):
+        with np.load(path) as z:
+            if str(z["geometry"]) == prep.hash and float(z["distance"]) == prep.distance:
+                return z["ao"].astype(np.float32), float(z["seconds"])
+    if not hasattr(_core, "RayTracer"):
+        return None, None
+    t0 = time.perf_counter()
+    tracer = _core.RayTracer(prep.V, prep.T)
+    ao = np.asarray(tracer.ao(prep.V, prep.N, samples=samples, distance=prep.distance,
+                              seed=REF_SEED), np.float32)
+    dt = time.perf_counter() - t0
+    os.makedirs(CACHE, exist_ok=True)
+    np.savez_compressed(path, ao=ao, seconds=dt, samples=samples, distance=prep.distance,
+                        geometry=prep.hash)
+    return ao, dt
+
+
+def cycles_runs(prep):
+    """{samples: (ao over all vertices, seconds)} for every cached Cycles bake of this scene."""
+    out = {}
+    if not os.path.isdir(CACHE):
+        return out
+    stem = f"cycles_{prep.name}{'_quick' if prep.quick else ''}_"
+    for f in os.listdir(CACHE):
+        if not (f.startswith(stem) and f.endswith(".npz")):
+            continue
+        tail = f[len(stem):-4]
+        if not tail.isdigit():
+            continue
+        with np.load(os.path.join(CACHE, f)) as z:
+            if str(z["geometry"]) != prep.hash:
+                log(f"  (ignoring stale {f}: geometry changed)")
+                continue
+            per = {p.name: z[f"ao/{p.name}"] for p in prep.scene}
+            out[int(tail)] = (prep.join(per), float(z["seconds"]))
+    return dict(sorted(out.items()))
+
+
+# === Methods ==================================================================================
+
+def timed(fn, repeats):
+    """(result, best seconds): repeat only while runs are short (< 2 s)."""
+    best, res = math.inf, None
+    for i in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        res = fn()
+        dt = time.perf_counter() - t0
+        best = min(best, dt)
+        if dt > 2.0:
+            break
+    return res, best
+
+
+def run_engine(prep, settings, repeats):
+    """Bake every item with the engine; (ao all vertices, t_prepare, t_eval, plan)."""
+    def prepare():
+        return engine.prepare(prep.items, settings)
+
+    plan, t_prep = timed(prepare, repeats)
+
+    def evaluate():
+        return {it.name: engine.evaluate_item(plan, it).ao for it in prep.items}
+
+    per, t_eval = timed(evaluate, repeats)
+    return prep.join(per), t_prep, t_eval, plan
+
+
+def best_tau(prep, plan, ref, n_sample=4000, seed=1):
+    """τ minimising the MSE against ``ref`` on a random vertex sample (golden section, log τ)."""
+    rng = np.random.default_rng(seed)
+    idx = np.sort(rng.choice(len(prep.V), size=min(n_sample, len(prep.V)), replace=False))
+    sub = []
+    for it, a, b in zip(prep.items, prep.offsets[:-1], prep.offsets[1:]):
+        k = idx[(idx >= a) & (idx < b)] - a
+        if len(k):
+            sub.append(engine.SceneItem(it.name, it.role, it.tree, it.positions[k],
+                                        it.normals[k], it.triangles))
+    r = ref[idx]
+
+    def err(log_tau):
+        plan.tau = math.exp(log_tau)
+        got = np.concatenate([engine.evaluate_item(plan, it).ao for it in sub])
+        return float(np.mean((got - r) ** 2))
+
+    lt, _ = engine._golden_min(err, math.log(0.02), math.log(50.0), iters=20)
+    plan.tau = math.exp(lt)
+    return plan.tau
+
+
+def analytic_methods():
+    """(family, method, setting, BakeSettings kwargs) of every analytic rung the core can run."""
+    rows = [("reeves_blau", "reeves_blau", "", {}), ("sphere", "sphere", "", {}),
+            ("ellipsoid", "ellipsoid", "", {})]
+    for k in (2, 4, 8):
+        rows.append(("shells", "shells", f"k={k}", {"shells": k}))
+    return rows
+
+
+def method_runs(prep, ref, args):
+    """Yield (family, method, setting, tau, tau_mode, ao, t_prepare, t_eval, note)."""
+    D = prep.distance
+    avail = engine.available_methods()
+    for family, method, setting, kw in analytic_methods():
+        if method not in avail:
+            continue
+        # product path: τ calibrated by the engine against ray-traced samples
+        try:
+            s = engine.BakeSettings(method=method, tau=None, distance=D, seed=0, **kw)
+            ao, tp, te, plan = run_engine(prep, s, args.repeats)
+            yield family, method, setting, plan.tau, "calibrated", ao, tp, te, "; ".join(plan.notes)
+        except Exception as exc:  # a missing native function, a bad fit: tabulate, go on
+            yield family, method, setting, math.nan, "calibrated", None, math.nan, math.nan, \
+                f"{type(exc).__name__}: {exc}"
+            continue
+        # best τ against the reference (upper bound on calibration)
+        if ref is not None:
+            try:
+                s = engine.BakeSettings(method=method, tau=1.0, distance=D, seed=0, **kw)
+                plan = engine.prepare(prep.items, s)
+                tau = best_tau(prep, plan, ref)
+                s.tau = tau
+                ao, tp, te, plan = run_engine(prep, s, args.repeats)
+                yield family, method, setting, tau, "best", ao, tp, te, ""
+            except Exception as exc:
+                yield family, method, setting, math.nan, "best", None, math.nan, math.nan, \
+                    f"{type(exc).__name__}: {exc}"
+    # the engine's own choice
+    try:
+        s = engine.BakeSettings(method="auto", tau=None, distance=D, seed=0)
+        ao, tp, te, plan = run_engine(prep, s, args.repeats)
+        yield "auto", "auto", plan.method, plan.tau, "calibrated", ao, tp, te, \
+            (plan.calibration or {}).get("why", "")
+    except Exception as exc:
+        yield "auto", "auto", "", math.nan, "calibrated", None, math.nan, math.nan, \
+            f"{type(exc).__name__}: {exc}"
+    if "grid" in avail:
+        try:
+            s = engine.BakeSettings(method="grid", tau=None, distance=D, seed=0)
+            ao, tp, te, plan = run_engine(prep, s, args.repeats)
+            yield "grid", "grid", "", math.nan, "", ao, tp, te, ""
+        except Exception as exc:
+            yield "grid", "grid", "", math.nan, "", None, math.nan, math.nan, \
+                f"{type(exc).__name__}: {exc}"
+    if hasattr(_core, "RayTracer"):
+        tracer, t_build = timed(lambda: _core.RayTracer(prep.V, prep.T), 1)
+        for n in args.ray_samples:
+            ao, te = timed(lambda: np.asarray(tracer.ao(prep.V, prep.N, samples=n, distance=D,
+                                                        seed=0), np.float32), args.repeats)
+            yield "raytrace", "raytrace", f"{n} rays", math.nan, "", ao, t_build, te, ""
+
+
+# === Metrics and output =======================================================================
+
+def metric_rows(prep, ao, ref, base):
+    rows = []
+    for role in ROLES + ("all",):
+        mask = np.ones(len(ref), bool) if role == "all" else (prep.role == role)
+        if not mask.any():
+            continue
+        m = compare(ao, ref, mask=mask)
+        row = dict(base, role=role, **{k: m[k] for k in ("mae", "rmse", "p95", "corr", "bias", "n")})
+        rows.append(row)
+    return rows
+
+
+def fmt(v):
+    if isinstance(v, float):
+        return "" if math.isnan(v) else f"{v:.6g}"
+    return v
+
+
+def run_scene(name, args, writer, fh):
+    scene = cs.make_scene(name, quick=args.quick)
+    prep = Prepared(scene, args.quick)
+    log(f"== {name}: {scene.n_vertices} vertices, {scene.n_triangles} triangles, "
+        f"D = {prep.distance:.2f}")
+    ref, t_ref = embree_reference(prep, args.ref_samples)
+    refs = {}
+    if ref is not None:
+        refs["embree"] = ref
+        log(f"  embree reference {args.ref_samples} rays: {t_ref:.1f} s, mean AO {ref.mean():.3f}")
+    cyc = cycles_runs(prep) if args.cycles else {}
+    cyc_ref_samples = max(cyc) if cyc else None
+    if cyc_ref_samples is not None and cyc_ref_samples >= args.cycles_ref_min:
+        refs["cycles"] = cyc[cyc_ref_samples][0]
+        log(f"  cycles reference {cyc_ref_samples} samples: {cyc[cyc_ref_samples][1]:.1f} s, "
+            f"mean AO {refs['cycles'].mean():.3f}")
+    if not refs:
+        log("  no reference (no RayTracer in _core and no cached Cycles bake): skipped")
+        return
+    primary = refs.get("embree", refs.get("cycles"))
+    nv = scene.n_vertices
+    saved = {}
+
+    def emit(family, method, setting, tau, tau_mode, ao, tp, te, note):
+        base = dict(scene=name, vertices=nv, family=family, method=method, setting=setting,
+                    tau=tau, tau_mode=tau_mode, t_prepare=tp, t_eval=te,
+                    t_total=(tp + te) if ao is not None else math.nan, note=note)
+        if ao is None:
+            writer.writerow({k: fmt(v) for k, v in dict(base, reference="", role="").items()})
+            log(f"  {family:12s} {setting:8s} {tau_mode:10s} FAILED {note}")
+            return
+        if engine.FALLBACKS_USED and family not in ("raytrace", "cycles", "embree_ref"):
+            base["note"] = (base["note"] + "; numpy stand-ins for "
+                            + ",".join(sorted(engine.FALLBACKS_USED))).strip("; ")
+        bad = int(np.count_nonzero(~np.isfinite(ao)))
+        if bad:
+            base["note"] = (note + f"; {bad} non-finite values").strip("; ")
+        for rname, r in refs.items():
+            if rname == family:   # Cycles against its own reference: noise only, still useful
+                pass
+            for row in metric_rows(prep, ao, r, dict(base, reference=rname)):
+                writer.writerow({k: fmt(v) for k, v in row.items()})
+        fh.flush()
+        m = compare(ao, primary)
+        log(f"  {family:12s} {setting:8s} {tau_mode:10s} tau={fmt(float(tau)) or '-':8s} "
+            f"t={tp + te:8.3f} s  MAE {m['mae']:.4f}  RMSE {m['rmse']:.4f}  corr {m['corr']:.3f}")
+        key = "|".join(x for x in (family, setting, tau_mode) if x)
+        saved[key] = ao.astype(np.float16)
+
+    # the references against each other (Embree-vs-Cycles agreement)
+    if "embree" in refs:
+        emit("embree_ref", "raytrace", f"{args.ref_samples} rays", math.nan, "", refs["embree"],
+             0.0, t_ref, "reference")
+    for s, (ao, dt) in cyc.items():
+        emit("cycles", "cycles", f"{s} samples", math.nan, "", ao, 0.0, dt,
+             "reference" if s == cyc_ref_samples and "cycles" in refs else "")
+    for out in method_runs(prep, primary, args):
+        emit(*out)
+    os.makedirs(os.path.join(OUT, "ao"), exist_ok=True)
+    np.savez_compressed(os.path.join(OUT, "ao", f"{name}{'_quick' if args.quick else ''}.npz"),
+                        V=prep.V, N=prep.N, role=prep.role.astype(str), **saved,
+                        **{f"ref_{k}": v.astype(np.float16) for k, v in refs.items()})
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="smaller scenes and sample counts")
+    ap.add_argument("--scenes", nargs="+", default=None, choices=sorted(cs.SCENES))
+    ap.add_argument("--ref-samples", type=int, default=None)
+    ap.add_argument("--ray-samples", type=int, nargs="+", default=None)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--no-cycles", dest="cycles", action="store_false")
+    ap.add_argument("--cycles-ref-min", type=int, default=256,
+                    help="a cached Cycles bake counts as a reference from this sample count")
+    ap.add_argument("--out", default=os.path.join(OUT, "results.csv"))
+    args = ap.parse_args(argv)
+    if args.ref_samples is None:
+        args.ref_samples = 256 if args.quick else 1024
+    if args.ray_samples is None:
+        args.ray_samples = [1, 4, 16, 64] if args.quick else [1, 4, 16, 64, 256]
+    scenes = args.scenes or DEFAULT_SCENES
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    log(f"canopy_ao._core {getattr(_core, '__version__', '?')}, engine methods "
+        f"{engine.available_methods()}, threads {_core.max_threads()}")
+    t0 = time.perf_counter()
+    with open(args.out, "w", newline="") as fh:
+        w = csv.DictWriter(fh, FIELDS)
+        w.writeheader()
+        for name in scenes:
+            run_scene(name, args, w, fh)
+    if engine.FALLBACKS_USED:
+        log(f"NOTE: numpy stand-ins used for missing native functions: "
+            f"{sorted(engine.FALLBACKS_USED)}")
+    log(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
