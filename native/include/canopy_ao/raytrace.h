@@ -20,9 +20,11 @@
 // never on the thread count, the block split or other points. No rand(), no global state.
 //
 // Origins: x + offset · n̂, rays from t = 0 to t = distance. offset < 0 (the default) means
-// automatic: 1e-4 × the scene's bounding-box diagonal + 1e-6 × the largest absolute vertex
-// coordinate (float precision far from the origin). A leaf's own vertex therefore does not see
-// its own triangle.
+// automatic: 1e-5 × the scene's bounding-box diagonal + 1e-6 × the largest absolute vertex
+// coordinate (float precision of the hit test, which grows with the extent and with the
+// distance from the origin). A leaf's own vertex therefore does not see its own triangle. The
+// offset is also a bias (occluders nearer than it along the normal are missed): pass an
+// explicit one below the smallest gap that matters, e.g. for a tiny tree on a huge ground.
 //
 // Edge cases (measured, never NaN, never a crash — DESIGN 8):
 //  - empty mesh (0 triangles, any vertex count including 0): nothing occludes, AO = 1 everywhere;

@@ -1,0 +1,358 @@
+// Known answers for the Embree AO reference (raytrace.h). Every expected value is a closed
+// form for cosine-weighted AO (DESIGN 2); tolerances are stated next to each check.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numeric>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include "canopy_ao/parallel.h"
+#include "canopy_ao/raytrace.h"
+
+using namespace canopy_ao;
+
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+struct Mesh {
+  std::vector<float> v;
+  std::vector<std::int32_t> t;
+  PointsView view() const { return {v.data(), v.size() / 3}; }
+  std::size_t triangles() const { return t.size() / 3; }
+  std::int32_t add(Vec3 p) {
+    v.insert(v.end(), {p.x, p.y, p.z});
+    return static_cast<std::int32_t>(v.size() / 3 - 1);
+  }
+  void tri(std::int32_t a, std::int32_t b, std::int32_t c) { t.insert(t.end(), {a, b, c}); }
+  // Quad a-b-c-d as two triangles; `flip` reverses the winding (occluders are two-sided).
+  void quad(Vec3 a, Vec3 b, Vec3 c, Vec3 d, bool flip = false) {
+    const auto ia = add(a), ib = add(b), ic = add(c), id = add(d);
+    if (flip) {
+      tri(ia, ic, ib);
+      tri(ia, id, ic);
+    } else {
+      tri(ia, ib, ic);
+      tri(ia, ic, id);
+    }
+  }
+  RayTracer tracer() const { return RayTracer(view(), t.data(), triangles()); }
+};
+
+// Horizontal rectangle [x0, x1] × [y0, y1] at height z.
+Mesh horizontal(float x0, float x1, float y0, float y1, float z, bool flip = false) {
+  Mesh m;
+  m.quad({x0, y0, z}, {x1, y0, z}, {x1, y1, z}, {x0, y1, z}, flip);
+  return m;
+}
+
+// Closed axis-aligned cube [-h, h]³, 12 triangles sharing 8 vertices (watertight).
+Mesh cube(float h) {
+  Mesh m;
+  for (int i = 0; i < 8; ++i) m.add({i & 1 ? h : -h, i & 2 ? h : -h, i & 4 ? h : -h});
+  const int f[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                       {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  for (const auto& q : f) {
+    m.tri(q[0], q[1], q[2]);
+    m.tri(q[0], q[2], q[3]);
+  }
+  return m;
+}
+
+// UV sphere (stacks × slices), inscribed: the faceting error in blocked solid angle is
+// ~1 − cos(π/stacks), below 1e-3 relative at 64 stacks.
+Mesh uv_sphere(Vec3 c, float r, int stacks, int slices) {
+  Mesh m;
+  for (int i = 0; i <= stacks; ++i) {
+    const float th = kPi * i / stacks;
+    for (int j = 0; j < slices; ++j) {
+      const float ph = 2 * kPi * j / slices;
+      m.add(c + r * Vec3{std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)});
+    }
+  }
+  for (int i = 0; i < stacks; ++i) {
+    for (int j = 0; j < slices; ++j) {
+      const int a = i * slices + j, b = i * slices + (j + 1) % slices;
+      const int c2 = a + slices, d = b + slices;
+      m.tri(a, b, d);
+      m.tri(a, d, c2);
+    }
+  }
+  return m;
+}
+
+// Random small triangles in a ball: a stand-in for a tree canopy.
+Mesh canopy(int triangles, float radius, float leaf, std::uint32_t seed) {
+  Mesh m;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1, 1);
+  for (int k = 0; k < triangles; ++k) {
+    Vec3 p;
+    do p = {u(rng), u(rng), u(rng)};
+    while (dot(p, p) > 1);
+    p = p * radius;
+    const auto a = m.add(p);
+    const auto b = m.add(p + leaf * Vec3{u(rng), u(rng), u(rng)});
+    const auto c = m.add(p + leaf * Vec3{u(rng), u(rng), u(rng)});
+    m.tri(a, b, c);
+  }
+  return m;
+}
+
+// N copies of one receiver: each row gets its own rotation, so their spread shows the noise.
+struct Receivers {
+  std::vector<float> p, n;
+  Receivers(Vec3 point, Vec3 normal, std::size_t count) {
+    for (std::size_t i = 0; i < count; ++i) {
+      p.insert(p.end(), {point.x, point.y, point.z});
+      n.insert(n.end(), {normal.x, normal.y, normal.z});
+    }
+  }
+  PointsView points() const { return {p.data(), p.size() / 3}; }
+  PointsView normals() const { return {n.data(), n.size() / 3}; }
+};
+
+double mean(const std::vector<float>& a) {
+  return std::accumulate(a.begin(), a.end(), 0.0) / static_cast<double>(a.size());
+}
+
+RayTraceOptions opts(int samples, float distance = kInf, std::uint32_t seed = 0,
+                     float offset = -1) {
+  RayTraceOptions o;
+  o.samples = samples;
+  o.distance = distance;
+  o.seed = seed;
+  o.offset = offset;
+  return o;
+}
+
+}  // namespace
+
+// === Open sky and planes
+
+TEST(RayTracer, PointOnOpenGroundIsOne) {
+  // The receiver lies on the plane itself: the origin offset must keep it from seeing it.
+  const Mesh ground = horizontal(-1000, 1000, -1000, 1000, 0);
+  const Receivers r({0.3f, -0.2f, 0}, {0, 0, 1}, 16);
+  for (float v : ground.tracer().ao(r.points(), r.normals(), opts(256))) EXPECT_EQ(v, 1.0f);
+}
+
+TEST(RayTracer, FarFromTheOriginTheAutoOffsetStillClearsTheGround) {
+  // 1 km away, float spacing is ~1e-4: the automatic offset scales with the coordinates too.
+  const Mesh ground = horizontal(9000, 11000, 9000, 11000, 500);
+  const Receivers r({10000.3f, 10000.1f, 500}, {0, 0, 1}, 16);
+  for (float v : ground.tracer().ao(r.points(), r.normals(), opts(256))) EXPECT_EQ(v, 1.0f);
+}
+
+TEST(RayTracer, AutoOffsetIsSmallAgainstTheScene) {
+  const Mesh ground = horizontal(-100, 100, -100, 100, 0);
+  const float diag = std::sqrt(2.0f) * 200;
+  EXPECT_GT(ground.tracer().auto_offset(), 0.0f);
+  EXPECT_LT(ground.tracer().auto_offset(), 2e-5f * diag);
+}
+
+TEST(RayTracer, UnderALargeCeilingIsBlockedUnlessTheDistanceIsShorter) {
+  const float h = 1;
+  const Mesh ceiling = horizontal(-100, 100, -100, 100, h);
+  const RayTracer tracer = ceiling.tracer();
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 32);
+  // Unblocked: only rays within atan(h/100) of the horizon, cos-weighted fraction ~1e-4.
+  for (float v : tracer.ao(r.points(), r.normals(), opts(256))) EXPECT_LE(v, 1.0f / 256);
+  // D < h: nothing within reach, exactly open.
+  for (float v : tracer.ao(r.points(), r.normals(), opts(256, 0.9f * h))) EXPECT_EQ(v, 1.0f);
+  // D = 2h: rays with cos θ ≥ h/D hit, a cos-weighted fraction sin²(60°) = 3/4 ⇒ AO = 1/4.
+  // (An explicit offset: the automatic one, 3e-3 here, would shift the answer by 0.0014.)
+  const auto ao = tracer.ao(r.points(), r.normals(), opts(1024, 2 * h, 0, 1e-5f));
+  for (float v : ao) EXPECT_NEAR(v, 0.25, 0.01);  // stratified: ~N^-3/4 noise
+  EXPECT_NEAR(mean(ao), 0.25, 0.003);
+}
+
+TEST(RayTracer, TrianglesAreTwoSided) {
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 32);
+  const auto a = horizontal(-50, 50, -50, 50, 1, false).tracer().ao(r.points(), r.normals(),
+                                                                     opts(256, 3));
+  const auto b = horizontal(-50, 50, -50, 50, 1, true).tracer().ao(r.points(), r.normals(),
+                                                                    opts(256, 3));
+  // Seen from below, one winding faces away from the receiver: both must block the same.
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) EXPECT_NEAR(a[i], b[i], 1.0 / 256);
+  EXPECT_NEAR(mean(a), 1.0 / 9.0, 0.005);  // cos θ ≥ 1/3 blocked: sin² = 8/9
+}
+
+TEST(RayTracer, UnderTheEdgeOfAHalfPlaneIsHalfOpen) {
+  // Overhang z = 1, x ≥ 0: rays with dx > 0 hit it (a cos-weighted half, by symmetry).
+  const Mesh roof = horizontal(0, 200, -200, 200, 1);
+  const RayTracer tracer = roof.tracer();
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 64);
+  const auto ao = tracer.ao(r.points(), r.normals(), opts(1024));
+  EXPECT_NEAR(mean(ao), 0.5, 0.003);
+  for (float v : ao) EXPECT_NEAR(v, 0.5, 0.01);
+  // With D = 2: half of the 3/4 of the unlimited ceiling ⇒ AO = 5/8.
+  EXPECT_NEAR(mean(tracer.ao(r.points(), r.normals(), opts(1024, 2, 0, 1e-5f))), 0.625, 0.003);
+}
+
+TEST(RayTracer, BesideATallWallIsHalfOpen) {
+  // Wall x = 1, the receiver on the ground facing up: every direction with dx > 0 hits it.
+  Mesh wall;
+  wall.quad({1, -300, -1}, {1, 300, -1}, {1, 300, 300}, {1, -300, 300});
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 64);
+  EXPECT_NEAR(mean(wall.tracer().ao(r.points(), r.normals(), opts(1024))), 0.5, 0.003);
+}
+
+// === Closed shapes
+
+TEST(RayTracer, InsideAClosedBoxIsZero) {
+  const RayTracer tracer = cube(1).tracer();
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 16);
+  for (float v : tracer.ao(r.points(), r.normals(), opts(1024))) EXPECT_EQ(v, 0.0f);
+}
+
+TEST(RayTracer, BoxCornersAtTheirOwnVertices) {
+  // ao_at_vertices with inward normals: closed all round ⇒ 0; outward: nothing of the convex
+  // box is in front of a corner ⇒ 1. Both check that the offset clears the adjacent faces.
+  const Mesh box = cube(1);
+  const RayTracer tracer = box.tracer();
+  std::vector<float> in, out;
+  for (std::size_t i = 0; i < box.v.size(); ++i) {
+    in.push_back(-box.v[i] / std::sqrt(3.0f));
+    out.push_back(box.v[i] / std::sqrt(3.0f));
+  }
+  for (float v : tracer.ao_at_vertices({in.data(), 8}, opts(512))) EXPECT_EQ(v, 0.0f);
+  for (float v : tracer.ao_at_vertices({out.data(), 8}, opts(512))) EXPECT_EQ(v, 1.0f);
+}
+
+TEST(RayTracer, SolidSphereAboveTheHorizonBlocksRSquaredOverDSquaredCosTheta) {
+  // A sphere of angular radius σ (sin σ = r/d) whose centre is θ from the normal, wholly
+  // above the horizon (θ + σ < 90°), blocks (r/d)² cos θ of cosine-weighted AO (the
+  // projected-solid-angle form factor of a sphere).
+  const float r = 1, d = 4;
+  for (float theta_deg : {0.0f, 30.0f, 60.0f}) {
+    const float th = theta_deg * kPi / 180;
+    const Mesh ball = uv_sphere({d * std::sin(th), 0, d * std::cos(th)}, r, 64, 128);
+    const Receivers rc({0, 0, 0}, {0, 0, 1}, 64);
+    const auto ao = ball.tracer().ao(rc.points(), rc.normals(), opts(1024));
+    const double want = 1.0 - (r / d) * (r / d) * std::cos(th);
+    for (float v : ao) EXPECT_NEAR(v, want, 0.01) << "theta " << theta_deg;
+    EXPECT_NEAR(mean(ao), want, 0.002) << "theta " << theta_deg;
+  }
+}
+
+// === Determinism
+
+TEST(RayTracer, DeterministicWhateverTheThreadCount) {
+  const Mesh leaves = canopy(2000, 2, 0.25f, 7);
+  const RayTracer tracer = leaves.tracer();
+  // Receivers on the leaves' own vertices, normals random (any direction is valid).
+  std::vector<float> nrm(leaves.v.size());
+  std::mt19937 rng(3);
+  std::normal_distribution<float> g;
+  for (float& x : nrm) x = g(rng);
+  const PointsView pts = leaves.view(), nv{nrm.data(), leaves.view().size};
+
+  const int prev = set_max_threads(1);
+  const auto one = tracer.ao(pts, nv, opts(64));
+  set_max_threads(2);
+  const auto two = tracer.ao(pts, nv, opts(64));
+  set_max_threads(0);
+  const auto all = tracer.ao(pts, nv, opts(64));
+  set_max_threads(prev);
+  EXPECT_EQ(one, two);
+  EXPECT_EQ(one, all);
+  EXPECT_EQ(one, tracer.ao(pts, nv, opts(64)));  // same seed, same bits
+
+  // Another seed: other noise, same expectation (mean over 6k points: σ ≲ 0.001).
+  const auto other = tracer.ao(pts, nv, opts(64, kInf, 12345));
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < one.size(); ++i) differ += one[i] != other[i];
+  EXPECT_GT(differ, one.size() / 4);
+  EXPECT_NEAR(mean(one), mean(other), 0.005);
+  EXPECT_GT(mean(one), 0.05);  // a real canopy: neither empty nor sealed
+  EXPECT_LT(mean(one), 0.95);
+}
+
+TEST(RayTracer, OneOffFunctionMatchesTheReusableTracer) {
+  const Mesh leaves = canopy(500, 1, 0.3f, 1);
+  const Receivers r({0, 0, 0}, {0, 1, 0}, 8);
+  const auto a = ao_raytrace(leaves.view(), leaves.t.data(), leaves.triangles(), r.points(),
+                             r.normals(), opts(128));
+  EXPECT_EQ(a, leaves.tracer().ao(r.points(), r.normals(), opts(128)));
+}
+
+TEST(RayTracer, HighQualityAndRobustBuildsGiveTheSameAnswer) {
+  // Rays grazing the roof's edge right above the receiver may go either way: one ray per
+  // point at most.
+  const Mesh roof = horizontal(0, 200, -200, 200, 1);
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 16);
+  RayTracerBuildOptions b;
+  b.high_quality = true;
+  b.robust = true;
+  const RayTracer t(roof.view(), roof.t.data(), roof.triangles(), b);
+  const auto robust = t.ao(r.points(), r.normals(), opts(256));
+  const auto fast = roof.tracer().ao(r.points(), r.normals(), opts(256));
+  for (std::size_t i = 0; i < r.points().size; ++i) EXPECT_NEAR(robust[i], fast[i], 1.01 / 256);
+}
+
+// === Edge cases and bad input
+
+TEST(RayTracer, EmptyMeshIsOpenSky) {
+  const Receivers r({1, 2, 3}, {0, 0, 1}, 4);
+  const RayTracer nothing(PointsView{nullptr, 0}, nullptr, 0);
+  for (float v : nothing.ao(r.points(), r.normals())) EXPECT_EQ(v, 1.0f);
+  const Mesh loose = [] {
+    Mesh m;
+    m.add({0, 0, 1});
+    m.add({1, 0, 1});
+    return m;
+  }();
+  for (float v : loose.tracer().ao(r.points(), r.normals())) EXPECT_EQ(v, 1.0f);
+  EXPECT_TRUE(nothing.ao(PointsView{nullptr, 0}, PointsView{nullptr, 0}).empty());
+}
+
+TEST(RayTracer, ZeroNormalIsOneAndUnnormalisedNormalsAreNormalised) {
+  const RayTracer tracer = cube(1).tracer();
+  const Receivers zero({0, 0, 0}, {0, 0, 0}, 2);
+  for (float v : tracer.ao(zero.points(), zero.normals())) EXPECT_EQ(v, 1.0f);
+  const Mesh roof = horizontal(0, 200, -200, 200, 1);
+  const Receivers unit({0, 0, 0}, {0, 0, 1}, 8), longer({0, 0, 0}, {0, 0, 5}, 8);
+  EXPECT_EQ(roof.tracer().ao(unit.points(), unit.normals()),
+            roof.tracer().ao(longer.points(), longer.normals()));
+}
+
+TEST(RayTracer, BadInputThrowsInvalidArgument) {
+  const Mesh box = cube(1);
+  const RayTracer tracer = box.tracer();
+  const Receivers r({0, 0, 0}, {0, 0, 1}, 2);
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), opts(0)), std::invalid_argument);
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), opts(-3)), std::invalid_argument);
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), opts(8, 0)), std::invalid_argument);
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), opts(8, -1)), std::invalid_argument);
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), opts(8, std::nanf(""))), std::invalid_argument);
+  RayTraceOptions bad_offset;
+  bad_offset.offset = std::nanf("");
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), bad_offset), std::invalid_argument);
+
+  const Receivers nan_point({std::nanf(""), 0, 0}, {0, 0, 1}, 1);
+  EXPECT_THROW(tracer.ao(nan_point.points(), nan_point.normals()), std::invalid_argument);
+  const Receivers inf_normal({0, 0, 0}, {0, kInf, 1}, 1);
+  EXPECT_THROW(tracer.ao(inf_normal.points(), inf_normal.normals()), std::invalid_argument);
+  const Receivers three({0, 0, 0}, {0, 0, 1}, 3);
+  EXPECT_THROW(tracer.ao(r.points(), three.normals()), std::invalid_argument);
+  EXPECT_THROW(tracer.ao_at_vertices(r.normals()), std::invalid_argument);
+
+  Mesh out_of_range = box;
+  out_of_range.t[5] = 8;
+  EXPECT_THROW(out_of_range.tracer(), std::invalid_argument);
+  out_of_range.t[5] = -1;
+  EXPECT_THROW(out_of_range.tracer(), std::invalid_argument);
+  Mesh nan_vertex = box;
+  nan_vertex.v[4] = std::nanf("");
+  EXPECT_THROW(nan_vertex.tracer(), std::invalid_argument);
+  EXPECT_THROW(ao_raytrace(box.view(), box.t.data(), box.triangles(), r.points(), r.normals(),
+                           opts(0)),
+               std::invalid_argument);
+}
