@@ -1,0 +1,167 @@
+"""Headless bake (issue 3, item 7).
+
+    blender -b scene.blend --python-expr "import canopy_ao.cli; canopy_ao.cli.main()" -- \
+        --objects Tree Leaves Ground --method auto --save --report out.json
+
+Prints one line per object (role, method, vertices, seconds, and the error against Cycles when
+asked), writes a JSON report, and exits non-zero with the message on stderr on bad arguments,
+missing objects or a failed bake. Run ``... -- --help`` for every option.
+"""
+
+import argparse
+import json
+import sys
+
+
+def _tau(text):
+    if text.lower() == "auto":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0 or 'auto', got {text!r}")
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"tau must be > 0, got {v}")
+    return v
+
+
+def _nonneg(text):
+    v = float(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
+    return v
+
+
+def _positive_int(text):
+    v = int(text)
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def build_parser():
+    from . import engine
+
+    p = argparse.ArgumentParser(
+        prog="blender -b scene.blend --python-expr 'import canopy_ao.cli; canopy_ao.cli.main()' --",
+        description="Bake Canopy AO into a color attribute of mesh objects.")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake")
+    which.add_argument("--all", action="store_true",
+                       help="bake every visible mesh (the default when --objects is not given)")
+    p.add_argument("--method", default="auto", choices=engine.METHODS,
+                   help="model to use (default: auto)")
+    p.add_argument("--tau", type=_tau, default=None,
+                   help="optical depth, or 'auto' to calibrate (default: auto)")
+    p.add_argument("--distance", type=_nonneg, default=10.0,
+                   help="AO distance, 0 = unlimited (default: 10)")
+    p.add_argument("--samples", type=_positive_int, default=64,
+                   help="rays per vertex for --method raytrace (default: 64)")
+    p.add_argument("--attribute", default="CanopyAO", help="color attribute name")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a same-named attribute Canopy AO did not make")
+    p.add_argument("--mode", choices=("vertex", "texel"), default="vertex")
+    p.add_argument("--resolution", type=_positive_int, default=1024, help="texel mode: image size")
+    p.add_argument("--uv", default="", help="texel mode: UV map (default: active)")
+    p.add_argument("--image-dir", default="//canopy_ao", help="texel mode: output folder")
+    p.add_argument("--no-proxies", action="store_true", help="do not add proxy empties")
+    p.add_argument("--wire-material", action="store_true",
+                   help="connect the attribute into the objects' materials")
+    p.add_argument("--aov", metavar="NAME", default=None,
+                   help="also add a shader + view-layer AOV of this name (not 'AO')")
+    p.add_argument("--check-cycles", action="store_true",
+                   help="also bake Cycles AO and report the error per object (slow)")
+    p.add_argument("--cycles-samples", type=_positive_int, default=64)
+    p.add_argument("--report", metavar="FILE.json", help="write a JSON report here")
+    p.add_argument("--save", action="store_true", help="save the .blend after baking")
+    return p
+
+
+def _argv(argv):
+    if argv is not None:
+        return list(argv)
+    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+
+
+def _fail(message, code=1):
+    sys.stdout.flush()
+    print(f"canopy_ao: error: {message}", file=sys.stderr, flush=True)
+    sys.exit(code)
+
+
+def main(argv=None):
+    """Parse the args after ``--``, bake, report; sys.exit with 0 on success."""
+    args = build_parser().parse_args(_argv(argv))  # exits 2 with usage on bad arguments
+    try:
+        code = _run(args)
+    except SystemExit:
+        raise
+    except Exception as exc:  # an unexpected failure must still fail the process
+        import traceback
+        traceback.print_exc()
+        _fail(f"{type(exc).__name__}: {exc}")
+    sys.stdout.flush()
+    sys.exit(code)
+
+
+def _run(args):
+    import addon_utils
+    import bpy
+
+    if not hasattr(bpy.types.Scene, "canopy_ao"):
+        # Imported by a plain `import canopy_ao.cli`: mark the package current so enable()
+        # registers it as it is instead of reloading it ("module changed on disk").
+        import os
+        pkg = sys.modules[__package__]
+        pkg.__time__ = os.path.getmtime(pkg.__file__)
+        addon_utils.enable(__package__, default_set=False, handle_error=None)
+        if not hasattr(bpy.types.Scene, "canopy_ao"):
+            _fail("the canopy_ao add-on could not be enabled (see the messages above)")
+    from . import engine, operators
+
+    if args.aov is not None and args.aov == "AO":
+        _fail("--aov AO collides with Cycles' own AO pass; choose another name (e.g. BakedAO)")
+    ok, msg = engine.core_status()
+    if not ok:
+        _fail(msg)
+    if args.save and not bpy.data.filepath:
+        _fail("--save needs a saved .blend (give the .blend before --python-expr)")
+    opts = dict(method=args.method, tau=args.tau, distance=args.distance, samples=args.samples,
+                attribute=args.attribute, overwrite=args.overwrite,
+                wire_material=args.wire_material, add_aov=args.aov is not None,
+                aov_name=args.aov or "BakedAO", mode=args.mode.upper(), uv_map=args.uv,
+                resolution=args.resolution, image_dir=args.image_dir,
+                show_proxies=not args.no_proxies, check_cycles=args.check_cycles,
+                cycles_samples=args.cycles_samples)
+    context = bpy.context
+    if args.objects is None:
+        # Headless: "the selection" means nothing here, so bake every visible mesh.
+        for ob in context.view_layer.objects:
+            ob.select_set(False)
+    try:
+        job, rep = operators.run_bake(context, args.objects or [], opts)
+    except operators.BakeError as exc:
+        _fail(str(exc))
+    for r in job.results:
+        e = rep["objects"][r.name]
+        line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
+                f"{e['seconds']:.3f} s, mean AO {e['ao_mean']:.3f}")
+        if "cycles" in e:
+            c = e["cycles"]
+            line += (f", vs Cycles MAE {c.get('mae', float('nan')):.4f} "
+                     f"RMSE {c.get('rmse', float('nan')):.4f}")
+        print(line, flush=True)
+    print(f"canopy_ao: {rep['method']} tau {rep['tau']:.4g}, {len(job.results)} object(s), "
+          f"{rep['seconds']:.2f} s", flush=True)
+    for note in rep["notes"]:
+        print(f"canopy_ao: note: {note}", flush=True)
+    if args.report:
+        try:
+            with open(bpy.path.abspath(args.report), "w") as f:
+                json.dump(rep, f, indent=1, default=float)
+        except OSError as exc:
+            _fail(f"cannot write the report: {exc}")
+    if args.save:
+        bpy.ops.wm.save_mainfile()
+        print(f"canopy_ao: saved {bpy.data.filepath}", flush=True)
+    return 0

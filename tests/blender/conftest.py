@@ -1,0 +1,89 @@
+"""Blender test fixtures: the add-on enabled once, a small tree + ground scene per test.
+
+Run inside Blender (see run_pytest.py). If BLENDER_USER_SCRIPTS does not provide the add-on,
+the repository's addon/ folder is put on sys.path so `canopy_ao` still imports.
+"""
+
+import os
+import sys
+import tempfile
+
+import bpy
+import numpy as np
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ADDON_PARENT = os.path.join(REPO, "addon")
+sys.path.insert(0, os.path.join(REPO, "tests", "python"))
+
+import tree_scene  # noqa: E402  (pure numpy scene arrays, shared with the plain tests)
+
+
+def _ensure_importable():
+    import importlib.util
+    if importlib.util.find_spec("canopy_ao") is None:
+        sys.path.insert(0, ADDON_PARENT)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def addon():
+    import addon_utils
+    _ensure_importable()
+    mod = addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
+    assert mod is not None, "the canopy_ao add-on did not enable"
+    assert hasattr(bpy.types.Scene, "canopy_ao")
+    yield mod
+
+
+@pytest.fixture(scope="session")
+def user_scripts():
+    """A BLENDER_USER_SCRIPTS folder with the add-on, for Blender subprocesses."""
+    env = os.environ.get("BLENDER_USER_SCRIPTS")
+    if env and os.path.isdir(os.path.join(env, "addons", "canopy_ao")):
+        return env
+    d = tempfile.mkdtemp(prefix="canopy_ao_scripts_")
+    os.makedirs(os.path.join(d, "addons"))
+    os.symlink(os.path.join(ADDON_PARENT, "canopy_ao"), os.path.join(d, "addons", "canopy_ao"))
+    return d
+
+
+def _clear_scene():
+    scene = bpy.context.scene
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob, do_unlink=True)
+    for me in list(bpy.data.meshes):
+        bpy.data.meshes.remove(me)
+    for coll in list(bpy.data.collections):
+        bpy.data.collections.remove(coll)
+    return scene
+
+
+def add_mesh(name, positions, triangles, collection=None):
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(positions))
+    me.vertices.foreach_set("co", np.ascontiguousarray(positions, np.float32).ravel())
+    tris = np.ascontiguousarray(triangles, np.int32)
+    me.loops.add(tris.size)
+    me.loops.foreach_set("vertex_index", tris.ravel())
+    me.polygons.add(len(tris))
+    me.polygons.foreach_set("loop_start", np.arange(0, tris.size, 3, dtype=np.int32))
+    me.polygons.foreach_set("loop_total", np.full(len(tris), 3, dtype=np.int32))
+    me.update(calc_edges=True)
+    me.validate()
+    ob = bpy.data.objects.new(name, me)
+    (collection or bpy.context.scene.collection).objects.link(ob)
+    return ob
+
+
+@pytest.fixture
+def tree_scene_objects():
+    """Trunk (cylinder), Leaves (1500 quads in a ball of radius 1.2 at z = 2.6), Ground
+    (20 x 20 plane at z = 0), Grass (300 blades at x in [4, 8]); nothing selected."""
+    _clear_scene()
+    obs = {name: add_mesh(name, p, t) for name, (p, t) in tree_scene.scene(True).items()}
+    for ob in bpy.context.scene.objects:
+        ob.select_set(False)
+    bpy.context.view_layer.update()
+    bpy.context.scene.canopy_ao.tau_auto = True
+    yield obs
+    _clear_scene()
