@@ -15,8 +15,10 @@ if str(ADDON_DIR) not in sys.path:
 
 
 def empty_scene():
-    """A fresh empty file; every test starts from here."""
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    """A fresh empty file; every test starts from here. read_homefile, not
+    read_factory_settings: the latter also resets preferences and so disables the add-on the
+    harness enabled for the whole session."""
+    bpy.ops.wm.read_homefile(use_empty=True)
     return bpy.context.scene
 
 
