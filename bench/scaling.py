@@ -1,0 +1,112 @@
+"""Time against vertex count per method, 1e4 … 1e7 vertices (issue 5, item 6).
+
+    /usr/bin/python3 bench/scaling.py [--max 1e7] [--quick]
+
+The round tree (examples/canopy_scenes.py) with leaves = N/4 quads, no ground, so the vertex
+count is N (+ a few thousand trunk vertices). Per method: prepare (fits; BVH build for ray
+tracing) and evaluation over every vertex, wall-clock, best of 2 when short. τ is fixed (1.5):
+calibration costs a constant (a few hundred traced points) and is timed in bench/accuracy.py.
+Writes bench/out/scaling.csv and bench/out/scaling.png (log-log).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(REPO, "examples"))
+sys.path.insert(0, os.path.join(REPO, "addon"))
+
+import numpy as np  # noqa: E402
+
+import canopy_scenes as cs  # noqa: E402
+from canopy_ao import _core, engine  # noqa: E402
+
+OUT = os.path.join(HERE, "out")
+
+
+def timed(fn, repeats=2):
+    best, res = math.inf, None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        res = fn()
+        dt = time.perf_counter() - t0
+        best = min(best, dt)
+        if dt > 1.0:
+            break
+    return res, best
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--max", type=float, default=1e7)
+    ap.add_argument("--quick", action="store_true", help="stop at 1e6 vertices")
+    ap.add_argument("--rays", type=int, default=16)
+    a = ap.parse_args(argv)
+    top = 1e6 if a.quick else a.max
+    sizes = [n for n in (1e4, 3e4, 1e5, 3e5, 1e6, 3e6, 1e7) if n <= top * 1.001]
+    methods = [m for m in ("reeves_blau", "sphere", "ellipsoid", "shells", "grid")
+               if m in engine.available_methods()]
+    rows = []
+    os.makedirs(OUT, exist_ok=True)
+    for n in sizes:
+        scene = cs.round_tree(seed=0, leaves=int(n // 4), ground=False)
+        V, T, _ = scene.merged()
+        N = np.concatenate([cs.vertex_normals(p.vertices, p.triangles) for p in scene])
+        items = [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
+                                  N[o:o + p.n_vertices], p.triangles)
+                 for p, o in zip(scene, np.cumsum([0] + [q.n_vertices for q in scene])[:-1])]
+        nv = len(V)
+        for m in methods:
+            engine.FALLBACKS_USED.clear()
+            try:
+                s = engine.BakeSettings(method=m, tau=1.5, shells=4)
+                plan, tp = timed(lambda: engine.prepare(items, s))
+                _, te = timed(lambda: [engine.evaluate_item(plan, it) for it in items])
+                note = ("numpy stand-ins: " + ",".join(sorted(engine.FALLBACKS_USED))
+                        if engine.FALLBACKS_USED else "")
+            except Exception as exc:
+                tp = te = math.nan
+                note = f"{type(exc).__name__}: {exc}"
+            rows.append(dict(method=m, vertices=nv, t_prepare=tp, t_eval=te, t_total=tp + te,
+                             mvps=nv / te / 1e6 if te > 0 else math.nan, note=note))
+            print(f"{nv:10d} {m:12s} prepare {tp:8.3f} s eval {te:8.3f} s "
+                  f"({rows[-1]['mvps']:.1f} M vertices/s) {note}", flush=True)
+        if hasattr(_core, "RayTracer"):
+            tr, tb = timed(lambda: _core.RayTracer(V, T), 1)
+            for r in (1, a.rays):
+                _, te = timed(lambda: tr.ao(V, N, samples=r, distance=scene.ao_distance()), 1)
+                rows.append(dict(method=f"raytrace {r}", vertices=nv, t_prepare=tb, t_eval=te,
+                                 t_total=tb + te, mvps=nv / te / 1e6, note=""))
+                print(f"{nv:10d} raytrace {r:3d} build {tb:8.3f} s trace {te:8.3f} s "
+                      f"({nv * r / te / 1e6:.1f} M rays/s)", flush=True)
+            del tr
+    path = os.path.join(OUT, "scaling.csv")
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for m in dict.fromkeys(r["method"] for r in rows):
+        rr = [r for r in rows if r["method"] == m and np.isfinite(r["t_total"])]
+        ax.plot([r["vertices"] for r in rr], [r["t_total"] for r in rr], "o-", label=m)
+    ax.set_xscale("log"); ax.set_yscale("log")
+    ax.set_xlabel("vertices"); ax.set_ylabel("wall time, s (prepare + evaluate)")
+    ax.grid(True, which="both", alpha=0.3); ax.legend(fontsize=8)
+    ax.set_title("Canopy AO: time against vertex count (round tree, 2 cores)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(OUT, "scaling.png"), dpi=110)
+    print(f"scaling: wrote {path} and scaling.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
