@@ -111,8 +111,9 @@ def _new_mix(nt, location):
 
 
 def _set_aov_target(node, aov_name):
-    # 3.4: the AOV Output node's RNA has two `name` properties and Python reaches the node name,
-    # which is also the AOV it writes (DESIGN 9). 4.x: a separate `aov_name`.
+    # 3.4: the AOV Output node's RNA has two `name` properties and Python reaches the node's
+    # own one, the AOV it writes (the node keeps its tree name "AOV Output"; DESIGN 9).
+    # 4.x: `aov_name`.
     if hasattr(node, "aov_name"):
         node.aov_name = aov_name
     else:
@@ -168,14 +169,6 @@ def _wire_material(mat, make_source, source_kind, aov_name, uv_map=None):
     added = 0
     out = _output_node(nt)
     x0, y0 = (out.location.x, out.location.y) if out is not None else (0.0, 0.0)
-
-    # AOV node name must be free in 3.4 (the node name *is* the target); check before changing
-    # anything so a refusal leaves the material as it was.
-    clash = nt.nodes.get(aov_name)
-    if clash is not None and clash.get(TAG) != "aov" and not hasattr(clash, "aov_name"):
-        raise ValueError(
-                f"Material '{mat.name}' already has a node named '{aov_name}'; rename it or "
-                "choose another AOV name (in Blender 3.4 the AOV Output node's name is its pass)")
 
     # Source node: reuse if it is the same kind, replace otherwise (vertex <-> texel switch).
     src = None

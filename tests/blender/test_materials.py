@@ -130,3 +130,15 @@ def test_non_mesh_refused(scene):
     bpy.ops.object.empty_add()
     with pytest.raises(ValueError, match="not a mesh"):
         materials.wire_vertex_ao(bpy.context.object, "CanopyAO")
+
+
+def test_aov_target_follows_name(scene):
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    user = mat.node_tree.nodes.new("ShaderNodeRGB")
+    user.name = "BakedAO"  # a user node with the pass's name does not get in the way
+    materials.wire_vertex_ao(obj, "CanopyAO", aov_name="BakedAO")
+    assert materials.wire_vertex_ao(obj, "CanopyAO", aov_name="TreeAO") == 0
+    aov = next(n for n in mat.node_tree.nodes if n.get("canopy_ao") == "aov")
+    assert materials._aov_target(aov) == "TreeAO"
+    assert mat.node_tree.nodes.get("BakedAO") == user
