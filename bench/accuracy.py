@@ -6,7 +6,7 @@ Pure Python over numpy, ``canopy_ao._core`` and the add-on's bpy-free ``engine``
 path as a bake in Blender, minus bpy I/O). For each scene (examples/canopy_scenes.py):
 
 1. Reference: Embree (``_core.RayTracer``) at ``--ref-samples`` cosine-weighted rays per vertex
-   (1024; 256 with --quick), AO distance D = the scene's bbox diagonal, seed 12345 so its noise
+   (1024 unless --ref-samples), AO distance D = the scene's bbox diagonal, seed 12345 so its noise
    is independent of the methods' own ray-traced runs. Cached in
    bench/out/cache/embree_<scene>[_quick]_<samples>.npz (keyed by a hash of the geometry).
    Cycles' bake (bench/cycles_reference.py, run in Blender) is read from the same cache folder
@@ -356,7 +356,7 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(OUT, "results.csv"))
     args = ap.parse_args(argv)
     if args.ref_samples is None:
-        args.ref_samples = 256 if args.quick else 1024
+        args.ref_samples = 1024
     if args.ray_samples is None:
         args.ray_samples = [1, 4, 16, 64] if args.quick else [1, 4, 16, 64, 256]
     scenes = args.scenes or DEFAULT_SCENES
