@@ -119,8 +119,6 @@ def _run(args):
             _fail("the canopy_ao add-on could not be enabled (see the messages above)")
     from . import engine, operators
 
-    if args.aov is not None and args.aov == "AO":
-        _fail("--aov AO collides with Cycles' own AO pass; choose another name (e.g. BakedAO)")
     ok, msg = engine.core_status()
     if not ok:
         _fail(msg)

@@ -28,18 +28,18 @@ def _vertex_normals(mesh, n):
     return out.reshape(n, 3)
 
 
-def evaluated_arrays(obj, depsgraph):
+def evaluated_arrays(obj, depsgraph, same_count=True):
     """World-space arrays of an object's evaluated mesh (modifiers applied).
 
     Returns (positions float32 (V, 3), normals float32 (V, 3) unit, triangles int32 (F, 3)).
-    Raises MeshIOError when the evaluated mesh has a different vertex count from the original
-    (a per-vertex result could not be stored on the original mesh).
+    With same_count, raises MeshIOError when the evaluated mesh has a different vertex count
+    from the original (a per-vertex result could not be stored on the original mesh).
     """
     ob_eval = obj.evaluated_get(depsgraph)
     mesh = ob_eval.to_mesh()
     try:
         n = len(mesh.vertices)
-        if n != len(obj.data.vertices):
+        if same_count and n != len(obj.data.vertices):
             raise MeshIOError(
                 f"{obj.name}: its modifiers change the vertex count ({len(obj.data.vertices)} → "
                 f"{n}), so a per-vertex result cannot be stored on the mesh; apply the "

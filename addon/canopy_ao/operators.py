@@ -3,6 +3,7 @@
 import time
 
 import bpy
+import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from . import engine, mesh_io, roles
@@ -72,6 +73,14 @@ class BakeJob:
             except ImportError:
                 raise BakeError("per-texel output is not available in this build yet (no "
                                 "canopy_ao.texel); bake per vertex") from None
+        if opts["wire_material"] or opts["add_aov"]:
+            try:
+                from . import materials
+                materials.check_aov_name(opts["aov_name"])
+            except ImportError:
+                pass  # reported in the notes after the bake
+            except ValueError as exc:
+                raise BakeError(str(exc)) from None
         if opts["method"] not in engine.available_methods():
             raise BakeError(f"method '{opts['method']}' is not available; one of "
                             f"{', '.join(engine.available_methods())}")
@@ -101,7 +110,8 @@ class BakeJob:
         self.items, self.objects, self.how = [], {}, {}
         for name, obj in members.items():
             try:
-                pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph)
+                pos, nor, tris = mesh_io.evaluated_arrays(
+                    obj, depsgraph, same_count=opts["mode"] == 'VERTEX')
             except mesh_io.MeshIOError as exc:
                 if obj in targets:
                     raise BakeError(str(exc)) from None
@@ -115,7 +125,7 @@ class BakeJob:
         self.targets = [it for it in self.items if it.name in {o.name for o in targets}]
         if not self.targets:
             raise BakeError("every object to bake has the role Ignore")
-        for it in self.targets:
+        for it in self.targets if opts["mode"] == 'VERTEX' else ():
             why = mesh_io.check_attribute(self.objects[it.name], opts["attribute"],
                                           opts["overwrite"])
             if why:
@@ -162,19 +172,29 @@ class BakeJob:
     def commit(self, context):
         """Write every result, then the optional extras. Returns the JSON-ready report."""
         o = self.opts
-        for r in self.results:
-            obj = self.objects[r.name]
-            mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
+        texel_stats = {}
         if o["mode"] == 'TEXEL':
             from . import texel
-            texel.bake_objects(context, self.plan, self.targets, o)
+            try:
+                texel_stats = texel.bake_objects(context, self.plan, self.targets, o)
+            except ValueError as exc:  # no UV map, bad resolution: said before any change
+                raise BakeError(str(exc)) from None
+        else:
+            for r in self.results:
+                obj = self.objects[r.name]
+                mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, engine.proxy_dicts(self.plan))
         rep = engine.report(self.plan, self.results)
-        rep["attribute"] = o["attribute"]
+        rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
+        rep["mode"] = o["mode"].lower()
+        for name, st in texel_stats.items():
+            rep["objects"][name]["texel"] = {k: v for k, v in st.items()
+                                             if isinstance(v, (int, float, str, list))}
+            rep["notes"].extend(st.get("warnings", []))
         for r in self.results:
             rep["objects"][r.name]["role_source"] = self.how[r.name]
-        if o["wire_material"] or o["add_aov"]:
+        if o["mode"] == 'VERTEX' and o["wire_material"] or o["add_aov"]:
             self._wire(rep)
         if o["check_cycles"]:
             self._check_cycles(context, rep)
@@ -213,7 +233,10 @@ class BakeJob:
         ref = cycles_check.bake_cycles_vertex_ao(context, objs, d if d > 0 else 1.0e6,
                                                  self.opts["cycles_samples"])
         for r in self.results:
-            if r.name in ref:
+            if r.name in ref and np.shape(ref[r.name]) != r.ao.shape:
+                rep["notes"].append(f"{r.name}: Cycles check skipped (its modifiers change the "
+                                    "vertex count)")
+            elif r.name in ref:
                 rep["objects"][r.name]["cycles"] = {
                     k: float(v) for k, v in metrics.compare(r.ao, ref[r.name]).items()}
 
@@ -243,6 +266,11 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
     wire_material: BoolProperty(name="Wire Material", default=False)
     add_aov: BoolProperty(name="Add AOV", default=False)
     aov_name: StringProperty(name="AOV Name", default="BakedAO")
+    mode: EnumProperty(name="Output", items=[("VERTEX", "Per Vertex", ""),
+                                             ("TEXEL", "Per Texel", "")], default="VERTEX")
+    uv_map: StringProperty(name="UV Map", default="")
+    resolution: IntProperty(name="Resolution", default=1024, min=16, max=16384)
+    image_dir: StringProperty(name="Image Folder", default="//canopy_ao", subtype='DIR_PATH')
     check_cycles: BoolProperty(name="Check with Cycles", default=False)
     cycles_samples: IntProperty(name="Cycles Samples", default=64, min=1)
 
@@ -267,7 +295,8 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                   "samples": "samples", "overwrite": "overwrite", "show_proxies": "show_proxies",
                   "wire_material": "wire_material", "add_aov": "add_aov",
                   "aov_name": "aov_name", "check_cycles": "check_cycles",
-                  "cycles_samples": "cycles_samples"}
+                  "cycles_samples": "cycles_samples", "mode": "mode", "uv_map": "uv_map",
+                  "resolution": "resolution", "image_dir": "image_dir"}
         for prop, key in keymap.items():
             if self.properties.is_property_set(prop):
                 opts[key] = getattr(self, prop)
@@ -290,8 +319,9 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         rep = job.report_dict
         for line in job.lines:
             self.report({'INFO'}, line)
+        where = f"'{rep['attribute']}'" if rep["attribute"] else "images"
         self.report({'INFO'}, f"Canopy AO: {rep['method']}, τ {rep['tau']:.3g}, "
-                              f"{len(job.results)} object(s) baked into '{rep['attribute']}'")
+                              f"{len(job.results)} object(s) baked into {where}")
         for note in rep["notes"]:
             self.report({'WARNING'}, note)
         return {'FINISHED'}

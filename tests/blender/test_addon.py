@@ -137,16 +137,32 @@ def test_undo_is_declared():
     assert not bpy.ops.ed.undo.poll()
 
 
-def test_texel_mode_errors_clearly(tree_scene_objects):
+def test_texel_mode_without_uvs_errors_clearly(tree_scene_objects):
     import importlib.util
-    if importlib.util.find_spec("canopy_ao.texel") is not None:
-        pytest.skip("the texel path exists in this build")
     bpy.context.scene.canopy_ao.mode = 'TEXEL'
     try:
-        with pytest.raises(RuntimeError, match="texel"):
-            bake(objects="Ground")
+        if importlib.util.find_spec("canopy_ao.texel") is None:
+            with pytest.raises(RuntimeError, match="texel"):
+                bake(objects="Ground")
+        else:  # the generated meshes have no UV map
+            with pytest.raises(RuntimeError, match="UV"):
+                bake(objects="Ground")
+        assert ATTR not in bpy.data.objects["Ground"].data.attributes
     finally:
         bpy.context.scene.canopy_ao.mode = 'VERTEX'
+
+
+def test_check_against_cycles(tree_scene_objects):
+    """The operator's Cycles check: a per-object error in the report (16 samples: ~2 s)."""
+    from canopy_ao import operators
+    pytest.importorskip("canopy_ao.cycles_check")
+    opts = operators.scene_settings_opts(bpy.context.scene)
+    opts.update(method="ellipsoid", tau=2.0, distance=0.0, check_cycles=True,
+                cycles_samples=16, show_proxies=False)
+    _job, rep = operators.run_bake(bpy.context, ["Ground"], opts)
+    c = rep["objects"]["Ground"]["cycles"]
+    assert 0.0 <= c["mae"] < 0.2, c
+    assert "vs Cycles MAE" in bpy.data.objects["Ground"].canopy_ao.last_result
 
 
 def test_module_missing_path(monkeypatch):
