@@ -21,7 +21,7 @@ import numpy as np
 from . import metrics
 
 __all__ = ["bake_cycles_vertex_ao", "bake_cycles_texel_ao", "write_error_attribute",
-           "check_objects", "render_settings_snapshot"]
+           "check_objects", "check_texel", "render_settings_snapshot"]
 
 _TMP_ATTR = "_CanopyAO_CyclesBake"
 _TMP_IMAGE = "_CanopyAO_CyclesBake"
@@ -304,3 +304,22 @@ def check_objects(context, objects, ours, distance, samples, write_errors=False,
             write_error_attribute(o, a - r)
         report[o.name] = m
     return report
+
+
+def check_texel(context, obj, ours, uv_map, distance, samples, ours_mask=None):
+    """Bake Cycles AO into obj's UV layout at our image's resolution and compare the texels
+    both cover (Cycles' coverage: texel centres inside a face; ours_mask, e.g. texel.splat's
+    mask == 1, leaves out our margin). ours: float32 (H, W), row 0 = bottom. Needs a square
+    image (Cycles bakes a square temporary image here)."""
+    ours = np.asarray(ours, dtype=np.float32)
+    if ours.ndim != 2 or ours.shape[0] != ours.shape[1]:
+        raise ValueError(f"Our texel AO for '{obj.name}' has shape {ours.shape}; expected a "
+                         "square (H, W) image")
+    t0 = time.perf_counter()
+    ref, mask = bake_cycles_texel_ao(context, obj, uv_map, ours.shape[0], distance, samples,
+                                     return_mask=True)
+    if ours_mask is not None:
+        mask &= np.asarray(ours_mask, dtype=bool)
+    m = metrics.compare(ours, ref, mask=mask)
+    m["time_cycles"] = time.perf_counter() - t0
+    return m
