@@ -21,7 +21,8 @@ path as a bake in Blender, minus bpy I/O). For each scene (examples/canopy_scene
    - grid: the density grid, when the core has DensityGrid.
    - raytrace at 1, 4, 16, 64, 256 rays (prepare = BVH build).
    - cycles at every cached sample count below the Cycles reference (time = the bake call).
-3. Errors per object role (canopy, trunk, ground, grass, all) against each reference: MAE,
+3. Errors per object role (canopy, trunk, ground, grass, all, and "unburied": all but the
+   vertices whose reference AO is <= 0.02, i.e. buried inside other geometry) against each reference: MAE,
    RMSE, p95, correlation, bias (canopy_ao.metrics.compare) → bench/out/results.csv; per-vertex
    AO of every method → bench/out/ao/<scene>.npz (float16) for the picture strip.
 
@@ -54,6 +55,7 @@ OUT = os.path.join(HERE, "out")
 CACHE = os.path.join(OUT, "cache")
 REF_SEED = 12345
 ROLES = ("canopy", "trunk", "ground", "grass")
+BURIED = 0.02   # reference AO at or below this: a vertex buried inside other geometry
 DEFAULT_SCENES = [n for n in cs.SCENES if n != "large_tree"]
 FIELDS = ["scene", "vertices", "family", "method", "setting", "tau", "tau_mode", "reference",
           "role", "mae", "rmse", "p95", "corr", "bias", "n", "t_prepare", "t_eval", "t_total",
@@ -263,8 +265,13 @@ def method_runs(prep, ref, args):
 
 def metric_rows(prep, ao, ref, base):
     rows = []
-    for role in ROLES + ("all",):
-        mask = np.ones(len(ref), bool) if role == "all" else (prep.role == role)
+    for role in ROLES + ("all", "unburied"):
+        if role == "all":
+            mask = np.ones(len(ref), bool)
+        elif role == "unburied":   # DESIGN 9: vertices inside other geometry read AO ~ 0
+            mask = ref > BURIED
+        else:
+            mask = prep.role == role
         if not mask.any():
             continue
         m = compare(ao, ref, mask=mask)
