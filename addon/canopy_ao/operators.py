@@ -17,11 +17,14 @@ class BakeError(RuntimeError):
 # === Scene → items ===========================================================================
 
 def tree_of(obj):
-    """Which tree an object belongs to: the user's name, else the root of its parent chain (a
+    """Which tree an object belongs to: the user's name (or a generator's ``canopy_ao_tree``
+    tag), else the root of its parent chain (a
     trunk parenting its leaves), else its first collection (the scene's own collection makes
     one tree of everything loose in it)."""
     if obj.canopy_ao.tree:
         return obj.canopy_ao.tree
+    if isinstance(obj.get("canopy_ao_tree"), str) and obj["canopy_ao_tree"]:
+        return obj["canopy_ao_tree"]  # set by a scene generator (examples/blender_scene.py)
     if obj.parent is not None or obj.children:
         root = obj
         while root.parent is not None:
@@ -36,6 +39,9 @@ def role_of(obj, positions, triangles):
     """(role, how) — the user's override, or a guess from the geometry."""
     if obj.canopy_ao.role != 'AUTO':
         return obj.canopy_ao.role, "set"
+    tagged = obj.get("canopy_ao_role")  # set by a scene generator (examples/blender_scene.py)
+    if isinstance(tagged, str) and tagged.upper() in roles.ROLES:
+        return tagged.upper(), "tagged canopy_ao_role"
     role, why = roles.guess_role(positions, triangles)
     return role, f"guessed: {why}"
 

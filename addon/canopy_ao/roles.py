@@ -24,6 +24,26 @@ MANY_COMPONENTS = 24
 FLAT_RATIO = 0.05
 
 
+def _hook(parent, hi, lo):
+    """parent[hi] = min(parent[hi], lo), the smallest lo winning for a repeated hi (what
+    np.minimum.at does, by a sort: ufunc.at is slow in numpy < 1.25)."""
+    order = np.lexsort((lo, hi))
+    hs, ls = hi[order], lo[order]
+    first = np.empty(len(hs), bool)
+    first[:1] = True
+    np.not_equal(hs[1:], hs[:-1], out=first[1:])
+    h, l = hs[first], ls[first]
+    parent[h] = np.minimum(parent[h], l)
+
+
+def _group_min_max(values, labels, k):
+    """Per-label min and max of values (N, D) for labels in [0, k) (each label present)."""
+    order = np.argsort(labels, kind="stable")
+    starts = np.searchsorted(labels[order], np.arange(k))
+    v = values[order]
+    return np.minimum.reduceat(v, starts, axis=0), np.maximum.reduceat(v, starts, axis=0)
+
+
 def connected_components(n_vertices: int, triangles: np.ndarray) -> np.ndarray:
     """Label each vertex with its connected component.
 
@@ -49,7 +69,7 @@ def connected_components(n_vertices: int, triangles: np.ndarray) -> np.ndarray:
                 break
             a, b = a[differ], b[differ]  # edges already inside one component never matter again
             ra, rb = ra[differ], rb[differ]
-            np.minimum.at(parent, np.maximum(ra, rb), np.minimum(ra, rb))
+            _hook(parent, np.maximum(ra, rb), np.minimum(ra, rb))
             # INV: parent[i] <= i, so pointer jumping terminates.
             while True:
                 grand = parent[parent]
@@ -72,6 +92,7 @@ class MeshStats:
     component_size_ratio: float  # median component diagonal / object diagonal
     base_spread: float  # spread of component lowest z, relative to the object's diagonal
     component_aspect: float  # median component height / width (blades are tall and thin)
+    component_flatness: float  # median λmin/λmid of each piece's covariance: 0 = flat card
     labels: np.ndarray = field(repr=False, default=None)
 
 
@@ -81,17 +102,14 @@ def mesh_stats(positions: np.ndarray, triangles: np.ndarray) -> MeshStats:
     n = len(p)
     if n == 0:
         z = np.zeros(3)
-        return MeshStats(0, 0, z, 0.0, 0.0, 0.0, 0.0, 0.0, np.zeros(0, np.int64))
+        return MeshStats(0, 0, z, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.zeros(0, np.int64))
     labels = connected_components(n, triangles)
     k = int(labels.max()) + 1
     lo, hi = p.min(axis=0), p.max(axis=0)
     ext = hi - lo
     diag = float(np.linalg.norm(ext)) or 1.0
     # Per-component bounding boxes, all at once.
-    cmin = np.full((k, 3), np.inf)
-    cmax = np.full((k, 3), -np.inf)
-    np.minimum.at(cmin, labels, p)
-    np.maximum.at(cmax, labels, p)
+    cmin, cmax = _group_min_max(p, labels, k)
     cext = cmax - cmin
     cdiag = np.linalg.norm(cext, axis=1)
     cwidth = np.maximum(np.hypot(cext[:, 0], cext[:, 1]), 1e-12)
@@ -104,8 +122,35 @@ def mesh_stats(positions: np.ndarray, triangles: np.ndarray) -> MeshStats:
         component_size_ratio=float(np.median(cdiag) / diag),
         base_spread=float(np.std(cmin[:, 2]) / diag),
         component_aspect=float(np.median(cext[:, 2] / cwidth)),
+        component_flatness=_flatness(p, labels, k),
         labels=labels,
     )
+
+
+def _flatness(p, labels, k, max_pieces=4000):
+    """Median over pieces of λmin/λmid of the piece's point covariance: ~0 for flat cards
+    (leaves, blades), ~1 for tubes (branches: their two short axes are alike). Pieces of fewer
+    than 3 points do not count; beyond max_pieces a fixed sample of pieces estimates it."""
+    if k > max_pieces:
+        keep = np.zeros(k, bool)
+        keep[np.random.default_rng(0).choice(k, max_pieces, replace=False)] = True
+        sel = keep[labels]
+        _, labels = np.unique(labels[sel], return_inverse=True)
+        p, k = p[sel], max_pieces
+    q = p - p.mean(axis=0)
+    cnt = np.bincount(labels, minlength=k).astype(np.float64)
+    mean = np.stack([np.bincount(labels, q[:, i], k) for i in range(3)], 1) / cnt[:, None]
+    second = np.empty((k, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            second[:, i, j] = second[:, j, i] = np.bincount(labels, q[:, i] * q[:, j], k) / cnt
+    cov = second - mean[:, :, None] * mean[:, None, :]
+    ok = cnt >= 3
+    if not ok.any():
+        return 1.0
+    ev = np.linalg.eigvalsh(cov[ok])  # ascending
+    ratio = np.clip(ev[:, 0], 0, None) / np.maximum(ev[:, 1], 1e-30)
+    return float(np.median(ratio))
 
 
 def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
@@ -114,8 +159,8 @@ def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
     - flat and wide (z extent < 5 % of the xy extent, few pieces) → GROUND;
     - many small pieces whose lowest points lie near one plane, taller than wide, the whole
       object low and wide → GRASS;
-    - many small pieces in a blob → CANOPY;
-    - otherwise (one or a few solid pieces) → TRUNK.
+    - many small flat pieces in a blob → CANOPY;
+    - many tube-like pieces (unwelded branches), or one or a few solid pieces → TRUNK.
     """
     s = mesh_stats(positions, triangles)
     if s.n_vertices == 0:
@@ -124,6 +169,8 @@ def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
     many = s.n_components >= MANY_COMPONENTS and s.component_size_ratio < 0.25
     if flat and not many:
         return "GROUND", f"flat (height {s.z_extent:.3g} vs width {s.xy_extent:.3g})"
+    if many and s.component_flatness > 0.6:
+        return "TRUNK", f"{s.n_components} tube-like pieces (branches)"
     if many:
         low_and_wide = s.z_extent < 0.5 * s.xy_extent
         if low_and_wide and s.base_spread < 0.05 and s.component_aspect > 1.0:
@@ -148,10 +195,7 @@ def blade_heights(positions: np.ndarray, triangles: np.ndarray, up=(0.0, 0.0, 1.
     h = p @ u
     labels = connected_components(len(p), triangles)
     k = int(labels.max()) + 1
-    lo = np.full(k, np.inf)
-    hi = np.full(k, -np.inf)
-    np.minimum.at(lo, labels, h)
-    np.maximum.at(hi, labels, h)
+    lo, hi = _group_min_max(h, labels, k)
     ground = float(np.median(lo))
     blade = float(np.median(hi - lo))
     if not blade > 0:

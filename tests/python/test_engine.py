@@ -1,0 +1,133 @@
+"""The bake engine (canopy_ao.engine) on a small tree + ground scene, no bpy.
+
+Known answers are orderings a correct AO must show, with the margins stated: ground under the
+crown darker than open ground, the crown's core darker than its rim, a denser canopy darker.
+"""
+import json
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+
+HERE = os.path.dirname(__file__)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
+sys.path.insert(0, HERE)
+
+from canopy_ao import engine  # noqa: E402
+import tree_scene as ts  # noqa: E402
+
+if not engine.core_status()[0]:
+    pytest.skip(engine.core_status()[1], allow_module_level=True)
+
+ROLE = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
+
+
+def items(with_grass=True, offset=(0.0, 0.0, 0.0), tree="T", suffix=""):
+    out = []
+    for name, (p, t) in ts.scene(with_grass).items():
+        if name == "Ground" and suffix:
+            continue
+        p = p + np.float32(offset)
+        out.append(engine.SceneItem(name + suffix, ROLE[name], tree if name != "Ground" else "",
+                                    p, ts.vertex_normals(p, t), t))
+    return out
+
+
+def by_name(results):
+    return {r.name: r.ao for r in results}
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return items()
+
+
+@pytest.mark.parametrize("method", [m for m in engine.available_methods()
+                                    if m not in ("auto", "grid")])
+def test_every_method_gives_valid_ao(scene, method):
+    res, rep = engine.bake(scene, engine.BakeSettings(method=method, tau=2.0, distance=0.0,
+                                                      samples=16))
+    assert [r.name for r in res] == [it.name for it in scene]
+    for r, it in zip(res, scene):
+        assert r.ao.dtype == np.float32 and r.ao.shape == (len(it.positions),)
+        assert np.all(np.isfinite(r.ao)) and r.ao.min() >= 0 and r.ao.max() <= 1, r.name
+    json.dumps(rep)  # the report is plain data
+
+
+@pytest.mark.parametrize("method", ["sphere", "ellipsoid", "shells", "raytrace"])
+def test_physical_orderings(scene, method):
+    res = by_name(engine.bake(scene, engine.BakeSettings(method=method, tau=2.0, distance=0.0,
+                                                         samples=32))[0])
+    g = {it.name: it for it in scene}
+    r = np.linalg.norm(g["Ground"].positions[:, :2], axis=1)
+    assert res["Ground"][r < 1.0].mean() < res["Ground"][r > 6.0].mean() - 0.05
+    d = np.linalg.norm(g["Leaves"].positions - [0, 0, 2.6], axis=1)
+    assert res["Leaves"][d < 0.5].mean() < res["Leaves"][d > 1.1].mean() - 0.1
+
+
+def test_denser_canopy_is_darker(scene):
+    lo = by_name(engine.bake(scene, engine.BakeSettings(method="ellipsoid", tau=0.5))[0])
+    hi = by_name(engine.bake(scene, engine.BakeSettings(method="ellipsoid", tau=4.0))[0])
+    assert hi["Leaves"].mean() < lo["Leaves"].mean() - 0.05
+    assert hi["Ground"].mean() < lo["Ground"].mean()
+
+
+def test_a_neighbour_tree_darkens(scene):
+    alone = by_name(engine.bake(scene, engine.BakeSettings(method="ellipsoid", tau=2.0))[0])
+    two = scene + items(with_grass=False, offset=(3.0, 0.0, 0.0), tree="U", suffix="_2")
+    both = by_name(engine.bake(two, engine.BakeSettings(method="ellipsoid", tau=2.0))[0])
+    assert both["Leaves"].mean() < alone["Leaves"].mean() - 0.005
+    assert both["Ground"].mean() < alone["Ground"].mean()
+
+
+def test_proxies_contain_the_canopy(scene):
+    plan = engine.prepare(scene, engine.BakeSettings(method="ellipsoid", tau=2.0))
+    leaves = next(it for it in scene if it.role == "CANOPY")
+    (shell,) = plan.proxies["T"]
+    assert np.asarray(shell.contains(leaves.positions)).all()
+    d = engine.proxy_dicts(plan)["T"][0]
+    assert np.allclose(d["center"], [0, 0, 2.6], atol=0.3)
+
+
+def test_auto_calibrates_and_says_why(scene):
+    if not hasattr(engine._core, "RayTracer"):
+        pytest.skip("no RayTracer in this build: auto falls back to the default tau")
+    s = engine.BakeSettings(method="auto", tau=None, distance=0.0, calibration_points=200)
+    plan = engine.prepare(scene, s)
+    cal = plan.calibration
+    assert plan.method in engine.ANALYTIC_METHODS and cal["chosen"] == plan.method
+    assert cal["points"] >= 100 and "why" in cal
+    # The fitted tau beats the default on the same samples.
+    _m, _t, fixed = engine.calibrate(plan, scene, [plan.method], tau_fixed=engine.DEFAULT_TAU)
+    assert cal["candidates"][plan.method]["rmse"] <= fixed["candidates"][plan.method]["rmse"] + 1e-6
+
+
+def test_bad_input_is_refused():
+    p = np.zeros((3, 3), np.float32)
+    t = np.array([[0, 1, 2]], np.int32)
+    with pytest.raises(engine.EngineError, match="unknown role"):
+        engine.SceneItem("x", "LEAVES", "", p, p, t)
+    with pytest.raises(engine.EngineError, match="normals"):
+        engine.SceneItem("x", "GROUND", "", p, p[:2], t)
+    with pytest.raises(engine.EngineError, match="unknown method"):
+        engine.prepare([], engine.BakeSettings(method="magic"))
+    with pytest.raises(engine.EngineError, match="tau"):
+        engine.prepare([], engine.BakeSettings(method="sphere", tau=-1.0))
+
+
+def test_without_trees_ground_is_open_and_noted():
+    p, t = ts.plane()
+    it = engine.SceneItem("Ground", "GROUND", "", p, ts.vertex_normals(p, t), t)
+    res, rep = engine.bake([it], engine.BakeSettings(method="auto"))
+    assert np.allclose(res[0].ao, 1.0)
+    assert any("no CANOPY" in n for n in rep["notes"])
+
+
+def test_ignored_items_stay_white(scene):
+    p, t = ts.cylinder()
+    ign = engine.SceneItem("Rock", "IGNORE", "", p + np.float32([5, 5, 0]),
+                           ts.vertex_normals(p, t), t)
+    res = by_name(engine.bake(scene + [ign], engine.BakeSettings(method="sphere", tau=2.0))[0])
+    assert np.all(res["Rock"] == 1.0)
