@@ -1,0 +1,75 @@
+// Canopy AO — the canopy-shell model: Hegeman et al. 2006, "Approximate Ambient Occlusion For
+// Trees", Eq. 4–6, with the scale-free optical depth τ of DESIGN 3.1, ellipsoids (DESIGN 3.2)
+// and several shells (DESIGN 3.3).
+//
+// Inside a shell of radius R (work in the unit frame, R = 1), receiver x with unit normal n:
+//   c = dot(C − x, n)            signed height of the centre above the tangent plane
+//   h = clamp(R + c, 0, 2R)      cap height on the +n side                       (Eq. 4)
+//   d² = |C − x|² − c²           off-centre distance² in the plane
+//   f = h² / (h² + d²)                                                            (Eq. 5)
+//   V = exp(−τ f Vcap/Vhemi),  Vcap/Vhemi = h²(3R − h)/(2R³)                      (Eq. 6)
+// so V = exp(−τ) at the centre for any normal and V = 1 on the shell facing out.
+// Ellipsoids: x' = diag(1/r) Qᵀ(x − C), n' = normalize(diag(r) Qᵀ n), then the above with R = 1.
+//
+// Receivers OUTSIDE a shell (|x'| > 1). The in-shell formula is not used there: it would count
+// the whole cap beyond the tangent plane at full density however far away the shell is (a point
+// 10 R from the shell facing it would still get exp(−2τ)). Outside, the shell is a
+// horizon-clipped, cosine-weighted sphere occluder scaled by its opacity (occluders.h,
+// occluder_visibility). The two laws do not agree on the surface (e.g. τ = 1, normal facing the
+// centre: in-shell e^{-2} = 0.135, occluder 1 − (1 − e^{-4/3}) = 0.264), so in a band
+// 1 < |x'| < 1 + band just outside the shell the value is blended with a smoothstep weight:
+//   V = (1 − w) V_in + w V_out,  w = smoothstep((|x'| − 1)/band).
+// V is therefore continuous everywhere (band > 0); band = 0 gives the hard switch.
+//
+// Zero-length normals: treated as facing away from the shell centre (n = x − C; at the centre
+// itself any normal gives exp(−τ)). Never NaN. All results in [0, 1], 1 = open sky.
+//
+// Throughput: the in-shell part is one vectorised pass (fast_math.h); outside points take a
+// scalar fix-up. Evaluated in parallel blocks; results do not depend on the thread count.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "canopy_ao/geometry.h"
+
+namespace canopy_ao {
+
+// === Options
+struct CanopyOptions {
+  /// Optical depth (≥ 0, finite): AO at a shell's centre = exp(−τ), whatever the scale.
+  float tau = 1.0f;
+  /// Width of the blend band outside each shell, in shell radii (unit frame), ≥ 0.
+  float band = 0.1f;
+};
+
+/// How several shells combine (DESIGN 3.3).
+enum class ShellCombine {
+  Product,  ///< V = Π over all shells of that shell's V (in-shell inside, occluder outside).
+  Nearest,  ///< Hegeman §5: the shell whose centre is closest to x alone (gives seams).
+};
+
+// === One point (reference path; the array functions give the same values)
+/// Visibility of one receiver x (world), normal n (any length), for one shell.
+float canopy_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, const CanopyOptions& options);
+
+// === Arrays. positions, normals: N×3 float32 (world space); out: N floats, written.
+/// PRE: positions.size == normals.size; sphere.radius > 0; 0 ≤ τ < ∞; band ≥ 0.
+/// Bad input throws std::invalid_argument.
+void ao_canopy_sphere(PointsView positions, PointsView normals, const Sphere& sphere,
+                      const CanopyOptions& options, float* out);
+/// PRE: ellipsoid radii > 0, axes orthonormal (to 1e-3).
+void ao_canopy_ellipsoid(PointsView positions, PointsView normals, const Ellipsoid& ellipsoid,
+                         const CanopyOptions& options, float* out);
+/// PRE: shells non-empty, each valid as above.
+void ao_canopy_shells(PointsView positions, PointsView normals,
+                      const std::vector<Ellipsoid>& shells, const CanopyOptions& options,
+                      ShellCombine combine, float* out);
+
+// === Checks shared by the models (throw std::invalid_argument naming the problem)
+void check_tau(float tau);
+void check_sphere(const Sphere& s);
+void check_ellipsoid(const Ellipsoid& e);
+void check_receivers(PointsView positions, PointsView normals);
+
+}  // namespace canopy_ao

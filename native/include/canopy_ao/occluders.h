@@ -1,0 +1,99 @@
+// Canopy AO — large occluders: shells seen from outside as sphere occluders (DESIGN 3.4;
+// Hegeman 2006 Eq. 7–8, Shanmugam & Arikan 2007 Eq. 2–5).
+//
+// One occluder. A solid sphere whose centre is at angle θ from the receiver's normal and whose
+// angular radius is σ (sin²σ = (r/d)²) blocks this fraction of the cosine-weighted AO:
+//   cos²θ > sin²σ (wholly above or below the horizon):   sin²σ · max(cos θ, 0)
+//   otherwise (crossing the horizon), x = sqrt(1/sin²σ − 1), y = −x cos θ / sin θ:
+//     ([cos θ · acos y − x sin θ sqrt(1 − y²)] sin²σ + atan(sin θ sqrt(1 − y²) / x)) / π
+// (Snyder's sphere form factor; Frostbite's illuminanceSphereOrDisk.) Hegeman's Eq. 8 ignores
+// the normal and the horizon; Shanmugam–Arikan's Eq. 2 ignores the horizon.
+//
+// Shell opacity. A leaf shell is not opaque. With the in-shell model's τ read as a uniform
+// medium of extinction τ per shell radius (so the centre sees exp(−τ) in every direction, as
+// in canopy_model.h), a ray crossing the shell has transmittance exp(−τ L/R); we use the mean
+// chord of a sphere, L = 4R/3 (Cauchy: 4V/S), so
+//   opacity = 1 − exp(−4τ/3),   occ = opacity · sphere_occlusion(cos θ, sin²σ).
+// solid = true uses opacity 1 (opaque objects, checks against ray tracing).
+//
+// Ellipsoid shells are replaced by the sphere at their centre with the same projected area seen
+// from the receiver: r_eq² = r₁r₂r₃ · sqrt(Σ (u·a_k / r_k)²), u the unit direction to the centre
+// (exact for spheres and for far receivers; approximate near flat or long shells).
+//
+// Many occluders: V = Π (1 − occ_i). Each occluder is ignored beyond
+//   d_far = r_max / sin(acos(1 − ε/2π))          (Shanmugam–Arikan Eq. 5)
+// where its blocked fraction is ≤ sin²σ ≤ (ε/π)(1 − ε/4π) < ε; a uniform grid over the
+// occluders' reach bounds the cost per receiver by the local occluder density, not their count.
+// ε = 0 disables the cut-off (every occluder for every receiver).
+//
+// Receivers inside a shell (|x'| ≤ 1 in its unit frame) skip that shell: inside is the canopy
+// model's job (canopy_model.h). Zero-length normals: treated as facing away from the occluder
+// (it is below the horizon, occ = 0). All results in [0, 1], 1 = open sky.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "canopy_ao/geometry.h"
+
+namespace canopy_ao {
+
+/// Exact horizon-clipped cosine-weighted fraction of the AO hemisphere blocked by a solid
+/// sphere with angular radius σ whose centre is at angle θ from the normal. In [0, 1].
+/// sin2_sigma ≥ 1 means the receiver is on (or in) the sphere: the half-space behind the
+/// tangent plane, (1 + cos θ)/2. sin2_sigma ≤ 0 → 0.
+float sphere_occlusion(float cos_theta, float sin2_sigma);
+
+/// Opacity of a leaf shell of optical depth τ seen from outside: 1 − exp(−4τ/3).
+float shell_opacity(float tau);
+
+/// Visibility (1 − occ) of one receiver outside one shell, no cut-off. 1 if x is inside.
+float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity);
+
+// === Options
+struct OccluderOptions {
+  float tau = 1.0f;         ///< shells' optical depth (canopy_model.h meaning), ≥ 0
+  float epsilon = 1e-3f;    ///< cut-off, in [0, 1); 0 = no cut-off
+  bool solid = false;       ///< opaque occluders (opacity 1), τ ignored
+};
+
+/// A set of occluders with their spatial grid, built once, evaluated many times.
+class OccluderField {
+ public:
+  // === Constructor
+  /// PRE: each shell valid (radii > 0, orthonormal axes); options valid. Throws
+  /// std::invalid_argument otherwise. An empty list is allowed (V = 1 everywhere).
+  OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options);
+
+  // === Methods
+  /// positions, normals: N×3; out: N floats in [0, 1].
+  void ao(PointsView positions, PointsView normals, float* out) const;
+  /// One receiver.
+  float visibility(Vec3 x, Vec3 n) const;
+
+  // === Introspection (tests, reports)
+  std::size_t size() const { return shells_.size(); }
+  /// Largest number of candidate occluders in one grid cell (the per-receiver cost bound).
+  std::size_t max_candidates() const { return max_candidates_; }
+  /// Cut-off distance of occluder i (inf when ε = 0).
+  float cutoff(std::size_t i) const { return far_[i]; }
+
+ private:
+  std::vector<Ellipsoid> shells_;
+  std::vector<float> far_;  // d_far per occluder
+  float opacity_ = 1.0f;
+  bool unbounded_ = false;  // ε = 0: one list holds every occluder
+  Vec3 lo_;                 // grid origin
+  float inv_cell_ = 1.0f;
+  int dims_[3] = {1, 1, 1};
+  std::vector<std::uint32_t> cell_start_;  // CSR: cell c holds items_[cell_start_[c] .. [c+1])
+  std::vector<std::uint32_t> items_;
+  std::size_t max_candidates_ = 0;
+};
+
+/// One-off: builds an OccluderField and evaluates it.
+void ao_occluders(PointsView positions, PointsView normals, const std::vector<Ellipsoid>& shells,
+                  const OccluderOptions& options, float* out);
+
+}  // namespace canopy_ao

@@ -1,0 +1,275 @@
+// Hot loops must vectorise: see fast_math.h for why this pragma is here.
+#pragma GCC optimize("no-trapping-math")
+
+#include "canopy_ao/canopy_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "canopy_ao/fast_math.h"
+#include "canopy_ao/occluders.h"
+#include "canopy_ao/parallel.h"
+
+namespace canopy_ao {
+
+// === Checks
+void check_tau(float tau) {
+  if (!std::isfinite(tau) || tau < 0) {
+    throw std::invalid_argument("tau must be finite and >= 0, got " + std::to_string(tau));
+  }
+}
+
+void check_sphere(const Sphere& s) {
+  if (!is_finite(s.center)) throw std::invalid_argument("sphere centre is not finite");
+  if (!std::isfinite(s.radius) || !(s.radius > 0)) {
+    throw std::invalid_argument("sphere radius must be finite and > 0, got " +
+                                std::to_string(s.radius));
+  }
+}
+
+void check_ellipsoid(const Ellipsoid& e) {
+  if (!is_finite(e.center)) throw std::invalid_argument("ellipsoid centre is not finite");
+  for (int k = 0; k < 3; ++k) {
+    if (!std::isfinite(e.radii[k]) || !(e.radii[k] > 0)) {
+      throw std::invalid_argument("ellipsoid radii must be finite and > 0, got " +
+                                  std::to_string(e.radii[k]));
+    }
+    if (!is_finite(e.axes[k]) || std::fabs(dot(e.axes[k], e.axes[k]) - 1.0f) > 2e-3f) {
+      throw std::invalid_argument("ellipsoid axes must be unit vectors");
+    }
+  }
+  if (std::fabs(dot(e.axes[0], e.axes[1])) > 1e-3f ||
+      std::fabs(dot(e.axes[0], e.axes[2])) > 1e-3f ||
+      std::fabs(dot(e.axes[1], e.axes[2])) > 1e-3f) {
+    throw std::invalid_argument("ellipsoid axes must be orthogonal");
+  }
+}
+
+void check_receivers(PointsView positions, PointsView normals) {
+  if (positions.size != normals.size) {
+    throw std::invalid_argument("positions and normals must have the same number of rows, got " +
+                                std::to_string(positions.size) + " and " +
+                                std::to_string(normals.size));
+  }
+  if (positions.size > 0 && (!positions.data || !normals.data)) {
+    throw std::invalid_argument("positions/normals data pointer is null");
+  }
+}
+
+namespace {
+
+constexpr std::size_t kGrain = 16384;  // points per parallel block
+constexpr std::size_t kChunk = 256;    // points per vectorised pass (buffers stay in L1)
+
+// Hegeman Eq. 4–6 in the shell's unit frame (R = 1). u = receiver − centre, n = normal of any
+// length. Returns V and writes |u|² (to tell inside from outside). Branch-free so the loops
+// calling it vectorise.
+inline float in_shell_unit(float ux, float uy, float uz, float nx, float ny, float nz,
+                           float tau, float& s2) {
+  const float uu = ux * ux + uy * uy + uz * uz;
+  float nn = nx * nx + ny * ny + nz * nz;
+  // Zero normal: face away from the centre (n = u). At the centre u = 0 too: then c = d = 0,
+  // h = 1, f = 1 and V = exp(−τ), which is right for any normal there.
+  const bool zero = !(nn > 1e-30f);
+  nx = zero ? ux : nx;
+  ny = zero ? uy : ny;
+  nz = zero ? uz : nz;
+  nn = zero ? uu : nn;
+  const float inv = 1.0f / std::sqrt(std::max(nn, 1e-30f));
+  const float c = -(ux * nx + uy * ny + uz * nz) * inv;  // dot(C − x, n̂)
+  const float h = clampf(1.0f + c, 0.0f, 2.0f);          // cap height (Eq. 4)
+  const float d2 = std::max(uu - c * c, 0.0f);            // off-centre distance² (Eq. 5)
+  const float h2 = h * h;
+  const float f = h2 / std::max(h2 + d2, 1e-30f);
+  const float cap = 0.5f * h2 * (3.0f - h);  // Vcap / Vhemi = h²(3 − h)/2 (DESIGN 3.1)
+  s2 = uu;
+  return fast_exp(-tau * f * cap);  // Eq. 6 with k = τ / Vhemi
+}
+
+// World → unit frame of a sphere: u = (p − C)/R; normals unchanged (uniform scale).
+struct SphereMap {
+  float cx, cy, cz, inv_r;
+  explicit SphereMap(const Sphere& s)
+      : cx(s.center.x), cy(s.center.y), cz(s.center.z), inv_r(1.0f / s.radius) {}
+  void operator()(const float* p, const float* n, float& ux, float& uy, float& uz, float& nx,
+                  float& ny, float& nz) const {
+    ux = (p[0] - cx) * inv_r;
+    uy = (p[1] - cy) * inv_r;
+    uz = (p[2] - cz) * inv_r;
+    nx = n[0];
+    ny = n[1];
+    nz = n[2];
+  }
+};
+
+// World → unit frame of an ellipsoid (DESIGN 3.2): u = diag(1/r) Qᵀ(p − C),
+// n' = diag(r) Qᵀ n (inverse transpose; normalised in in_shell_unit).
+struct EllipsoidMap {
+  float c[3];
+  float m[9];   // rows a_k / r_k
+  float nm[9];  // rows a_k · r_k
+  explicit EllipsoidMap(const Ellipsoid& e) {
+    for (int k = 0; k < 3; ++k) {
+      c[k] = e.center[k];
+      for (int j = 0; j < 3; ++j) {
+        m[3 * k + j] = e.axes[k][j] / e.radii[k];
+        nm[3 * k + j] = e.axes[k][j] * e.radii[k];
+      }
+    }
+  }
+  void operator()(const float* p, const float* n, float& ux, float& uy, float& uz, float& nx,
+                  float& ny, float& nz) const {
+    const float dx = p[0] - c[0], dy = p[1] - c[1], dz = p[2] - c[2];
+    ux = m[0] * dx + m[1] * dy + m[2] * dz;
+    uy = m[3] * dx + m[4] * dy + m[5] * dz;
+    uz = m[6] * dx + m[7] * dy + m[8] * dz;
+    nx = nm[0] * n[0] + nm[1] * n[1] + nm[2] * n[2];
+    ny = nm[3] * n[0] + nm[4] * n[1] + nm[5] * n[2];
+    nz = nm[6] * n[0] + nm[7] * n[1] + nm[8] * n[2];
+  }
+};
+
+// Everything one shell needs per chunk.
+template <class Map>
+struct ShellEval {
+  Map map;
+  Ellipsoid shell;  // world shape, for the outside (occluder) law
+  float tau, band, opacity;
+};
+
+// V of one shell for `count` points starting at p/n (AoS). One vectorised in-shell pass, then a
+// scalar fix-up of the (usually few) points outside the shell.
+template <class Map>
+void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float* __restrict n,
+                 std::size_t count, float* __restrict v) {
+  float s2[kChunk];
+  const float tau = s.tau;
+  for (std::size_t i = 0; i < count; ++i) {
+    float ux, uy, uz, nx, ny, nz;
+    s.map(p + 3 * i, n + 3 * i, ux, uy, uz, nx, ny, nz);
+    v[i] = in_shell_unit(ux, uy, uz, nx, ny, nz, tau, s2[i]);
+  }
+  int any_outside = 0;  // an int OR-reduction vectorises; a float max would not (NaN order)
+  for (std::size_t i = 0; i < count; ++i) any_outside |= s2[i] > 1.0f ? 1 : 0;
+  if (!any_outside) return;
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!(s2[i] > 1.0f)) continue;
+    const Vec3 x{p[3 * i], p[3 * i + 1], p[3 * i + 2]};
+    const Vec3 nw{n[3 * i], n[3 * i + 1], n[3 * i + 2]};
+    const float v_out = occluder_visibility(x, nw, s.shell, s.opacity);
+    const float w = s.band > 0 ? smoothstep01((std::sqrt(s2[i]) - 1.0f) / s.band) : 1.0f;
+    v[i] = clampf((1.0f - w) * v[i] + w * v_out, 0.0f, 1.0f);
+  }
+}
+
+template <class Map>
+ShellEval<Map> make_eval(const Map& map, const Ellipsoid& shell, const CanopyOptions& o) {
+  return ShellEval<Map>{map, shell, o.tau, o.band, shell_opacity(o.tau)};
+}
+
+void check_options(const CanopyOptions& o) {
+  check_tau(o.tau);
+  if (!std::isfinite(o.band) || o.band < 0) {
+    throw std::invalid_argument("band must be finite and >= 0, got " + std::to_string(o.band));
+  }
+}
+
+template <class Map>
+void run_one_shell(PointsView positions, PointsView normals, const ShellEval<Map>& eval,
+                   float* out) {
+  parallel_for_blocks(positions.size, kGrain, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; i += kChunk) {
+      const std::size_t cnt = std::min(kChunk, e - i);
+      shell_chunk(eval, positions.data + 3 * i, normals.data + 3 * i, cnt, out + i);
+    }
+  });
+}
+
+}  // namespace
+
+// === One point
+float canopy_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, const CanopyOptions& options) {
+  check_options(options);
+  check_ellipsoid(shell);
+  const float p[3] = {x.x, x.y, x.z};
+  const float nn[3] = {n.x, n.y, n.z};
+  float v;
+  shell_chunk(make_eval(EllipsoidMap(shell), shell, options), p, nn, 1, &v);
+  return v;
+}
+
+// === Arrays
+void ao_canopy_sphere(PointsView positions, PointsView normals, const Sphere& sphere,
+                      const CanopyOptions& options, float* out) {
+  check_receivers(positions, normals);
+  check_sphere(sphere);
+  check_options(options);
+  run_one_shell(positions, normals,
+                make_eval(SphereMap(sphere), Ellipsoid::from_sphere(sphere), options), out);
+}
+
+void ao_canopy_ellipsoid(PointsView positions, PointsView normals, const Ellipsoid& ellipsoid,
+                         const CanopyOptions& options, float* out) {
+  check_receivers(positions, normals);
+  check_ellipsoid(ellipsoid);
+  check_options(options);
+  run_one_shell(positions, normals, make_eval(EllipsoidMap(ellipsoid), ellipsoid, options), out);
+}
+
+void ao_canopy_shells(PointsView positions, PointsView normals,
+                      const std::vector<Ellipsoid>& shells, const CanopyOptions& options,
+                      ShellCombine combine, float* out) {
+  check_receivers(positions, normals);
+  check_options(options);
+  if (shells.empty()) throw std::invalid_argument("shells must not be empty");
+  for (const Ellipsoid& s : shells) check_ellipsoid(s);
+  std::vector<ShellEval<EllipsoidMap>> evals;
+  evals.reserve(shells.size());
+  for (const Ellipsoid& s : shells) evals.push_back(make_eval(EllipsoidMap(s), s, options));
+
+  parallel_for_blocks(positions.size, kGrain, [&](std::size_t b, std::size_t e) {
+    float tmp[kChunk];
+    int nearest[kChunk];
+    float best[kChunk];
+    for (std::size_t i = b; i < e; i += kChunk) {
+      const std::size_t cnt = std::min(kChunk, e - i);
+      const float* p = positions.data + 3 * i;
+      const float* n = normals.data + 3 * i;
+      float* v = out + i;
+      if (combine == ShellCombine::Product) {
+        shell_chunk(evals[0], p, n, cnt, v);
+        for (std::size_t k = 1; k < evals.size(); ++k) {
+          shell_chunk(evals[k], p, n, cnt, tmp);
+          for (std::size_t j = 0; j < cnt; ++j) v[j] *= tmp[j];
+        }
+      } else {
+        // Hegeman §5: the shell with the closest centre (first one on ties).
+        for (std::size_t j = 0; j < cnt; ++j) {
+          nearest[j] = 0;
+          best[j] = std::numeric_limits<float>::infinity();
+        }
+        for (std::size_t k = 0; k < shells.size(); ++k) {
+          const Vec3 c = shells[k].center;
+          for (std::size_t j = 0; j < cnt; ++j) {
+            const float dx = p[3 * j] - c.x, dy = p[3 * j + 1] - c.y, dz = p[3 * j + 2] - c.z;
+            const float d2 = dx * dx + dy * dy + dz * dz;
+            if (d2 < best[j]) {
+              best[j] = d2;
+              nearest[j] = static_cast<int>(k);
+            }
+          }
+        }
+        for (std::size_t k = 0; k < evals.size(); ++k) {
+          shell_chunk(evals[k], p, n, cnt, tmp);
+          for (std::size_t j = 0; j < cnt; ++j) {
+            if (nearest[j] == static_cast<int>(k)) v[j] = tmp[j];
+          }
+        }
+      }
+    }
+  });
+}
+
+}  // namespace canopy_ao

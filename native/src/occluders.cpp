@@ -1,0 +1,199 @@
+#include "canopy_ao/occluders.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "canopy_ao/canopy_model.h"
+#include "canopy_ao/parallel.h"
+
+namespace canopy_ao {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+constexpr std::size_t kMaxCells = std::size_t(1) << 20;  // grid memory bound (4 MB of offsets)
+constexpr int kMaxDim = 1024;
+}  // namespace
+
+float sphere_occlusion(float cos_theta, float sin2_sigma) {
+  if (!(sin2_sigma > 0)) return 0.0f;  // also NaN
+  const double c = std::clamp(static_cast<double>(cos_theta), -1.0, 1.0);
+  if (sin2_sigma >= 1.0f) return static_cast<float>(0.5 * (1.0 + c));  // on/in the sphere
+  const double s2 = sin2_sigma;
+  if (c * c > s2) return c > 0 ? static_cast<float>(s2 * c) : 0.0f;  // wholly above / below
+  // Crossing the horizon (Snyder; Frostbite illuminanceSphereOrDisk). Here sin θ ≥ cos σ > 0.
+  const double s = std::sqrt(std::max(0.0, 1.0 - c * c));
+  const double x = std::sqrt(1.0 / s2 - 1.0);
+  const double y = std::clamp(-x * c / s, -1.0, 1.0);
+  const double sy = std::sqrt(std::max(0.0, 1.0 - y * y));
+  const double r = (c * std::acos(y) - x * s * sy) * s2 + std::atan2(s * sy, x);
+  return static_cast<float>(std::clamp(r / kPi, 0.0, 1.0));
+}
+
+float shell_opacity(float tau) {
+  // Mean chord of a sphere 4R/3 (Cauchy) through a medium of τ per radius.
+  return static_cast<float>(1.0 - std::exp(-4.0 * static_cast<double>(tau) / 3.0));
+}
+
+float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity) {
+  const Vec3 u = shell.to_unit(x);
+  if (!(dot(u, u) > 1.0f)) return 1.0f;  // inside: the canopy model's job
+  const double nn = static_cast<double>(dot(n, n));
+  if (!(nn > 1e-30)) return 1.0f;  // zero normal: facing away, the occluder is below horizon
+  const Vec3 dv = shell.center - x;
+  const double d2 = static_cast<double>(dot(dv, dv));
+  const double d = std::sqrt(d2);
+  const double cos_theta = static_cast<double>(dot(n, dv)) / (std::sqrt(nn) * d);
+  // Sphere with the ellipsoid's projected area along the view direction (exact for spheres).
+  double q = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double t = static_cast<double>(dot(dv, shell.axes[k])) / (d * shell.radii[k]);
+    q += t * t;
+  }
+  const double r_eq2 = static_cast<double>(shell.radii.x) * shell.radii.y * shell.radii.z *
+                       std::sqrt(q);
+  const double sin2 = std::min(r_eq2 / d2, 1.0);
+  const float occ = opacity * sphere_occlusion(static_cast<float>(cos_theta),
+                                               static_cast<float>(sin2));
+  return std::clamp(1.0f - occ, 0.0f, 1.0f);
+}
+
+// === OccluderField
+OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options)
+    : shells_(std::move(shells)) {
+  if (!options.solid) check_tau(options.tau);
+  if (!std::isfinite(options.epsilon) || options.epsilon < 0 || options.epsilon >= 1) {
+    throw std::invalid_argument("epsilon must be in [0, 1), got " +
+                                std::to_string(options.epsilon));
+  }
+  for (const Ellipsoid& s : shells_) check_ellipsoid(s);
+  opacity_ = options.solid ? 1.0f : shell_opacity(options.tau);
+  const std::size_t n = shells_.size();
+  if (n >= std::numeric_limits<std::uint32_t>::max()) throw std::invalid_argument("too many shells");
+  far_.resize(n);
+
+  if (options.epsilon == 0 || n == 0) {
+    // No cut-off: a single list of everything, used for every receiver.
+    unbounded_ = true;
+    std::fill(far_.begin(), far_.end(), std::numeric_limits<float>::infinity());
+    items_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) items_[i] = static_cast<std::uint32_t>(i);
+    cell_start_ = {0, static_cast<std::uint32_t>(n)};
+    max_candidates_ = n;
+    return;
+  }
+
+  // Shanmugam–Arikan Eq. 5 with the shell's largest radius (r_eq ≤ r_max).
+  const double e = static_cast<double>(options.epsilon) / (2.0 * kPi);
+  const double sin_far = std::sqrt(1.0 - (1.0 - e) * (1.0 - e));
+  Vec3 lo{std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
+          std::numeric_limits<float>::max()};
+  Vec3 hi = -lo;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Ellipsoid& s = shells_[i];
+    const float rmax = std::max({s.radii.x, s.radii.y, s.radii.z});
+    far_[i] = static_cast<float>(rmax / sin_far);
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], s.center[k] - far_[i]);
+      hi[k] = std::max(hi[k], s.center[k] + far_[i]);
+    }
+  }
+  // Cell ≈ the median reach, so an occluder covers ~3³ cells and a cell's list holds the
+  // occluders that can reach it; grown until the grid fits the memory bound.
+  std::vector<float> sorted = far_;
+  std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+  double cell = std::max(static_cast<double>(sorted[n / 2]), 1e-6);
+  std::size_t cells = 0;
+  for (;;) {
+    cells = 1;
+    bool fits = true;
+    for (int k = 0; k < 3; ++k) {
+      const double cnt = std::ceil((static_cast<double>(hi[k]) - lo[k]) / cell);
+      if (cnt > kMaxDim) fits = false;
+      dims_[k] = std::max(1, static_cast<int>(std::min(cnt, double(kMaxDim))));
+      cells *= static_cast<std::size_t>(dims_[k]);
+    }
+    if (fits && cells <= kMaxCells) break;
+    cell *= 1.25;
+  }
+  lo_ = lo;
+  inv_cell_ = static_cast<float>(1.0 / cell);
+
+  // CSR fill in two passes: count, then place. Cells are kept only if the occluder's reach
+  // sphere touches the cell box.
+  auto for_cells = [&](std::size_t i, auto&& fn) {
+    const Ellipsoid& s = shells_[i];
+    int a[3], b[3];
+    for (int k = 0; k < 3; ++k) {
+      a[k] = std::clamp(static_cast<int>(std::floor((s.center[k] - far_[i] - lo_[k]) * inv_cell_)),
+                        0, dims_[k] - 1);
+      b[k] = std::clamp(static_cast<int>(std::floor((s.center[k] + far_[i] - lo_[k]) * inv_cell_)),
+                        0, dims_[k] - 1);
+    }
+    const double r2 = static_cast<double>(far_[i]) * far_[i];
+    for (int z = a[2]; z <= b[2]; ++z)
+      for (int y = a[1]; y <= b[1]; ++y)
+        for (int x = a[0]; x <= b[0]; ++x) {
+          const int idx[3] = {x, y, z};
+          double dd = 0;
+          for (int k = 0; k < 3; ++k) {
+            const double blo = lo_[k] + idx[k] * cell, bhi = blo + cell;
+            const double c = s.center[k];
+            const double t = c < blo ? blo - c : (c > bhi ? c - bhi : 0.0);
+            dd += t * t;
+          }
+          if (dd <= r2) fn((static_cast<std::size_t>(z) * dims_[1] + y) * dims_[0] + x);
+        }
+  };
+  std::vector<std::size_t> count(cells + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) for_cells(i, [&](std::size_t c) { ++count[c + 1]; });
+  for (std::size_t c = 0; c < cells; ++c) {
+    max_candidates_ = std::max(max_candidates_, count[c + 1]);
+    count[c + 1] += count[c];
+  }
+  if (count[cells] >= std::numeric_limits<std::uint32_t>::max()) {
+    throw Error("occluder grid too large");
+  }
+  cell_start_.assign(count.begin(), count.end());
+  items_.resize(count[cells]);
+  std::vector<std::size_t> fill(count.begin(), count.end() - 1);
+  for (std::size_t i = 0; i < n; ++i)
+    for_cells(i, [&](std::size_t c) { items_[fill[c]++] = static_cast<std::uint32_t>(i); });
+}
+
+float OccluderField::visibility(Vec3 x, Vec3 n) const {
+  std::size_t cell = 0;
+  if (!unbounded_) {
+    int idx[3];
+    for (int k = 0; k < 3; ++k) {
+      const float t = std::floor((x[k] - lo_[k]) * inv_cell_);
+      if (!(t >= 0 && t < static_cast<float>(dims_[k]))) return 1.0f;  // beyond every reach
+      idx[k] = static_cast<int>(t);
+    }
+    cell = (static_cast<std::size_t>(idx[2]) * dims_[1] + idx[1]) * dims_[0] + idx[0];
+  }
+  float v = 1.0f;
+  for (std::uint32_t j = cell_start_[cell]; j < cell_start_[cell + 1]; ++j) {
+    const std::uint32_t i = items_[j];
+    const Vec3 dv = shells_[i].center - x;
+    if (dot(dv, dv) > far_[i] * far_[i]) continue;  // Shanmugam–Arikan cut-off
+    v *= occluder_visibility(x, n, shells_[i], opacity_);  // V = Π (1 − occ_i)
+  }
+  return v;
+}
+
+void OccluderField::ao(PointsView positions, PointsView normals, float* out) const {
+  check_receivers(positions, normals);
+  parallel_for_blocks(positions.size, 4096, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) out[i] = visibility(positions[i], normals[i]);
+  });
+}
+
+void ao_occluders(PointsView positions, PointsView normals, const std::vector<Ellipsoid>& shells,
+                  const OccluderOptions& options, float* out) {
+  check_receivers(positions, normals);
+  OccluderField(shells, options).ao(positions, normals, out);
+}
+
+}  // namespace canopy_ao

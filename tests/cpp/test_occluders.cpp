@@ -1,0 +1,168 @@
+// Sphere occluders (occluders.h): exact horizon-clipped form against quadrature, opacity,
+// the ε cut-off and the grid.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "canopy_ao/canopy_model.h"
+#include "canopy_ao/occluders.h"
+
+using namespace canopy_ao;
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+
+// Independent reference: Malley's method turns the cosine-weighted hemisphere into the unit
+// disk (fraction = area / π). With the sphere's centre at c = (sin θ, 0, cos θ), the blocked
+// set on each disk row a is an interval (or two) in b with closed-form ends; integrate the row
+// length over a = −cos ψ (smooth in ψ) with the midpoint rule.
+double quadrature_occlusion(double theta, double sin2_sigma, int rows = 200000) {
+  const double st = std::sin(theta), ct = std::cos(theta);
+  const double cs = std::sqrt(1.0 - sin2_sigma);  // cos σ
+  double area = 0;
+  const double dpsi = kPi / rows;
+  for (int i = 0; i < rows; ++i) {
+    const double psi = (i + 0.5) * dpsi;
+    const double a = -std::cos(psi), w2 = 1.0 - a * a, w = std::sqrt(w2);
+    double len;
+    if (std::fabs(ct) < 1e-15) {
+      len = st * a >= cs ? 2 * w : 0;
+    } else if (ct > 0) {  // need z ≥ t, z = sqrt(w² − b²)
+      const double t = (cs - st * a) / ct;
+      len = t <= 0 ? 2 * w : 2 * std::sqrt(std::max(0.0, w2 - t * t));
+    } else {  // need z ≤ t
+      const double t = (st * a - cs) / -ct;
+      len = t < 0 ? 0 : 2 * (w - std::sqrt(std::max(0.0, w2 - t * t)));
+    }
+    area += len * std::sin(psi) * dpsi;
+  }
+  return area / kPi;
+}
+}  // namespace
+
+TEST(SphereOcclusion, MatchesQuadratureIncludingHorizonCrossing) {
+  // Tolerance 2e-5 absolute (quadrature error ~1e-7; float result ~1e-7).
+  double worst = 0;
+  int crossing = 0;
+  for (double s2 : {0.001, 0.01, 0.1, 0.3, 0.5, 0.8, 0.95, 0.999}) {
+    for (int k = 0; k <= 36; ++k) {
+      const double theta = kPi * k / 36.0;
+      const double c = std::cos(theta);
+      if (c * c <= s2) ++crossing;
+      const double ref = quadrature_occlusion(theta, s2);
+      const double got = sphere_occlusion(static_cast<float>(c), static_cast<float>(s2));
+      worst = std::max(worst, std::fabs(got - ref));
+      EXPECT_NEAR(got, ref, 2e-5) << "theta=" << theta << " sin2=" << s2;
+    }
+  }
+  EXPECT_GT(crossing, 50);
+  RecordProperty("worst_abs_error", std::to_string(worst));
+}
+
+TEST(SphereOcclusion, ClosedFormBranches) {
+  // Wholly above the horizon: (r/d)² cos θ. Wholly below: 0.
+  for (float s2 : {0.01f, 0.2f, 0.5f}) {
+    for (float c : {1.0f, 0.95f, 0.8f}) {
+      if (c * c > s2) EXPECT_NEAR(sphere_occlusion(c, s2), s2 * c, 1e-7f);
+      if (c * c > s2) EXPECT_EQ(sphere_occlusion(-c, s2), 0.0f);
+    }
+  }
+  // On the sphere: the half-space, (1 + cos θ)/2; continuous as sin²σ → 1.
+  EXPECT_NEAR(sphere_occlusion(0.3f, 1.0f), 0.65f, 1e-7f);
+  EXPECT_NEAR(sphere_occlusion(0.3f, 0.99999f), 0.65f, 2e-3f);
+  // Horizon exactly through the centre: half the sphere's cap visible.
+  EXPECT_GT(sphere_occlusion(0.0f, 0.1f), 0.0f);
+  EXPECT_EQ(sphere_occlusion(0.5f, 0.0f), 0.0f);
+  EXPECT_EQ(sphere_occlusion(0.5f, NAN), 0.0f);
+  // Continuity at the branch boundary cos²θ = sin²σ.
+  const float s2 = 0.25f;
+  EXPECT_NEAR(sphere_occlusion(0.5f + 1e-5f, s2), sphere_occlusion(0.5f - 1e-5f, s2), 1e-5f);
+  EXPECT_NEAR(sphere_occlusion(-0.5f + 1e-5f, s2), 0.0f, 1e-5f);
+}
+
+TEST(Occluders, OpacityAndProduct) {
+  const float tau = 0.7f;
+  EXPECT_NEAR(shell_opacity(tau), 1 - std::exp(-4 * tau / 3), 1e-7f);
+  const Ellipsoid a = Ellipsoid::from_sphere({{0, 0, 5}, 1});
+  const Ellipsoid b = Ellipsoid::from_sphere({{4, 0, 4}, 2});
+  const Vec3 x{0, 0, 0}, n{0, 0, 1};
+  OccluderOptions o;
+  o.tau = tau;
+  o.epsilon = 0;
+  const OccluderField f({a, b}, o);
+  const float va = occluder_visibility(x, n, a, shell_opacity(tau));
+  const float vb = occluder_visibility(x, n, b, shell_opacity(tau));
+  EXPECT_NEAR(va, 1 - shell_opacity(tau) / 25, 1e-6f);
+  EXPECT_NEAR(f.visibility(x, n), va * vb, 1e-6f);
+  o.solid = true;
+  EXPECT_NEAR(OccluderField({a}, o).visibility(x, n), 1 - 1.0f / 25, 1e-6f);
+  // Inside a shell: skipped (the canopy model's job). Zero normal: nothing blocks.
+  EXPECT_EQ(OccluderField({a}, o).visibility({0, 0, 5.5f}, n), 1.0f);
+  EXPECT_EQ(OccluderField({a}, o).visibility(x, {0, 0, 0}), 1.0f);
+}
+
+TEST(Occluders, EllipsoidEquivalentSphereFarAway) {
+  // Far from a long ellipsoid seen side-on, it blocks like its projected area: π·a·c / d².
+  Ellipsoid e = Ellipsoid::from_sphere({{0, 0, 0}, 1});
+  e.radii = {1, 1, 4};
+  const Vec3 x{100, 0, 0}, n{-1, 0, 0};
+  const float v = occluder_visibility(x, n, e, 1.0f);
+  EXPECT_NEAR(1 - v, 4.0 / (100.0 * 100.0), 1e-7);
+  const float top = occluder_visibility({0, 0, 100}, {0, 0, -1}, e, 1.0f);  // end-on: π·1·1
+  EXPECT_NEAR(1 - top, 1.0 / (100.0 * 100.0), 1e-7);
+}
+
+TEST(Occluders, CutoffBoundsTheErrorAndGridBoundsTheCost) {
+  // A forest: 40×40 trees of radius 1 on a 6-unit lattice; receivers on the ground.
+  std::vector<Ellipsoid> forest;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) forest.push_back(Ellipsoid::from_sphere({{6.0f * i, 6.0f * j, 3}, 1}));
+  OccluderOptions cut;
+  cut.epsilon = 1e-2f;
+  OccluderOptions all = cut;
+  all.epsilon = 0;
+  const OccluderField fc(forest, cut), fa(forest, all);
+  EXPECT_LT(fc.max_candidates(), 200u);
+  EXPECT_EQ(fa.max_candidates(), forest.size());
+  const float far = fc.cutoff(0);
+  const double sin_far = std::sin(std::acos(1.0 - 1e-2 / (2 * kPi)));
+  EXPECT_NEAR(far, 1.0 / sin_far, 1e-3);
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<float> u(0, 234);
+  double worst = 0;
+  std::vector<float> p, nn;
+  for (int k = 0; k < 2000; ++k) {
+    const Vec3 x{u(rng), u(rng), 0};
+    const float a = fa.visibility(x, {0, 0, 1}), c = fc.visibility(x, {0, 0, 1});
+    ASSERT_GE(c, a);  // cut-off only removes occlusion
+    worst = std::max(worst, double(c - a));
+    p.insert(p.end(), {x.x, x.y, x.z});
+    nn.insert(nn.end(), {0, 0, 1});
+  }
+  // Each neglected occluder blocks < ε/π; many of them add up, but stay small.
+  EXPECT_LT(worst, 0.06);
+  RecordProperty("worst_cutoff_error", std::to_string(worst));
+  std::vector<float> out(p.size() / 3);
+  ao_occluders({p.data(), out.size()}, {nn.data(), out.size()}, forest, cut, out.data());
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    ASSERT_TRUE(std::isfinite(out[k]) && out[k] >= 0 && out[k] <= 1);
+    ASSERT_EQ(out[k], fc.visibility({p[3 * k], p[3 * k + 1], p[3 * k + 2]}, {0, 0, 1}));
+  }
+  // Receivers beyond every occluder's reach: 1.
+  EXPECT_EQ(fc.visibility({-1000, -1000, 0}, {0, 0, 1}), 1.0f);
+}
+
+TEST(Occluders, BadInputThrows) {
+  OccluderOptions o;
+  o.tau = -1;
+  EXPECT_THROW(OccluderField({}, o), std::invalid_argument);
+  o = {};
+  o.epsilon = 1.5f;
+  EXPECT_THROW(OccluderField({}, o), std::invalid_argument);
+  Ellipsoid bad = Ellipsoid::from_sphere({{0, 0, 0}, 1});
+  bad.radii.y = -1;
+  EXPECT_THROW(OccluderField({bad}, OccluderOptions{}), std::invalid_argument);
+  EXPECT_EQ(OccluderField({}, OccluderOptions{}).visibility({0, 0, 0}, {0, 0, 1}), 1.0f);
+}
