@@ -191,25 +191,22 @@ def _rasterize_numpy(uvs, positions, normals, width, height, max_candidates=1 <<
             np.ascontiguousarray(nrm, dtype=np.float32), stats)
 
 
-def _get(obj, key):
-    return obj[key] if isinstance(obj, dict) else getattr(obj, key)
-
-
 def rasterize(uvs, positions, normals, width, height):
     """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict):
-    one receiver point per covered texel, ascending pixel index j * width + i."""
+    one receiver point per covered texel, ascending pixel index j * width + i.
+    Native: conservative coverage (islands thinner than a texel keep texels); the numpy
+    stand-in covers texel centres only."""
     core = _core()
     fn = getattr(core, "rasterize_uv", None) if core is not None else None
     if fn is None:
         return _rasterize_numpy(uvs, positions, normals, width, height)
-    ts = fn(uvs, positions, normals, width, height)
-    pixels = np.asarray(_get(ts, "pixels"), dtype=np.int32)
-    pos = np.ascontiguousarray(_get(ts, "positions"), dtype=np.float32).reshape(-1, 3)
-    nrm = np.ascontiguousarray(_get(ts, "normals"), dtype=np.float32).reshape(-1, 3)
-    raw = _get(ts, "stats")
-    keys = ("triangles", "degenerate", "invalid_uv", "exact_texels", "conservative_texels",
-            "overlapping_texels")
-    stats = {k: int(_get(raw, k)) for k in keys}
+    ts = fn(uvs, positions, normals, resolution=(width, height), conservative=True)
+    # The TexelSet's arrays are read-only views of its own buffers: copy what ao_fn receives
+    # so nothing outlives or writes into it.
+    pixels = np.array(ts.pixels, dtype=np.int32)
+    pos = np.array(ts.positions, dtype=np.float32).reshape(-1, 3)
+    nrm = np.array(ts.normals, dtype=np.float32).reshape(-1, 3)
+    stats = {k: int(v) for k, v in dict(ts.stats).items()}
     stats["raster"] = "native"
     return pixels, pos, nrm, stats
 
@@ -242,11 +239,8 @@ def splat(pixels, values, width, height, margin, background=1.0):
     fn = getattr(core, "splat_texels", None) if core is not None else None
     values = np.ascontiguousarray(values, dtype=np.float32)
     if fn is not None:
-        res = fn(pixels, values, width, height, margin)
-        if isinstance(res, tuple):
-            img, mask = res
-        else:
-            img, mask = _get(res, "image"), _get(res, "mask")
+        img, mask = fn(np.ascontiguousarray(pixels, dtype=np.int32), values, (width, height),
+                       margin=int(margin), background=float(background), return_mask=True)
         return (np.asarray(img, dtype=np.float32).reshape(height, width),
                 np.asarray(mask, dtype=np.uint8).reshape(height, width))
     img = np.full(width * height, background, dtype=np.float32)
@@ -294,7 +288,8 @@ def _write_exr(path, ao):
     core = _core()
     fn = getattr(core, "write_image", None) if core is not None else None
     if fn is not None:
-        fn(path, np.ascontiguousarray(ao, dtype=np.float32))
+        # grey (H, W), row 0 = bottom: the writer flips rows so the file shows v = 1 on top
+        fn(path, np.ascontiguousarray(ao, dtype=np.float32), dtype="float", bottom_up=True)
         return "native"
     tmp = bpy.data.images.new("_CanopyAO_write", w, h, alpha=True, float_buffer=True)
     try:

@@ -157,3 +157,20 @@ def test_texel_bake_checks_against_cycles(scene, tmp_path):
     assert m["n"] == 256
     assert all(np.isfinite(v) for v in m.values())
     assert m["mae"] < 0.12 and -1.0 <= m["corr"] <= 1.0
+
+
+def test_native_raster_agrees_with_numpy_stand_in(scene):
+    core = texel._core()
+    if core is None or not hasattr(core, "rasterize_uv"):
+        pytest.skip("this build of _core has no rasterize_uv")
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+    obj = bpy.context.object
+    uvs, pos, nrm = texel.gather_corner_triangles(obj, bpy.context.evaluated_depsgraph_get(),
+                                                  "UVMap")
+    pa, xa, na, sa = texel.rasterize(uvs, pos, nrm, 64, 64)
+    pb, xb, nb, sb = texel._rasterize_numpy(uvs, pos, nrm, 64, 64)
+    assert sa["raster"] == "native" and sb["raster"] == "numpy"
+    assert sa["exact_texels"] == sb["exact_texels"] == len(pb)
+    common, ia, ib = np.intersect1d(pa, pb, return_indices=True)
+    assert len(common) == len(pb)  # native adds conservative texels only
+    assert np.abs(xa[ia] - xb[ib]).max() < 1e-5 and np.abs(na[ia] - nb[ib]).max() < 1e-5
