@@ -91,7 +91,7 @@ def _need(name: str):
 
 @dataclass
 class SceneItem:
-    """One mesh object, in world space. positions/normals: float32 (N, 3); triangles int32 (M, 3)."""
+    """One mesh object in world space: positions, normals float32 (N, 3); triangles int32 (M, 3)."""
 
     name: str
     role: str
@@ -228,7 +228,7 @@ def _evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
     if method == "raytrace":
         return _trace(plan, p, n, plan.settings.samples)
     if method == "grid":
-        return np.asarray(plan.grid.ao(p, n), dtype=np.float32)
+        return _grid_ao(plan, p, n)
     ao = np.ones(len(p), np.float32)
     # Other trees' canopies and trunks (own tree handled below).
     others = [e for t in plan.fits if t != tree for e in _own_shells(plan, t, method)]
@@ -307,8 +307,9 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     """Pick τ (unless fixed) and a method among ``candidates`` against ray-traced samples.
 
     Traces a few hundred receiver points (DESIGN 5), then for each candidate finds the τ that
-    minimises the mean squared error (golden-section search on log τ in [0.02, 50]) and walks up
-    the ladder only while the error drops by more than 10 %. Returns (method, tau, info dict).
+    minimises the mean squared error (golden-section search on log τ in [0.02, 50]; the density
+    grid has no τ) and walks up the ladder only while the error drops by more than 10 %.
+    Returns (method, tau, info dict).
     Kept apart so a better search can replace it.
     """
     s = plan.settings
@@ -331,7 +332,9 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
 
     results = {}
     for m in candidates:
-        if tau_fixed is not None:
+        if m == "grid":  # physical density, no τ to fit
+            results[m] = (float(tau_fixed or DEFAULT_TAU), err(m, None))
+        elif tau_fixed is not None:
             results[m] = (float(tau_fixed), err(m, tau_fixed))
         else:
             lt, e = _golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
@@ -397,12 +400,25 @@ def prepare(items, settings: BakeSettings) -> Plan:
         plan.timings["tracer"] = time.perf_counter() - t0
 
     if settings.method == "grid":
+        t0 = time.perf_counter()
         plan.grid = _build_grid(items, settings)
+        plan.timings["grid"] = time.perf_counter() - t0
+    elif (settings.method == "auto" and "grid" in available_methods() and plan.fits
+          and plan.tracer is not None):
+        t0 = time.perf_counter()
+        try:  # the top rung of the ladder: only worth it if it beats the shells (calibrate)
+            plan.grid = _build_grid(items, settings)
+        except EngineError as exc:
+            plan.notes.append(f"density grid not considered: {exc}")
+        plan.timings["grid"] = time.perf_counter() - t0
 
     # Method and τ for the analytic rungs.
     analytic = settings.method in ANALYTIC_METHODS + ("reeves_blau", "auto")
+    plan.method = settings.method
     if analytic and plan.fits:
         candidates = list(ANALYTIC_METHODS) if settings.method == "auto" else [settings.method]
+        if settings.method == "auto" and plan.grid is not None:
+            candidates.append("grid")
         if plan.tracer is not None and (settings.method == "auto" or settings.tau is None):
             method, tau, info = calibrate(plan, items, candidates, settings.tau)
             plan.method, plan.tau, plan.calibration = method, tau, info
@@ -418,8 +434,8 @@ def prepare(items, settings: BakeSettings) -> Plan:
     return plan
 
 
-def _build_tracer(items):
-    cls = _need("RayTracer")
+def _scene_triangles(items):
+    """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32)."""
     verts, tris, base = [], [], 0
     for it in items:
         if it.role == "IGNORE" or not len(it.triangles):
@@ -428,27 +444,37 @@ def _build_tracer(items):
         tris.append(it.triangles + base)
         base += len(it.positions)
     if not verts:
-        raise EngineError("the scene has no triangles to trace against")
-    return cls(np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
-               np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
+        raise EngineError("the scene has no triangles")
+    return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
+            np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
+
+
+def _build_tracer(items):
+    cls = _need("RayTracer")
+    return cls(*_scene_triangles(items))
 
 
 def _build_grid(items, settings):
-    """The density grid of DESIGN 3.6, built from the canopy triangles (API of the grid helper)."""
+    """The leaf-density grid of DESIGN 3.6 from every non-ignored triangle (leaves, branches,
+    ground: each adds its area where it lies)."""
     cls = _need("DensityGrid")
-    leaves = [it for it in items if it.role == "CANOPY" and len(it.triangles)]
-    if not leaves:
+    if not any(it.role == "CANOPY" for it in items):
         raise EngineError("method 'grid' needs at least one CANOPY object")
-    verts, tris, base = [], [], 0
-    for it in leaves:
-        verts.append(it.positions)
-        tris.append(it.triangles + base)
-        base += len(it.positions)
+    verts, tris = _scene_triangles(items)
     try:
-        return cls(np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
-                   np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
+        return cls(verts, tris)
     except TypeError as exc:
         raise EngineError(f"this build's DensityGrid has an interface the add-on does not "
+                          f"know yet: {exc}") from exc
+
+
+def _grid_ao(plan, p, n):
+    d = plan.settings.distance
+    kw = {"distance": float(d)} if d > 0 else {}
+    try:
+        return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
+    except TypeError as exc:
+        raise EngineError(f"this build's DensityGrid.ao has an interface the add-on does not "
                           f"know yet: {exc}") from exc
 
 

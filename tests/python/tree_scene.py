@@ -16,7 +16,8 @@ def cylinder(radius=0.15, height=2.0, segments=12):
     pos = np.concatenate([bottom, top, [[0, 0, 0], [0, 0, height]]])
     i = np.arange(segments)
     j = (i + 1) % segments
-    side = np.concatenate([np.stack([i, j, j + segments], 1), np.stack([i, j + segments, i + segments], 1)])
+    side = np.concatenate([np.stack([i, j, j + segments], 1),
+                           np.stack([i, j + segments, i + segments], 1)])
     cb, ct = 2 * segments, 2 * segments + 1
     caps = np.concatenate([np.stack([np.full(segments, cb), j, i], 1),
                            np.stack([np.full(segments, ct), i + segments, j + segments], 1)])
