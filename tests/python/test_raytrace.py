@@ -1,0 +1,211 @@
+"""canopy_ao._core ray-traced AO (RayTracer, ao_raytrace): known answers, the README's
+argument checks, determinism, and that the GIL is released while tracing."""
+import math
+import os
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "addon"))
+_core = pytest.importorskip("canopy_ao._core")
+if not hasattr(_core, "RayTracer"):
+    pytest.skip("this build of canopy_ao._core has no RayTracer", allow_module_level=True)
+
+
+def quad(x0, x1, y0, y1, z):
+    v = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], np.float32)
+    t = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    return v, t
+
+
+def receivers(n, point=(0, 0, 0), normal=(0, 0, 1)):
+    p = np.tile(np.asarray(point, np.float32), (n, 1))
+    nn = np.tile(np.asarray(normal, np.float32), (n, 1))
+    return p, nn
+
+
+def canopy(triangles, seed=0, radius=2.0, leaf=0.2):
+    rng = np.random.default_rng(seed)
+    c = rng.normal(size=(triangles, 3))
+    c *= (radius * rng.random(triangles) ** (1 / 3) / np.linalg.norm(c, axis=1))[:, None]
+    v = (c[:, None, :] + leaf * rng.uniform(-1, 1, (triangles, 3, 3))).reshape(-1, 3)
+    t = np.arange(3 * triangles, dtype=np.int32).reshape(-1, 3)
+    return np.ascontiguousarray(v, np.float32), t
+
+
+# === Known answers
+
+
+def test_ceiling_with_distance_round_trip():
+    v, t = quad(-100, 100, -100, 100, 1.0)
+    rt = _core.RayTracer(v, t)
+    assert rt.vertex_count == 4 and rt.triangle_count == 2 and 0 < rt.auto_offset < 1e-2
+    p, n = receivers(32)
+    ao = rt.ao(p, n, samples=1024, distance=2.0, offset=1e-5)
+    assert ao.dtype == np.float32 and ao.shape == (32,)
+    # Rays with cos θ ≥ h/D = 1/2 hit: blocked sin²60° = 3/4 (cosine-weighted).
+    assert ao.mean() == pytest.approx(0.25, abs=0.003)
+    assert np.all(np.abs(ao - 0.25) < 0.01)
+    assert np.all(rt.ao(p, n, distance=0.9) == 1.0)  # D < h: nothing in reach
+    assert np.all(rt.ao(p, n, samples=256) <= 1 / 256)  # unlimited: closed but for the horizon
+
+
+def test_half_plane_edge_is_half_open_and_one_off_matches():
+    v, t = quad(0, 200, -200, 200, 1.0)
+    p, n = receivers(64)
+    ao = _core.ao_raytrace(v, t, p, n, samples=1024)
+    assert ao.mean() == pytest.approx(0.5, abs=0.003)
+    np.testing.assert_array_equal(ao, _core.RayTracer(v, t).ao(p, n, samples=1024))
+
+
+def test_defaults_follow_the_readme():
+    v, t = canopy(300)
+    p, n = receivers(8, normal=(0, 1, 0))
+    rt = _core.RayTracer(v, t)
+    default = rt.ao(p, n)
+    np.testing.assert_array_equal(
+        default, rt.ao(p, n, samples=64, distance=math.inf, seed=0, offset=-1.0)
+    )
+    np.testing.assert_array_equal(default, _core.ao_raytrace(v, t, p, n))
+
+
+def test_empty_mesh_and_zero_normal_are_open_sky():
+    p, n = receivers(3)
+    empty_v = np.zeros((0, 3), np.float32)
+    empty_t = np.zeros((0, 3), np.int32)
+    np.testing.assert_array_equal(_core.ao_raytrace(empty_v, empty_t, p, n), np.ones(3))
+    v, t = quad(-1, 1, -1, 1, 1.0)
+    zp, zn = receivers(2, normal=(0, 0, 0))
+    np.testing.assert_array_equal(_core.RayTracer(v, t).ao(zp, zn), np.ones(2))
+    assert _core.RayTracer(v, t).ao(np.zeros((0, 3), np.float32),
+                                    np.zeros((0, 3), np.float32)).shape == (0,)
+
+
+# === Determinism
+
+
+def test_same_answer_whatever_the_thread_count_and_seed_changes_only_noise():
+    v, t = canopy(2000, seed=1)
+    rt = _core.RayTracer(v, t)
+    rng = np.random.default_rng(2)
+    p = v[:3000].copy()
+    n = rng.normal(size=(3000, 3)).astype(np.float32)
+    prev = _core.set_max_threads(1)
+    try:
+        one = rt.ao(p, n)
+        _core.set_max_threads(2)
+        two = rt.ao(p, n)
+    finally:
+        _core.set_max_threads(prev)
+    np.testing.assert_array_equal(one, two)
+    other = rt.ao(p, n, seed=7)
+    assert np.count_nonzero(one != other) > len(one) // 4
+    assert abs(float(one.mean()) - float(other.mean())) < 0.005
+
+
+# === Bad input → ValueError naming the argument
+
+
+@pytest.mark.parametrize(
+    "kwargs, word",
+    [
+        ({"samples": 0}, "samples"),
+        ({"distance": 0.0}, "distance"),
+        ({"distance": -1.0}, "distance"),
+        ({"distance": math.nan}, "distance"),
+        ({"seed": -1}, "seed"),
+        ({"offset": math.nan}, "offset"),
+    ],
+)
+def test_bad_settings(kwargs, word):
+    v, t = quad(-1, 1, -1, 1, 1.0)
+    p, n = receivers(2)
+    with pytest.raises(ValueError, match=word):
+        _core.RayTracer(v, t).ao(p, n, **kwargs)
+    if "offset" not in kwargs:
+        with pytest.raises(ValueError, match=word):
+            _core.ao_raytrace(v, t, p, n, **kwargs)
+
+
+def test_bad_arrays():
+    v, t = quad(-1, 1, -1, 1, 1.0)
+    p, n = receivers(2)
+    with pytest.raises(ValueError, match="vertices"):
+        _core.RayTracer(v.astype(np.float64), t)
+    with pytest.raises(ValueError, match="vertices"):
+        _core.RayTracer(v[:, :2].copy(), t)
+    with pytest.raises(ValueError, match="triangles"):
+        _core.RayTracer(v, t.astype(np.int64))
+    bad = t.copy()
+    bad[1, 2] = 4
+    with pytest.raises(ValueError, match="triangles"):
+        _core.RayTracer(v, bad)
+    bad[1, 2] = -1
+    with pytest.raises(ValueError, match="triangles"):
+        _core.ao_raytrace(v, bad, p, n)
+    nan_v = v.copy()
+    nan_v[0, 0] = np.nan
+    with pytest.raises(ValueError, match="vertices"):
+        _core.RayTracer(nan_v, t)
+    rt = _core.RayTracer(v, t)
+    nan_p = p.copy()
+    nan_p[1, 2] = np.nan
+    with pytest.raises(ValueError, match="points"):
+        rt.ao(nan_p, n)
+    with pytest.raises(ValueError, match="normals"):
+        rt.ao(p, np.full((2, 3), np.inf, np.float32))
+    with pytest.raises(ValueError, match="same number of rows"):
+        rt.ao(p, n[:1].copy())
+    with pytest.raises(ValueError, match="C-contiguous"):
+        rt.ao(np.asfortranarray(np.zeros((4, 3), np.float32)), np.zeros((4, 3), np.float32))
+
+
+# === The GIL
+
+
+def test_tracing_releases_the_gil():
+    """While one thread traces, the main thread keeps running Python.
+
+    Not a speed comparison (the cores are shared): the main thread timestamps its loop, the
+    tracing thread timestamps the start and end of its call, and some main-thread timestamps
+    must fall in the middle half of the call. If the GIL were held by the call, no Python
+    could run there at all: the only Python in that window is the call's own argument checks
+    (microseconds) and at most one 5 ms GIL switch interval, far less than a quarter of a call
+    of ≥ 0.3 s. The main thread only needs to be scheduled once in ≥ 75 ms to pass.
+    """
+    v, t = canopy(20000, seed=3, radius=3.0, leaf=0.1)
+    rt = _core.RayTracer(v, t)
+    p = v[:2000].copy()
+    n = np.tile(np.float32([0, 0, 1]), (2000, 1))
+    prev = _core.set_max_threads(1)  # leave the other core to the main thread
+    try:
+        start = time.perf_counter()
+        rt.ao(p, n, samples=16)
+        per_sample = max(time.perf_counter() - start, 1e-6) / 16
+        samples = int(min(1 << 16, max(64, 0.4 / per_sample)))
+
+        span = {}
+
+        def work():
+            span["t0"] = time.perf_counter()
+            span["ao"] = rt.ao(p, n, samples=samples)
+            span["t1"] = time.perf_counter()
+
+        stamps = []
+        worker = threading.Thread(target=work)
+        worker.start()
+        while worker.is_alive():
+            stamps.append(time.perf_counter())
+        worker.join()
+    finally:
+        _core.set_max_threads(prev)
+
+    t0, t1 = span["t0"], span["t1"]
+    assert t1 - t0 > 0.1, "the call was too short to tell"
+    lo, hi = t0 + 0.25 * (t1 - t0), t1 - 0.25 * (t1 - t0)
+    inside = sum(lo < s < hi for s in stamps)
+    assert inside > 0, f"no Python ran during the {t1 - t0:.2f} s call: the GIL was held"
+    assert span["ao"].shape == (2000,)
