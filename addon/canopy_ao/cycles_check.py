@@ -249,23 +249,30 @@ def error_colors(err, scale=None):
     return rgba
 
 
-def write_error_attribute(obj, err, name="CanopyAO_Error", scale=None):
-    """Write err = ours - ref (per vertex) as a FLOAT_COLOR POINT heat map attribute.
-    Returns the attribute. Colours: see error_colors."""
+def write_error_attribute(obj, err, name="CanopyAO_Error", scale=None, overwrite=False):
+    """Write err = ours - ref (per vertex) as a FLOAT_COLOR POINT heat map attribute (see
+    error_colors). Like the AO attribute, it replaces only an attribute Canopy AO made (or any,
+    with overwrite). Returns the attribute."""
+    from . import mesh_io
+
     me = obj.data
     n = len(me.vertices)
     err = np.asarray(err)
     if err.shape != (n,):
         raise ValueError(f"Error array for '{obj.name}' has shape {err.shape}; the mesh has "
                          f"{n} vertices (bake and compare the same, unmodified mesh)")
-    attr = me.color_attributes.get(name)
+    why = mesh_io.check_attribute(obj, name, overwrite)
+    if why:
+        raise ValueError(why)
+    attr = me.attributes.get(name)
     if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != "POINT"):
-        me.color_attributes.remove(attr)
+        me.attributes.remove(attr)
         attr = None
     if attr is None:
         attr = me.color_attributes.new(name, "FLOAT_COLOR", "POINT")
     attr.data.foreach_set("color", error_colors(err, scale).ravel())
     me.update()
+    mesh_io._mark_owned(obj, name)
     return attr
 
 

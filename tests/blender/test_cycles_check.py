@@ -39,7 +39,7 @@ def _user_state(scene, objs):
 
 def _make_user_settings(scene, objs):
     """Settings unlike the ones a check uses, so restoring is visible."""
-    scene.render.engine = "BLENDER_EEVEE"
+    scene.render.engine = "BLENDER_WORKBENCH"  # exists in 3.x and 4.x
     scene.cycles.samples = 77
     scene.cycles.use_denoising = True
     scene.cycles.use_adaptive_sampling = True
@@ -162,6 +162,18 @@ def test_error_attribute_shape_checked(scene):
     obj = H.add_plane()
     with pytest.raises(ValueError, match="4 vertices"):
         cc.write_error_attribute(obj, np.zeros(5))
+
+
+def test_error_attribute_spares_user_attribute(scene):
+    obj = H.add_plane()
+    H.set_point_color(obj, "CanopyAO_Error", 0.5)  # the user's, not ours
+    with pytest.raises(ValueError, match="did not make"):
+        cc.write_error_attribute(obj, np.zeros(4))
+    attr = cc.write_error_attribute(obj, np.array([0.1, -0.1, 0, 0]), name="Err")
+    buf = np.empty(16, dtype=np.float32)
+    attr.data.foreach_get("color", buf)
+    assert np.allclose(buf.reshape(4, 4)[0], (1, 0, 0, 1))
+    cc.write_error_attribute(obj, np.zeros(4), name="Err")  # ours now: replaced freely
 
 
 def test_edit_mode_refused(scene):
