@@ -388,6 +388,13 @@ def bake_objects(context, plan, targets, opts):
     AO from the plan's model. Returns {object name: stats}."""
     from . import engine
 
+    # Refuse before the first image is written: every target needs the UV map.
+    for it in targets:
+        obj = context.scene.objects[it.name]
+        if obj.type != "MESH":
+            raise ValueError(f"Object '{obj.name}' is not a mesh; only meshes can be baked "
+                             "per texel")
+        _resolve_uv_map(obj, opts.get("uv_map") or None)
     out = {}
     for it in targets:
         obj = context.scene.objects[it.name]
