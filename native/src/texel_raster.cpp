@@ -349,11 +349,13 @@ TexelSet rasterize_uv(const CornerTriangles& in, const RasterOptions& options) {
     for (std::size_t n = b; n < e; ++n) {
       const std::int32_t id = out.triangles[n];
       const Tri& t = tris[id];
-      const std::int64_t i = out.pixels[n] % W, j = out.pixels[n] / W;
-      const std::int64_t px = i * kSub + kHalf, py = j * kSub + kHalf;
+      const std::int32_t pixel = out.pixels[n];  // 32-bit division: pixel < 2^28
+      const std::int64_t px = std::int64_t(pixel % W) * kSub + kHalf;
+      const std::int64_t py = std::int64_t(pixel / W) * kSub + kHalf;
       double w[3];
       if (out.exact[n]) {
-        for (int k = 0; k < 3; ++k) w[k] = double(edge(t, k, px, py)) / double(t.area2);
+        const double inv_area2 = 1.0 / double(t.area2);
+        for (int k = 0; k < 3; ++k) w[k] = double(edge(t, k, px, py)) * inv_area2;
       } else {
         closest_barycentric(t, double(px), double(py), w);
       }
