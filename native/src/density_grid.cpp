@@ -309,8 +309,11 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
   parallel_for_blocks(positions.size, kGrain, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Vec3 x = positions[i];
-      Vec3 n = normalize(normals[i]);
-      if (dot(n, n) == 0) n = {0, 0, 1};
+      const Vec3 n = normalize(normals[i]);
+      if (dot(n, n) == 0) {  // no hemisphere: open, like the ray-traced reference
+        out[i] = 1.0f;
+        continue;
+      }
       Vec3 t1, t2;
       basis(n, &t1, &t2);
       const float psi = kTwoPi * static_cast<float>(mix(seed ^ i) >> 40) * (1.0f / (1 << 24));

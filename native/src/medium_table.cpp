@@ -185,13 +185,14 @@ void require_ellipsoid(const Ellipsoid& e, const char* name) {
   }
 }
 
-// (r, cosβ) of a receiver in the unit-sphere frame (centre at the origin). A zero normal or a
-// receiver exactly at the centre gets cosβ = 0.
-inline void unit_frame_coords(Vec3 x, Vec3 n, float* r, float* c) {
+// (r, cosβ) of a receiver in the unit-sphere frame (centre at the origin); false for a zero
+// normal (no hemisphere: AO 1, as the ray-traced reference). At the centre cosβ is irrelevant.
+inline bool unit_frame_coords(Vec3 x, Vec3 n, float* r, float* c) {
   const float d = length(x);
   const float ln = length(n);
   *r = d;
-  *c = (d > 0 && ln > 0) ? dot(x, n) / (d * ln) : 0.0f;
+  *c = d > 0 && ln > 0 ? dot(x, n) / (d * ln) : 0.0f;
+  return ln > 0;
 }
 
 constexpr std::size_t kGrain = 1024;
@@ -315,8 +316,8 @@ void ao_medium_sphere(PointsView positions, PointsView normals, const Sphere& sp
   parallel_for_blocks(positions.size, kGrain, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       float r, c;
-      unit_frame_coords((positions[i] - sphere.center) * inv_r, normals[i], &r, &c);
-      out[i] = s.ao(r, c);
+      const bool ok = unit_frame_coords((positions[i] - sphere.center) * inv_r, normals[i], &r, &c);
+      out[i] = ok ? s.ao(r, c) : 1.0f;
     }
   });
 }
@@ -330,9 +331,9 @@ void ao_medium_ellipsoid(PointsView positions, PointsView normals, const Ellipso
   parallel_for_blocks(positions.size, kGrain, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       float r, c;
-      unit_frame_coords(ellipsoid.to_unit(positions[i]), ellipsoid.normal_to_unit(normals[i]),
-                        &r, &c);
-      out[i] = s.ao(r, c);
+      const bool ok = unit_frame_coords(ellipsoid.to_unit(positions[i]),
+                                        ellipsoid.normal_to_unit(normals[i]), &r, &c);
+      out[i] = ok ? s.ao(r, c) : 1.0f;
     }
   });
 }
@@ -362,8 +363,9 @@ void ao_medium_shells(PointsView positions, PointsView normals,
       if (combine == MediumCombine::Product) {
         for (std::size_t k = 0; k < shells.size(); ++k) {
           float r, c;
-          unit_frame_coords(shells[k].to_unit(x), shells[k].normal_to_unit(n), &r, &c);
-          v *= slices[k].ao(r, c);
+          if (unit_frame_coords(shells[k].to_unit(x), shells[k].normal_to_unit(n), &r, &c)) {
+            v *= slices[k].ao(r, c);
+          }
         }
       } else if (!shells.empty()) {
         std::size_t best = 0;
@@ -374,8 +376,9 @@ void ao_medium_shells(PointsView positions, PointsView normals,
           if (d2 < best_d) best_d = d2, best = k;
         }
         float r, c;
-        unit_frame_coords(shells[best].to_unit(x), shells[best].normal_to_unit(n), &r, &c);
-        v = slices[best].ao(r, c);
+        if (unit_frame_coords(shells[best].to_unit(x), shells[best].normal_to_unit(n), &r, &c)) {
+          v = slices[best].ao(r, c);
+        }
       }
       out[i] = v;
     }

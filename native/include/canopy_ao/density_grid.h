@@ -71,7 +71,7 @@ class DensityGrid {
   // === Methods
   /// AO for N receivers (positions, normals N×3) into out (N floats in [0, 1], 1 = open sky).
   /// Parallel over points (parallel_for_blocks), independent of the thread count. A zero normal
-  /// is replaced by +z. Throws std::invalid_argument on non-finite input or bad options.
+  /// gives 1 (no hemisphere; as the ray-traced reference). Throws std::invalid_argument on non-finite input or bad options.
   void ao(PointsView positions, PointsView normals, const DensityAOOptions& options,
           float* out) const;
 

@@ -91,7 +91,7 @@ class MediumTable {
 };
 
 // === Per-point evaluation (parallel, deterministic). out has N floats, values in [0, 1].
-/// Sphere: positions/normals N×3. tau = σR ≥ 0. A zero normal is treated as tangent (cosβ = 0).
+/// Sphere: positions/normals N×3. tau = σR ≥ 0. A zero normal gives 1 (no hemisphere, as the ray-traced reference).
 /// Throws std::invalid_argument on a non-finite or non-positive radius or a bad tau.
 void ao_medium_sphere(PointsView positions, PointsView normals, const Sphere& sphere, float tau,
                       float* out);
