@@ -73,7 +73,8 @@ struct EllipsoidFitInfo {
 Ellipsoid fit_min_ellipsoid(PointsView points, const EllipsoidFitOptions& options = {},
                             EllipsoidFitInfo* info = nullptr);
 
-/// The same on points[indices] only (indices non-empty, each < points.size).
+/// The same on points[indices] only (indices non-empty, each < points.size); options.trim is
+/// not applied here (the caller chose the points).
 Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& indices,
                             const EllipsoidFitOptions& options = {},
                             EllipsoidFitInfo* info = nullptr);
