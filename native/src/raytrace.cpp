@@ -320,13 +320,14 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
     };
 
     for (std::size_t i = begin; i < end; ++i) {
+      // Scale by the largest component first so tiny (1e-25) normals do not underflow to zero.
       const Vec3 raw = normals[i];
-      const float len = length(raw);
-      if (!(len > 0.0f)) {  // zero normal: documented fallback, no hemisphere
+      const float big = std::max(std::fabs(raw.x), std::max(std::fabs(raw.y), std::fabs(raw.z)));
+      if (!(big > 0.0f)) {  // zero normal: documented fallback, no hemisphere
         open[i - begin] = samples;
         continue;
       }
-      const Vec3 nn = raw / len;
+      const Vec3 nn = normalize(raw / big);
       Vec3 t, b;
       onb(nn, &t, &b);
       const Vec3 o = points[i] + nn * offset;

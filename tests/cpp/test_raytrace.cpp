@@ -275,6 +275,21 @@ TEST(RayTracer, DeterministicWhateverTheThreadCount) {
   EXPECT_LT(mean(one), 0.95);
 }
 
+TEST(RayTracer, BvhBuiltOnOneOrTwoThreadsGivesTheSameAnswer) {
+  // Occlusion is an any-hit test: each triangle's test does not depend on the tree, so even a
+  // BVH built differently under another thread cap must give the same bits.
+  const Mesh leaves = canopy(3000, 2, 0.25f, 11);
+  const Receivers r({0.1f, 0.2f, 0.3f}, {1, 0, 0}, 64);
+  const int prev = set_max_threads(1);
+  const auto one = ao_raytrace(leaves.view(), leaves.t.data(), leaves.triangles(), r.points(),
+                               r.normals(), opts(64));
+  set_max_threads(2);
+  const auto two = ao_raytrace(leaves.view(), leaves.t.data(), leaves.triangles(), r.points(),
+                               r.normals(), opts(64));
+  set_max_threads(prev);
+  EXPECT_EQ(one, two);
+}
+
 TEST(RayTracer, OneOffFunctionMatchesTheReusableTracer) {
   const Mesh leaves = canopy(500, 1, 0.3f, 1);
   const Receivers r({0, 0, 0}, {0, 1, 0}, 8);
@@ -318,9 +333,11 @@ TEST(RayTracer, ZeroNormalIsOneAndUnnormalisedNormalsAreNormalised) {
   const Receivers zero({0, 0, 0}, {0, 0, 0}, 2);
   for (float v : tracer.ao(zero.points(), zero.normals())) EXPECT_EQ(v, 1.0f);
   const Mesh roof = horizontal(0, 200, -200, 200, 1);
-  const Receivers unit({0, 0, 0}, {0, 0, 1}, 8), longer({0, 0, 0}, {0, 0, 5}, 8);
-  EXPECT_EQ(roof.tracer().ao(unit.points(), unit.normals()),
-            roof.tracer().ao(longer.points(), longer.normals()));
+  const Receivers unit({0, 0, 0}, {0, 0, 1}, 8), longer({0, 0, 0}, {0, 0, 5}, 8),
+      tiny({0, 0, 0}, {0, 0, 1e-30f}, 8);
+  const auto want = roof.tracer().ao(unit.points(), unit.normals());
+  EXPECT_EQ(want, roof.tracer().ao(longer.points(), longer.normals()));
+  EXPECT_EQ(want, roof.tracer().ao(tiny.points(), tiny.normals()));  // no underflow to "zero"
 }
 
 TEST(RayTracer, BadInputThrowsInvalidArgument) {
