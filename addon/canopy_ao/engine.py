@@ -35,9 +35,13 @@ except Exception as exc:  # ImportError, or an undefined symbol from a stale bui
     _core = None
     _CORE_ERROR = f"{type(exc).__name__}: {exc}"
 
-# Method ladder, cheapest first (DESIGN 3). "grid" exists only when the core has DensityGrid.
+# Method ladder, cheapest first (DESIGN 3): one sphere, one ellipsoid, k shells, the shells as a
+# uniform random medium (exact expected AO, tabulated), the leaf-density grid; Reeves-Blau is the
+# paper's baseline and ray tracing the reference.
 ANALYTIC_METHODS = ("sphere", "ellipsoid", "shells")
-METHODS = ("auto",) + ANALYTIC_METHODS + ("reeves_blau", "grid", "raytrace")
+METHODS = ("auto",) + ANALYTIC_METHODS + ("medium", "reeves_blau", "grid", "raytrace")
+# Optional rungs and the native function each needs.
+_OPTIONAL = {"medium": "ao_medium_shells", "grid": "DensityGrid"}
 RECEIVER_ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS")
 DEFAULT_TAU = 1.5
 UP = np.array([0.0, 0.0, 1.0], dtype=np.float32)
@@ -65,10 +69,8 @@ def core_status() -> tuple[bool, str]:
 
 def available_methods() -> tuple[str, ...]:
     """Methods the loaded core can run."""
-    out = [m for m in METHODS if m != "grid"]
-    if _core is not None and hasattr(_core, "DensityGrid"):
-        out.insert(out.index("raytrace"), "grid")
-    return tuple(out)
+    return tuple(m for m in METHODS
+                 if m not in _OPTIONAL or (_core is not None and hasattr(_core, _OPTIONAL[m])))
 
 
 def _need(name: str):
@@ -208,6 +210,8 @@ def _in_shell(p, n, tree_fit, method, tau):
         if len(shells) == 1:
             return _need("ao_canopy_ellipsoid")(p, n, shells[0], float(tau))
         return _need("ao_canopy_shells")(p, n, list(shells), float(tau), combine="product")
+    if method == "medium":
+        return _need("ao_medium_shells")(p, n, list(shells), float(tau), combine="product")
     raise EngineError(f"unknown analytic method {method!r}")
 
 
@@ -285,7 +289,7 @@ def _sample_receivers(items, count, seed):
     return picks
 
 
-def _golden_min(f, lo, hi, iters=24):
+def _golden_min(f, lo, hi, iters=16):
     """Minimise a unimodal f on [lo, hi] by golden-section search."""
     g = (math.sqrt(5) - 1) / 2
     a, b = lo, hi
@@ -413,10 +417,12 @@ def prepare(items, settings: BakeSettings) -> Plan:
         plan.timings["grid"] = time.perf_counter() - t0
 
     # Method and τ for the analytic rungs.
-    analytic = settings.method in ANALYTIC_METHODS + ("reeves_blau", "auto")
+    analytic = settings.method in ANALYTIC_METHODS + ("medium", "reeves_blau", "auto")
     plan.method = settings.method
     if analytic and plan.fits:
         candidates = list(ANALYTIC_METHODS) if settings.method == "auto" else [settings.method]
+        if settings.method == "auto" and "medium" in available_methods():
+            candidates.append("medium")
         if settings.method == "auto" and plan.grid is not None:
             candidates.append("grid")
         if plan.tracer is not None and (settings.method == "auto" or settings.tau is None):

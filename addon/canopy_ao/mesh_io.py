@@ -67,23 +67,30 @@ def evaluated_arrays(obj, depsgraph, same_count=True):
     return np.ascontiguousarray(pos), np.ascontiguousarray(nor), np.ascontiguousarray(tris)
 
 
-def owned_attributes(obj):
-    """Names of the attributes Canopy AO made on this object."""
-    raw = obj.get(OWNED_PROP)
-    if not raw:
+def _owned(idblock):
+    raw = idblock.get(OWNED_PROP)
+    if not isinstance(raw, str) or not raw:
         return []
     try:
         names = json.loads(raw)
-    except (TypeError, ValueError):
+    except ValueError:
         return []
-    return [s for s in names if isinstance(s, str)]
+    return [s for s in names if isinstance(s, str)] if isinstance(names, list) else []
+
+
+def owned_attributes(obj):
+    """Names of the attributes Canopy AO made on this object. The mark is kept on the object
+    and on its mesh, so objects sharing one mesh agree on what is ours."""
+    names = _owned(obj)
+    return names + [n for n in _owned(obj.data) if n not in names]
 
 
 def _mark_owned(obj, name):
-    names = owned_attributes(obj)
-    if name not in names:
-        names.append(name)
-    obj[OWNED_PROP] = json.dumps(names)
+    for idblock in (obj, obj.data):
+        names = _owned(idblock)
+        if name not in names:
+            names.append(name)
+        idblock[OWNED_PROP] = json.dumps(names)
 
 
 def check_attribute(obj, name, overwrite):

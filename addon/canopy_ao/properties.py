@@ -12,6 +12,8 @@ METHOD_LABELS = {
     "sphere": ("Sphere", "One fitted sphere per tree (Hegeman Eq. 4-6)"),
     "ellipsoid": ("Ellipsoid", "One fitted ellipsoid per tree"),
     "shells": ("Shells", "Several ellipsoid shells per tree (k-means clusters)"),
+    "medium": ("Leaf medium", "The shells filled with randomly oriented leaves: exact expected "
+                              "AO of a uniform medium (tabulated)"),
     "reeves_blau": ("Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
     "grid": ("Density grid", "Leaf density voxelised, rays marched through it"),
     "raytrace": ("Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
