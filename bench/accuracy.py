@@ -18,7 +18,11 @@ path as a bake in Blender, minus bpy I/O). For each scene (examples/canopy_scene
      ("best τ": an upper bound on what calibration can reach; its prepare time excludes the
      search).
    - auto: the engine's own ladder walk.
-   - grid: the density grid, when the core has DensityGrid.
+   - grid: the engine's density-grid method, and DensityGrid straight from the core at
+     resolutions 16-128 (all geometry except the ground, 32 directions).
+   - medium_sphere / medium_ellipsoid / medium_shells (k = 2, 4, 8): the leaf-medium expectation
+     (ao_medium_shells over every tree's proxies, product), τ calibrated the engine's way (256
+     traced points) and best τ; not yet used by the engine.
    - raytrace at 1, 4, 16, 64, 256 rays (prepare = BVH build).
    - cycles at every cached sample count below the Cycles reference (time = the bake call).
 3. Errors per object role (canopy, trunk, ground, grass, all, and "unburied": all but the
@@ -249,16 +253,114 @@ def method_runs(prep, ref, args):
         try:
             s = engine.BakeSettings(method="grid", tau=None, distance=D, seed=0)
             ao, tp, te, plan = run_engine(prep, s, args.repeats)
-            yield "grid", "grid", "", math.nan, "", ao, tp, te, ""
+            yield "grid", "grid", "engine", math.nan, "", ao, tp, te, "the engine's grid method"
         except Exception as exc:
-            yield "grid", "grid", "", math.nan, "", None, math.nan, math.nan, \
+            yield "grid", "grid", "engine", math.nan, "", None, math.nan, math.nan, \
                 f"{type(exc).__name__}: {exc}"
+    yield from raw_runs(prep, ref, args)
     if hasattr(_core, "RayTracer"):
         tracer, t_build = timed(lambda: _core.RayTracer(prep.V, prep.T), 1)
         for n in args.ray_samples:
             ao, te = timed(lambda: np.asarray(tracer.ao(prep.V, prep.N, samples=n, distance=D,
                                                         seed=0), np.float32), args.repeats)
             yield "raytrace", "raytrace", f"{n} rays", math.nan, "", ao, t_build, te, ""
+
+
+def _tree_points(prep):
+    trees = {}
+    for p in prep.scene:
+        if p.role == "canopy":
+            trees.setdefault(p.tree, []).append(p.vertices)
+    return {t: np.ascontiguousarray(np.concatenate(v)) for t, v in trees.items()}
+
+
+def _fit_proxies(prep, kind, k):
+    """One proxy per tree ("sphere", "ellipsoid") or k shells per tree, as Ellipsoids."""
+    out = []
+    for pts in _tree_points(prep).values():
+        if kind == "sphere":
+            out.append(_core.Ellipsoid.from_sphere(engine._need("fit_sphere")(pts)))
+        elif kind == "ellipsoid":
+            out.append(engine._need("fit_ellipsoid")(pts))
+        else:
+            shells, _ = _core.fit_shells(pts, k, kind="ellipsoid", seed=0)
+            out += list(shells)
+    return out
+
+
+def _calibration_sample(prep, n=256, rays=128, seed=0):
+    """The engine's recipe (DESIGN 5): trace a few hundred random receivers; (idx, ao, seconds)."""
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    idx = np.sort(rng.choice(len(prep.V), size=min(n, len(prep.V)), replace=False))
+    tr = _core.RayTracer(prep.V, prep.T)
+    ao = np.asarray(tr.ao(prep.V[idx], prep.N[idx], samples=rays, distance=prep.distance), np.float32)
+    return idx, ao, time.perf_counter() - t0
+
+
+def _fit_tau(f, idx, target):
+    P, N = np.ascontiguousarray(PREP_CACHE["V"][idx]), np.ascontiguousarray(PREP_CACHE["N"][idx])
+    lt, _ = engine._golden_min(lambda x: float(np.mean((f(P, N, math.exp(x)) - target) ** 2)),
+                               math.log(0.02), math.log(50.0), iters=20)
+    return math.exp(lt)
+
+
+PREP_CACHE = {}
+
+
+def raw_runs(prep, ref, args):
+    """Rungs the engine does not use yet, straight from _core over every vertex of the scene:
+    the leaf-medium expectation (ao_medium_shells over every tree's proxies, product) and the
+    density grid at several resolutions (all geometry except the ground)."""
+    PREP_CACHE.update(V=prep.V, N=prep.N)
+    have_trees = bool(_tree_points(prep))
+    rng = np.random.default_rng(1)
+    best_idx = np.sort(rng.choice(len(prep.V), size=min(4000, len(prep.V)), replace=False))
+    calib = None
+    if have_trees and hasattr(_core, "ao_medium_shells") and hasattr(_core, "RayTracer"):
+        for kind, k in (("sphere", 1), ("ellipsoid", 1), ("shells", 2), ("shells", 4), ("shells", 8)):
+            if kind == "shells" and not hasattr(_core, "fit_shells"):
+                continue
+            fam, setting = f"medium_{kind}", (f"k={k}" if kind == "shells" else "")
+            try:
+                t0 = time.perf_counter()
+                shells = _fit_proxies(prep, kind, k)
+                t_fit = time.perf_counter() - t0
+
+                def f(P, N, tau, shells=shells):
+                    return np.asarray(_core.ao_medium_shells(P, N, shells, float(tau)), np.float32)
+
+                if calib is None:
+                    calib = _calibration_sample(prep)
+                t0 = time.perf_counter()
+                tau_c = _fit_tau(f, calib[0], calib[1])
+                t_cal = calib[2] + time.perf_counter() - t0
+                ao, te = timed(lambda: f(prep.V, prep.N, tau_c), args.repeats)
+                yield fam, fam, setting, tau_c, "calibrated", ao, t_fit + t_cal, te, \
+                    "256 points traced at 128 rays"
+                if ref is not None:
+                    tau_b = _fit_tau(f, best_idx, ref[best_idx])
+                    ao, te = timed(lambda: f(prep.V, prep.N, tau_b), args.repeats)
+                    yield fam, fam, setting, tau_b, "best", ao, t_fit, te, ""
+            except Exception as exc:
+                yield fam, fam, setting, math.nan, "calibrated", None, math.nan, math.nan, \
+                    f"{type(exc).__name__}: {exc}"
+    if hasattr(_core, "DensityGrid"):
+        keep = [p for p in prep.scene if p.role != "ground"]
+        off = np.cumsum([0] + [p.n_vertices for p in keep])
+        GV = np.ascontiguousarray(np.concatenate([p.vertices for p in keep]))
+        GT = np.ascontiguousarray(np.concatenate([p.triangles + o for p, o in zip(keep, off[:-1])]))
+        for r in (16, 32, 64, 128):
+            try:
+                g, tb = timed(lambda: _core.DensityGrid(GV, GT, resolution=r), 1)
+                ao, te = timed(lambda: np.asarray(g.ao(prep.V, prep.N, directions=32,
+                                                       distance=prep.distance), np.float32),
+                               args.repeats)
+                yield "grid", "grid", f"r={r}", math.nan, "", ao, tb, te, \
+                    "32 directions; grid of all geometry but the ground"
+            except Exception as exc:
+                yield "grid", "grid", f"r={r}", math.nan, "", None, math.nan, math.nan, \
+                    f"{type(exc).__name__}: {exc}"
 
 
 # === Metrics and output =======================================================================

@@ -27,6 +27,9 @@ STYLE = {  # family -> (colour, marker)
     "sphere": ("#1f77b4", "o"),
     "ellipsoid": ("#2ca02c", "s"),
     "shells": ("#17becf", "D"),
+    "medium_sphere": ("#e377c2", "o"),
+    "medium_ellipsoid": ("#7f7f7f", "s"),
+    "medium_shells": ("#000080", "D"),
     "auto": ("#9467bd", "*"),
     "grid": ("#bcbd22", "P"),
     "raytrace": ("#d62728", "^"),
@@ -230,7 +233,8 @@ def strips(ao_dir, out_dir, quick, max_points=40000):
         ref = z[keys[0]].astype(np.float32) if keys else None
         wanted = ["ref_embree", "ref_cycles", "cycles|16 samples", "raytrace|16 rays",
                   "reeves_blau|calibrated", "sphere|calibrated", "ellipsoid|calibrated",
-                  "shells|k=4|calibrated", "auto|calibrated", "grid"]
+                  "shells|k=4|calibrated", "medium_sphere|calibrated",
+                  "medium_shells|k=4|calibrated", "grid|r=64", "auto|calibrated"]
         shown = [k for k in wanted if k in z.files]
         shown += [k for k in z.files if k.startswith("auto|") and k not in shown][:1]
         if not shown:
