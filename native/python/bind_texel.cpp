@@ -47,25 +47,30 @@ std::size_t corners_arg(const py::array& a, const char* name, py::ssize_t d, boo
 }
 
 std::pair<int, int> resolution_arg(const py::object& o) {
-  int w, h;
-  if (py::isinstance<py::int_>(o)) {
-    w = h = o.cast<int>();
-  } else {
-    py::tuple t;
-    try {
-      t = py::tuple(py::iterable(o));
-    } catch (const py::error_already_set&) {
-      throw py::value_error("resolution must be an int or (width, height)");
+  // operator.index accepts Python and numpy integers, refuses floats.
+  const py::object index = py::module_::import("operator").attr("index");
+  long long w = 0, h = 0;
+  try {
+    if (py::hasattr(o, "__index__")) {
+      w = h = index(o).cast<long long>();
+    } else {
+      const py::tuple t = py::module_::import("builtins").attr("tuple")(o);
+      if (t.size() != 2) throw py::value_error("");
+      w = index(t[0]).cast<long long>();
+      h = index(t[1]).cast<long long>();
     }
-    if (t.size() != 2) throw py::value_error("resolution must be an int or (width, height)");
-    w = t[0].cast<int>();
-    h = t[1].cast<int>();
+  } catch (const py::error_already_set&) {
+    throw py::value_error("resolution must be an int or (width, height) of ints, got " +
+                          std::string(py::repr(o)));
+  } catch (const py::value_error&) {
+    throw py::value_error("resolution must be an int or (width, height) of ints, got " +
+                          std::string(py::repr(o)));
   }
   if (w < 1 || w > 16384 || h < 1 || h > 16384) {
     throw py::value_error("resolution must be 1..16384 in each direction, got " +
                           std::to_string(w) + " x " + std::to_string(h));
   }
-  return {w, h};
+  return {int(w), int(h)};
 }
 
 std::string path_arg(const py::object& p) {

@@ -214,6 +214,9 @@ TexelSet rasterize_uv(const CornerTriangles& in, const RasterOptions& options) {
   if (in.count > 0 && (in.uvs == nullptr || in.positions == nullptr)) {
     throw std::invalid_argument("rasterize_uv: uvs and positions are required");
   }
+  if (in.count > std::size_t(std::numeric_limits<std::int32_t>::max())) {
+    throw std::invalid_argument("rasterize_uv: more than 2^31 - 1 triangles");
+  }
   TexelSet out;
   out.width = W;
   out.height = H;

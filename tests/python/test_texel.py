@@ -60,7 +60,7 @@ def test_quad_covers_every_texel_once_bottom_row_first():
 
 def test_grouped_corner_shape_and_face_normals():
     uv, pos, _ = quad(0.1, 0.2, 0.7, 0.9)
-    flat = core.rasterize_uv(uv, pos, resolution=(20, 10))
+    flat = core.rasterize_uv(uv, pos, resolution=(np.int64(20), 10))
     grouped = core.rasterize_uv(uv.reshape(2, 3, 2), pos.reshape(2, 3, 3), None, (20, 10))
     np.testing.assert_array_equal(flat.pixels, grouped.pixels)
     assert flat.width == 20 and flat.height == 10
@@ -147,6 +147,8 @@ def test_image_round_trips(tmp_path):
     (dict(resolution=0), "resolution"),
     (dict(resolution=(16, 20000)), "resolution"),
     (dict(resolution=(1, 2, 3)), "resolution"),
+    (dict(resolution=(8.0, 8)), "resolution"),
+    (dict(resolution="8"), "resolution"),
     (dict(normals=np.zeros((6, 2), np.float32)), "normals"),
 ])
 def test_rasterize_bad_input(kwargs, match):
