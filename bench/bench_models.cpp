@@ -1,0 +1,129 @@
+// Throughput of the analytic AO models (vertices/s), 10^5..10^7 points, 1 and 2 threads.
+//   build-models/canopy_ao_bench --benchmark_filter=Models
+// Inputs are AoS float32 (N×3) positions and unit normals, as the add-on passes them; the
+// output buffer is reused (the Python binding allocates a new array each call, which adds the
+// page faults of a fresh 4N-byte buffer).
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "canopy_ao/canopy_model.h"
+#include "canopy_ao/grass.h"
+#include "canopy_ao/occluders.h"
+#include "canopy_ao/parallel.h"
+#include "canopy_ao/reeves_blau.h"
+
+using namespace canopy_ao;
+
+namespace {
+constexpr std::size_t kMax = 10'000'000;
+
+// Receivers: points uniform in the unit ball scaled to `radius` around the origin (a canopy),
+// random unit normals. Built once, shared by every benchmark (prefixes of it).
+struct Data {
+  std::vector<float> p, n, out;
+  Data() : p(3 * kMax), n(3 * kMax), out(kMax) {
+    std::mt19937 rng(42);
+    std::uniform_real_distribution<float> u(-1, 1);
+    for (std::size_t i = 0; i < kMax; ++i) {
+      float x, y, z;
+      do {
+        x = u(rng), y = u(rng), z = u(rng);
+      } while (x * x + y * y + z * z > 1);
+      p[3 * i] = 5 * x, p[3 * i + 1] = 5 * y, p[3 * i + 2] = 5 * z + 6;
+      float a, b, c, l;
+      do {
+        a = u(rng), b = u(rng), c = u(rng), l = a * a + b * b + c * c;
+      } while (l > 1 || l < 1e-4f);
+      l = 1 / std::sqrt(l);
+      n[3 * i] = a * l, n[3 * i + 1] = b * l, n[3 * i + 2] = c * l;
+    }
+  }
+  PointsView pv(std::size_t k) const { return {p.data(), k}; }
+  PointsView nv(std::size_t k) const { return {n.data(), k}; }
+};
+
+Data& data() {
+  static Data d;
+  return d;
+}
+
+Ellipsoid tilted() {
+  Ellipsoid e;
+  e.center = {0, 0, 6};
+  const float c = std::cos(0.4f), s = std::sin(0.4f);
+  e.axes[0] = {c, s, 0};
+  e.axes[1] = {-s, c, 0};
+  e.axes[2] = {0, 0, 1};
+  e.radii = {5, 4, 6};
+  return e;
+}
+
+template <class Fn>
+void run(benchmark::State& state, Fn&& fn) {
+  const std::size_t n = static_cast<std::size_t>(state.range(0));
+  const int prev = set_max_threads(static_cast<int>(state.range(1)));
+  Data& d = data();
+  for (auto _ : state) {
+    fn(d.pv(n), d.nv(n), d.out.data());
+    benchmark::DoNotOptimize(d.out.data());
+    benchmark::ClobberMemory();
+  }
+  set_max_threads(prev);
+  state.SetItemsProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(n));
+}
+
+void Models_CanopySphere(benchmark::State& state) {
+  const Sphere s{{0, 0, 6}, 5.0f};
+  run(state, [&](PointsView p, PointsView n, float* o) { ao_canopy_sphere(p, n, s, {1.5f}, o); });
+}
+void Models_CanopyEllipsoid(benchmark::State& state) {
+  const Ellipsoid e = tilted();
+  run(state,
+      [&](PointsView p, PointsView n, float* o) { ao_canopy_ellipsoid(p, n, e, {1.5f}, o); });
+}
+void Models_CanopyShells4(benchmark::State& state) {
+  std::vector<Ellipsoid> shells;
+  for (int k = 0; k < 4; ++k) {
+    shells.push_back(Ellipsoid::from_sphere({{k < 2 ? -2.0f : 2.0f, k % 2 ? -2.0f : 2.0f, 6}, 3.5f}));
+  }
+  run(state, [&](PointsView p, PointsView n, float* o) {
+    ao_canopy_shells(p, n, shells, {1.5f}, ShellCombine::Product, o);
+  });
+}
+void Models_ReevesBlau(benchmark::State& state) {
+  const Ellipsoid e = tilted();
+  run(state, [&](PointsView p, PointsView, float* o) { ao_reeves_blau(p, e, 1.5f, o); });
+}
+void Models_Grass(benchmark::State& state) {
+  GrassOptions g;
+  g.ground_height = 1.0f;
+  g.blade_height = 4.0f;
+  run(state, [&](PointsView p, PointsView n, float* o) { ao_grass(p, n, g, o); });
+}
+// A forest of 32×32 trees (radius 3 on an 8-unit lattice, ε = 1e-3) over the receivers.
+void Models_Occluders1024(benchmark::State& state) {
+  std::vector<Ellipsoid> forest;
+  for (int i = 0; i < 32; ++i)
+    for (int j = 0; j < 32; ++j)
+      forest.push_back(Ellipsoid::from_sphere({{8.0f * (i - 16), 8.0f * (j - 16), 20}, 3.0f}));
+  const OccluderField field(forest, OccluderOptions{1.5f, 1e-3f, false});
+  state.counters["max_candidates"] = static_cast<double>(field.max_candidates());
+  run(state, [&](PointsView p, PointsView n, float* o) { field.ao(p, n, o); });
+}
+
+void sizes(benchmark::internal::Benchmark* b) {
+  for (int threads : {1, 2})
+    for (int64_t n : {100'000, 1'000'000, 10'000'000}) b->Args({n, threads});
+  b->ArgNames({"n", "threads"})->UseRealTime()->Unit(benchmark::kMillisecond);
+}
+}  // namespace
+
+BENCHMARK(Models_CanopySphere)->Apply(sizes);
+BENCHMARK(Models_CanopyEllipsoid)->Apply(sizes);
+BENCHMARK(Models_CanopyShells4)->Apply(sizes);
+BENCHMARK(Models_ReevesBlau)->Apply(sizes);
+BENCHMARK(Models_Grass)->Apply(sizes);
+BENCHMARK(Models_Occluders1024)->Apply(sizes);
