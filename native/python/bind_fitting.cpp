@@ -7,13 +7,18 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "arrays.h"
+#include "canopy_ao/ellipsoid_fit.h"
 #include "canopy_ao/geometry.h"
+#include "canopy_ao/shells.h"
+#include "canopy_ao/sphere_fit.h"
 
 namespace canopy_ao::py_bind {
 
@@ -151,6 +156,33 @@ std::string fmt(Vec3 v) {
   return s.str();
 }
 
+EllipsoidMethod method_arg(const std::string& m) {
+  if (m == "auto") return EllipsoidMethod::Auto;
+  if (m == "khachiyan") return EllipsoidMethod::Khachiyan;
+  if (m == "pca") return EllipsoidMethod::Pca;
+  throw py::value_error("method must be 'auto', 'khachiyan' or 'pca', got '" + m + "'");
+}
+
+ShellKind kind_arg(const std::string& k) {
+  if (k == "ellipsoid") return ShellKind::Ellipsoid;
+  if (k == "sphere") return ShellKind::Sphere;
+  throw py::value_error("kind must be 'ellipsoid' or 'sphere', got '" + k + "'");
+}
+
+EllipsoidFitOptions ellipsoid_options(double trim, const std::string& method, double tolerance,
+                                      py::ssize_t max_points, double min_radius_ratio) {
+  if (max_points < 4) {
+    throw py::value_error("max_points must be >= 4, got " + std::to_string(max_points));
+  }
+  EllipsoidFitOptions o;
+  o.trim = trim;
+  o.method = method_arg(method);
+  o.tolerance = tolerance;
+  o.max_points = static_cast<std::size_t>(max_points);
+  o.min_radius_ratio = min_radius_ratio;
+  return o;
+}
+
 }  // namespace
 
 void bind_fitting(py::module_& m) {
@@ -244,6 +276,80 @@ void bind_fitting(py::module_& m) {
             if (t.size() != 3) throw py::value_error("bad Ellipsoid pickle state");
             return make_ellipsoid(t[0], t[1], t[2]);
           }));
+
+  // === Fitting (std::invalid_argument from the core becomes ValueError)
+  m.def(
+      "fit_sphere",
+      [](const py::array& points, double trim) {
+        const PointsView p = points_arg(points, "points");
+        py::gil_scoped_release release;
+        return fit_min_sphere(p, trim);
+      },
+      py::arg("points"), py::arg("trim") = 0.0,
+      "fit_sphere(points, trim=0.0) -> Sphere\n\n"
+      "Exact minimum enclosing sphere (Gaertner's Miniball) of points, float32 (N, 3), N >= 1, "
+      "finite. It contains every point: the radius is measured from the float centre and "
+      "inflated by a relative 1e-6, and is at least 1e-6 * (|centre| + 1) (a single point).\n"
+      "trim in [0, 0.5): that fraction of points farthest from the coordinate-wise median is "
+      "ignored (outlier branches); the sphere then contains the kept points only.");
+
+  m.def(
+      "fit_ellipsoid",
+      [](const py::array& points, double trim, const std::string& method, double tolerance,
+         py::ssize_t max_points, double min_radius_ratio) {
+        const PointsView p = points_arg(points, "points");
+        const EllipsoidFitOptions o =
+            ellipsoid_options(trim, method, tolerance, max_points, min_radius_ratio);
+        py::gil_scoped_release release;
+        return fit_min_ellipsoid(p, o);
+      },
+      py::arg("points"), py::arg("trim") = 0.0, py::arg("method") = "auto",
+      py::arg("tolerance") = 1e-3, py::arg("max_points") = 20000,
+      py::arg("min_radius_ratio") = 1e-2,
+      "fit_ellipsoid(points, trim=0.0, method='auto', tolerance=1e-3, max_points=20000, "
+      "min_radius_ratio=0.01) -> Ellipsoid\n\n"
+      "Minimum-volume enclosing ellipsoid of points, float32 (N, 3), N >= 1, finite.\n"
+      "method: 'khachiyan' (Khachiyan/Todd-Yildirim on at most max_points points, then scaled "
+      "to contain every point; volume within (1 + tolerance)^(3/2) of optimal on that sample), "
+      "'pca' (covariance axes, box aspect, scaled to contain all), 'auto' (khachiyan, or pca "
+      "if smaller).\n"
+      "Flat, line-like or single-point input: axes thinner than 1e-3 of the widest are fitted "
+      "in fewer dimensions; every radius is then at least min_radius_ratio x the largest and "
+      "at least 1e-6 * (|centre| + 1). Axes (columns) sorted by decreasing radius, "
+      "orthonormal, right-handed.\n"
+      "trim in [0, 0.5): that fraction of points with the largest robust Mahalanobis distance "
+      "is ignored.");
+
+  m.def(
+      "fit_shells",
+      [](const py::array& points, int k, const std::string& kind, double trim,
+         std::int64_t seed, int max_iterations) {
+        const PointsView p = points_arg(points, "points");
+        if (seed < 0) throw py::value_error("seed must be >= 0, got " + std::to_string(seed));
+        ShellFitOptions o;
+        o.k = k;
+        o.kind = kind_arg(kind);
+        o.trim = trim;
+        o.seed = static_cast<std::uint64_t>(seed);
+        o.max_iterations = max_iterations;
+        ShellFit f;
+        {
+          py::gil_scoped_release release;
+          f = fit_shells(p, o);
+        }
+        py::array_t<std::int32_t> labels(static_cast<py::ssize_t>(f.labels.size()));
+        std::copy(f.labels.begin(), f.labels.end(), labels.mutable_data());
+        return py::make_tuple(py::cast(f.shells), labels);
+      },
+      py::arg("points"), py::arg("k"), py::arg("kind") = "ellipsoid", py::arg("trim") = 0.0,
+      py::arg("seed") = 0, py::arg("max_iterations") = 100,
+      "fit_shells(points, k, kind='ellipsoid', trim=0.0, seed=0, max_iterations=100) -> "
+      "(list[Ellipsoid], labels)\n\n"
+      "Clusters points, float32 (N, 3), with seeded k-means++ and Lloyd iterations and fits "
+      "one shell per cluster (kind 'ellipsoid': fit_ellipsoid; 'sphere': fit_sphere as an "
+      "Ellipsoid), trim applied per cluster. labels: int32 (N,), the shell of each point. "
+      "Empty clusters are dropped, so fewer than k shells come back when there are fewer "
+      "distinct points than k. Same seed, same result, whatever the thread count.");
 }
 
 }  // namespace canopy_ao::py_bind
