@@ -194,3 +194,21 @@ def test_write_errors_name_the_path(tmp_path):
     with pytest.raises(ValueError, match="pixels must have shape"):
         core.write_image(tmp_path / "a.exr", np.zeros((4, 4, 5), np.float32))
     assert not (tmp_path / "a.png").exists()
+
+
+@pytest.mark.skipif(not hasattr(core, "ao_canopy_sphere"), reason="models not in this build")
+def test_bake_a_ground_texture_end_to_end(tmp_path):
+    """Ground quad under a canopy sphere: texels are ordinary receivers for an AO model, and the
+    EXR written from the splatted image reads back to the same AO at every covered texel."""
+    uv, _, _ = quad()
+    pos = np.column_stack([10 * uv - 5, np.zeros(6)]).astype(np.float32)  # 10 x 10 ground, z = 0
+    nrm = np.tile(np.float32([0, 0, 1]), (6, 1))
+    t = core.rasterize_uv(uv, pos, nrm, resolution=(64, 32))
+    ao = core.ao_canopy_sphere(t.positions, t.normals, core.Sphere((0, 0, 2), 1.5), 2.0)
+    assert ao.shape == (len(t),) and (ao >= 0).all() and (ao <= 1).all()
+    image = t.splat(ao, margin=4)
+    # Darkest under the sphere (image centre), open sky at the corners.
+    assert image[16, 32] < image[0, 0] and image[0, 0] > 0.9
+    core.write_image(tmp_path / "ground_ao.exr", image)
+    back = core.read_image(tmp_path / "ground_ao.exr")[..., 0]
+    np.testing.assert_array_equal(back.ravel()[t.pixels], ao)
