@@ -57,6 +57,9 @@ def build_parser():
                    help="AO distance, 0 = unlimited (default: 10)")
     p.add_argument("--samples", type=_positive_int, default=64,
                    help="rays per vertex for --method raytrace (default: 64)")
+    p.add_argument("--time-budget", type=_nonneg, default=2.0,
+                   help="auto: seconds the bake may take; richer models predicted to take "
+                        "longer are not chosen (0 = no limit; default 2)")
     p.add_argument("--attribute", default="CanopyAO", help="color attribute name")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a same-named attribute Canopy AO did not make")
@@ -125,6 +128,7 @@ def _run(args):
     if args.save and not bpy.data.filepath:
         _fail("--save needs a saved .blend (give the .blend before --python-expr)")
     opts = dict(method=args.method, tau=args.tau, distance=args.distance, samples=args.samples,
+                time_budget=args.time_budget,
                 attribute=args.attribute, overwrite=args.overwrite,
                 wire_material=args.wire_material, add_aov=args.aov is not None,
                 aov_name=args.aov or "BakedAO", mode=args.mode.upper(), uv_map=args.uv,

@@ -118,7 +118,10 @@ class BakeSettings:
     """method: one of METHODS. tau: optical depth (AO at a shell's centre = exp(-tau)); None =
     calibrate. distance: AO distance in scene units, 0 = unlimited (Cycles' meaning: a hard
     cut-off on ray length; the analytic models ignore it). samples: rays per point for
-    "raytrace". shells: k for "shells". calibration_points: reference points traced for "auto"."""
+    "raytrace". shells: k for "shells". calibration_points: reference points traced for "auto".
+    time_budget: seconds the whole bake may take; "auto" does not pick a rung predicted to take
+    longer (0 = no limit). target_rmse: "auto" stops climbing once a rung's sample RMSE is
+    below it."""
 
     method: str = "auto"
     tau: float | None = None
@@ -128,6 +131,8 @@ class BakeSettings:
     trim: float = 0.0
     calibration_points: int = 256
     calibration_samples: int = 128
+    time_budget: float = 2.0
+    target_rmse: float = 0.02
     seed: int = 0
 
 
@@ -312,8 +317,9 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
 
     Traces a few hundred receiver points (DESIGN 5), then for each candidate finds the τ that
     minimises the mean squared error (golden-section search on log τ in [0.02, 50]; the density
-    grid has no τ) and walks up the ladder only while the error drops by more than 10 %.
-    Returns (method, tau, info dict).
+    grid has no τ) and walks up the ladder while the RMSE drops by more than 10 %, stays above
+    ``target_rmse`` and the richer rung's predicted time (its cost per sample point times the
+    receivers) fits ``time_budget``. Returns (method, tau, info dict).
     Kept apart so a better search can replace it.
     """
     s = plan.settings
@@ -334,28 +340,51 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got - ref) ** 2)) if len(ref) else 0.0
 
-    results = {}
+    n_receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
+    big = max((it for it, _p, _n in groups), key=lambda it: len(it.positions))
+    bp = np.ascontiguousarray(big.positions[:4096])
+    bn = np.ascontiguousarray(big.normals[:4096])
+    results, predicted = {}, {}
     for m in candidates:
         if m == "grid":  # physical density, no τ to fit
-            results[m] = (float(tau_fixed or DEFAULT_TAU), err(m, None))
+            tau = float(tau_fixed or DEFAULT_TAU)
         elif tau_fixed is not None:
-            results[m] = (float(tau_fixed), err(m, tau_fixed))
+            tau = float(tau_fixed)
         else:
-            lt, e = _golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
-            results[m] = (math.exp(lt), e)
-    chosen = candidates[0]
+            lt, _e = _golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
+            tau = math.exp(lt)
+        results[m] = (tau, err(m, tau))
+        # Cost per point on one batch of the largest receiver, scaled to every receiver (a
+        # batch large enough that per-call overhead does not dominate).
+        t1 = time.perf_counter()
+        _evaluate_points(plan, big.role, big.tree, big.name, bp, bn, m, tau)
+        predicted[m] = (time.perf_counter() - t1) / max(len(bp), 1) * n_receivers
+    # Walk up the ladder (DESIGN 5): a richer rung only if it cuts the error by > 10 %, the
+    # current one misses the target, and the richer one fits the time budget.
+    chosen, skipped = candidates[0], []
     for m in candidates[1:]:
-        if results[m][1] < 0.9 * results[chosen][1]:
+        if math.sqrt(results[chosen][1]) <= s.target_rmse:
+            break
+        if results[m][1] < 0.81 * results[chosen][1]:  # RMSE down by more than 10 %
+            if s.time_budget > 0 and predicted[m] > s.time_budget:
+                skipped.append(m)
+                continue
             chosen = m
+    rmse = math.sqrt(results[chosen][1])
+    why = (f"{chosen}: sample RMSE {rmse:.3f}; no richer rung cut it by more than 10 %"
+           if rmse > s.target_rmse else f"{chosen}: sample RMSE {rmse:.3f} meets the target "
+           f"{s.target_rmse}")
+    if skipped:
+        why += f" within the {s.time_budget:g} s budget (over it: {', '.join(skipped)})"
     info = {
         "points": int(len(ref)),
         "reference_samples": s.calibration_samples,
         "trace_seconds": t_trace,
         "seconds": time.perf_counter() - t0,
-        "candidates": {m: {"tau": t, "rmse": math.sqrt(e)} for m, (t, e) in results.items()},
+        "candidates": {m: {"tau": t, "rmse": math.sqrt(e), "predicted_seconds": predicted[m]}
+                       for m, (t, e) in results.items()},
         "chosen": chosen,
-        "why": (f"{chosen}: lowest rung whose sample RMSE {math.sqrt(results[chosen][1]):.3f} "
-                "is not beaten by more than 10 % by a richer one"),
+        "why": why,
     }
     return chosen, results[chosen][0], info
 

@@ -138,7 +138,7 @@ class BakeJob:
                 raise BakeError(why + " (nothing was changed)")
         self.settings = engine.BakeSettings(
             method=opts["method"], tau=opts["tau"], distance=opts["distance"],
-            samples=opts["samples"])
+            samples=opts["samples"], time_budget=opts.get("time_budget", 2.0))
         self.plan = None
         self.index = 0
 
