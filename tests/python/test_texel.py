@@ -212,3 +212,11 @@ def test_bake_a_ground_texture_end_to_end(tmp_path):
     core.write_image(tmp_path / "ground_ao.exr", image)
     back = core.read_image(tmp_path / "ground_ao.exr")[..., 0]
     np.testing.assert_array_equal(back.ravel()[t.pixels], ao)
+
+
+def test_empty_mesh_gives_an_empty_set_and_a_background_image():
+    t = core.rasterize_uv(np.zeros((0, 2), np.float32), np.zeros((0, 3), np.float32),
+                          resolution=4)
+    assert len(t) == 0 and t.positions.shape == (0, 3) and t.pixels.dtype == np.int32
+    img = t.splat(np.zeros(0, np.float32), margin=3, background=0.5)
+    np.testing.assert_array_equal(img, np.full((4, 4), 0.5, np.float32))
