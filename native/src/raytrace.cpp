@@ -225,7 +225,9 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
 
   // 3. The triangles. An empty mesh makes an empty scene: every ray misses, AO = 1.
   m.vertices.resize(3 * vertices.size + 1, 0.0f);
-  if (vertices.size) std::copy(vertices.data, vertices.data + 3 * vertices.size, m.vertices.begin());
+  if (vertices.size) {
+    std::copy(vertices.data, vertices.data + 3 * vertices.size, m.vertices.begin());
+  }
   if (triangle_count > 0) {
     // Two-sided occluders: Debian's Embree does not cull back faces; if a build does, add
     // every triangle a second time with the opposite winding.
