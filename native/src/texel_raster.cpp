@@ -306,6 +306,11 @@ TexelSet rasterize_uv(const CornerTriangles& in, const RasterOptions& options) {
         }
       }
       StripTexels& o = strip_out[s];
+      std::size_t found = 0;  // reserve once: growing three vectors by doubling costs more
+      for (std::size_t p = 0; p < n; ++p) found += owner[p] >= 0 || (conservative && near_tri[p] >= 0);
+      o.pixels.reserve(found);
+      o.triangles.reserve(found);
+      o.exact.reserve(found);
       for (std::size_t p = 0; p < n; ++p) {
         const std::int32_t pixel = std::int32_t(std::size_t(r0) * W + p);
         if (owner[p] >= 0) {
