@@ -182,17 +182,29 @@ bool DensityGrid::clip(Vec3 o, Vec3 d, float* t0, float* t1) const {
 
 float DensityGrid::sample(int level, Vec3 p) const {
   const std::array<int, 3>& d = dims_[level];
-  const float s = h_ * static_cast<float>(1 << level);
+  const float inv = 1.0f / (h_ * static_cast<float>(1 << level));
   int i0[3];
   float f[3];
+  bool interior = true;
   for (int k = 0; k < 3; ++k) {
-    const float q = (p[k] - origin_[k]) / s - 0.5f;  // values sit at voxel centres
+    const float q = (p[k] - origin_[k]) * inv - 0.5f;  // values sit at voxel centres
     const float fl = std::floor(q);
     i0[k] = static_cast<int>(fl);
     f[k] = q - fl;
     if (i0[k] < -1 || i0[k] >= d[k]) return 0.0f;  // wholly outside: empty
+    interior = interior && i0[k] >= 0 && i0[k] + 1 < d[k];
   }
-  const std::vector<float>& g = sigma_[level];
+  const float* g = sigma_[level].data();
+  if (interior) {  // all 8 corners inside: no per-corner checks
+    const std::size_t sy = d[0], sz = static_cast<std::size_t>(d[0]) * d[1];
+    const float* c = g + index(level, i0[0], i0[1], i0[2]);
+    const float x00 = c[0] + (c[1] - c[0]) * f[0];
+    const float x10 = c[sy] + (c[sy + 1] - c[sy]) * f[0];
+    const float x01 = c[sz] + (c[sz + 1] - c[sz]) * f[0];
+    const float x11 = c[sz + sy] + (c[sz + sy + 1] - c[sz + sy]) * f[0];
+    const float y0 = x00 + (x10 - x00) * f[1], y1 = x01 + (x11 - x01) * f[1];
+    return y0 + (y1 - y0) * f[2];
+  }
   float v = 0;
   for (int c = 0; c < 8; ++c) {
     const int i = i0[0] + (c & 1), j = i0[1] + ((c >> 1) & 1), k = i0[2] + (c >> 2);
@@ -263,7 +275,7 @@ float DensityGrid::march(Vec3 o, Vec3 d, float t_max, float skip_len, float cone
   float t = t0;
   while (t < t1 && acc < limit) {
     const float fp = 2.0f * cone_tan * t / h_;  // footprint in finest voxels
-    const int l = fp >= 2.0f ? std::min(static_cast<int>(std::log2(fp)), last) : 0;
+    const int l = fp >= 2.0f ? std::min(std::ilogb(fp), last) : 0;  // ⌊log2 fp⌋
     const float dt = std::min(h_ * static_cast<float>(1 << l), t1 - t);
     acc += sample(l, o + d * (t + 0.5f * dt)) * dt;
     t += dt;
