@@ -231,7 +231,12 @@ def _own_shells(plan, tree, method):
 
 def _evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
                      p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
-    """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree."""
+    """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree.
+
+    Any receiver inside a tree's shells (its own canopy, a trunk, but also ground or grass that
+    a low crown reaches down to) gets that tree's in-shell model; every shell it is outside of
+    is an occluder. Trunks are solid occluders for everything but their own tree's canopy and
+    trunk (which sit inside or on them)."""
     if len(p) == 0:
         return np.ones(0, np.float32)
     if method == "raytrace":
@@ -239,34 +244,37 @@ def _evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
     if method == "grid":
         return _grid_ao(plan, p, n)
     ao = np.ones(len(p), np.float32)
-    # Other trees' canopies and trunks (own tree handled below).
-    others = [e for t in plan.fits if t != tree for e in _own_shells(plan, t, method)]
-    ao *= _occluders(p, n, others, tau)
-    solids = [e for t, es in plan.trunks.items() if t != tree or role in ("GROUND", "GRASS")
-              for e in es]
+    shells = {t: _own_shells(plan, t, method) for t in plan.fits}
+    inside = {}
+    for t, es in shells.items():
+        ins = np.zeros(len(p), bool)
+        for e in es:
+            ins |= np.asarray(e.contains(p), bool)
+        if ins.any():
+            inside[t] = ins
+    outside_all = np.ones(len(p), bool)
+    for ins in inside.values():
+        outside_all &= ~ins
+    if outside_all.any():  # the common case for ground: one call, the core's spatial grid
+        po, no = np.ascontiguousarray(p[outside_all]), np.ascontiguousarray(n[outside_all])
+        ao[outside_all] = _occluders(po, no, [e for es in shells.values() for e in es], tau)
+    claimed = np.zeros(len(p), bool)
+    for t, ins in inside.items():
+        done = ins & ~claimed
+        claimed |= ins
+        if not done.any():
+            continue
+        pi, ni = np.ascontiguousarray(p[done]), np.ascontiguousarray(n[done])
+        # Inside several trees' shells (crowns that interlock): the in-shell model of the
+        # first, the others as occluders (which skip shells a point is inside).
+        others = [e for u, es in shells.items() if u != t for e in es]
+        ao[done] = _in_shell(pi, ni, plan.fits[t], method, tau) * _occluders(pi, ni, others, tau)
+    solids = [e for t, es in plan.trunks.items()
+              if t != tree or role in ("GROUND", "GRASS") for e in es]
     ao *= _occluders(p, n, solids, tau, solid=True)
-    if role in ("CANOPY", "TRUNK"):
-        if tree in plan.fits:
-            own = _own_shells(plan, tree, method)
-            inside = np.zeros(len(p), bool)
-            for e in own:
-                inside |= np.asarray(e.contains(p), bool)
-            part = np.ones(len(p), np.float32)
-            if inside.any():
-                pi = np.ascontiguousarray(p[inside])
-                ni = np.ascontiguousarray(n[inside])
-                part[inside] = _in_shell(pi, ni, plan.fits[tree], method, tau)
-            if (~inside).any():
-                po = np.ascontiguousarray(p[~inside])
-                no = np.ascontiguousarray(n[~inside])
-                part[~inside] = _occluders(po, no, own, tau)
-            ao *= part
-    elif role == "GROUND":
-        ao *= _occluders(p, n, [e for t in plan.fits for e in _own_shells(plan, t, method)], tau)
-    elif role == "GRASS":
+    if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
         ao *= _need("ao_grass")(p, n, float(ground), float(blade))
-        ao *= _occluders(p, n, [e for t in plan.fits for e in _own_shells(plan, t, method)], tau)
     return np.clip(ao, 0.0, 1.0).astype(np.float32, copy=False)
 
 

@@ -55,6 +55,15 @@ def test_roles_guessed_and_tree_by_parent(tree_scene_objects):
     assert got == {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
     obs["Leaves"].parent = obs["Trunk"]
     assert operators.tree_of(obs["Leaves"]) == operators.tree_of(obs["Trunk"]) == "Trunk"
+    obs["Leaves"].parent = None
+    coll = bpy.data.collections.new("Oak")
+    bpy.context.scene.collection.children.link(coll)
+    for name in ("Trunk", "Leaves"):
+        bpy.context.scene.collection.objects.unlink(obs[name])
+        coll.objects.link(obs[name])
+    assert operators.tree_of(obs["Leaves"]) == operators.tree_of(obs["Trunk"]) == "Oak"
+    obs["Trunk"].canopy_ao.tree = "Elm"
+    assert operators.tree_of(obs["Trunk"]) == "Elm"
     obs["Ground"].canopy_ao.role = "IGNORE"
     assert operators.role_of(obs["Ground"], pos, tris)[0] == "IGNORE"
 
@@ -126,6 +135,36 @@ def test_user_attribute_survives(tree_scene_objects):
     assert "Canopy AO Proxies" not in bpy.data.collections
     assert bake(objects="Ground", method="sphere", tau=1.0, overwrite=True) == {'FINISHED'}
     assert not np.allclose(ao_of("Ground"), 0.25)
+
+
+def test_invoke_in_background_runs_synchronously(tree_scene_objects):
+    # No window: invoke falls back to execute instead of starting the modal (Esc) loop.
+    assert bpy.ops.canopy_ao.bake('INVOKE_DEFAULT', objects="Ground", method="sphere",
+                                  tau=1.0) == {'FINISHED'}
+    assert ATTR in bpy.data.objects["Ground"].data.attributes
+
+
+def test_vertex_count_changing_modifier_is_refused(tree_scene_objects):
+    ground = bpy.data.objects["Ground"]
+    ground.modifiers.new("Subdiv", 'SUBSURF').levels = 1
+    with pytest.raises(RuntimeError, match="vertex count"):
+        bake(objects="Ground,Leaves", method="sphere", tau=1.0)
+    assert ATTR not in ground.data.attributes
+    assert ATTR not in bpy.data.objects["Leaves"].data.attributes
+
+
+def test_evaluated_mesh_is_used(tree_scene_objects):
+    """A deform modifier (kept vertex count) moves the ground under the crown: its AO follows."""
+    ground = bpy.data.objects["Ground"]
+    bake(objects="Ground", method="ellipsoid", tau=2.0, show_proxies=False)
+    flat = ao_of("Ground")
+    mod = ground.modifiers.new("Lift", 'DISPLACE')
+    mod.strength = 2.6  # lifts the plane to the crown's centre height
+    mod.mid_level = 0.0
+    bake(objects="Ground", method="ellipsoid", tau=2.0, show_proxies=False)
+    xy = np.array([v.co[:2] for v in ground.data.vertices])
+    under = np.linalg.norm(xy, axis=1) < 0.8
+    assert ao_of("Ground")[under].mean() < flat[under].mean() - 0.05
 
 
 def test_undo_is_declared():
