@@ -106,6 +106,26 @@ def test_same_answer_whatever_the_thread_count_and_seed_changes_only_noise():
     assert abs(float(one.mean()) - float(other.mean())) < 0.005
 
 
+def test_one_tracer_shared_by_threads_gives_the_serial_answer():
+    v, t = canopy(2000, seed=4)
+    rt = _core.RayTracer(v, t)
+    p = v[:1500].copy()
+    n = np.tile(np.float32([0, 1, 0]), (1500, 1))
+    serial = [rt.ao(p, n, seed=s) for s in range(4)]
+    results = [None] * 4
+
+    def work(s):
+        results[s] = rt.ao(p, n, seed=s)
+
+    threads = [threading.Thread(target=work, args=(s,)) for s in range(4)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    for got, want in zip(results, serial):
+        np.testing.assert_array_equal(got, want)
+
+
 # === Bad input → ValueError naming the argument
 
 
