@@ -1,12 +1,14 @@
-// Hot loops must vectorise: see fast_math.h for why this pragma is here.
-#pragma GCC optimize("no-trapping-math")
+// Hot loops must vectorise into few instructions: see fast_math.h for no-trapping-math;
+// finite-math-only and no-signed-zeros let min/max become vminps/vmaxps instead of
+// compare+blend. Every value here is finite by construction (inputs are checked in
+// model_checks.cpp, which is compiled without these options; no inf or NaN is produced).
+#pragma GCC optimize("no-trapping-math", "finite-math-only", "no-signed-zeros")
 
 #include "canopy_ao/canopy_model.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <string>
 
 #include "canopy_ao/fast_math.h"
 #include "canopy_ao/occluders.h"
@@ -14,60 +16,15 @@
 
 namespace canopy_ao {
 
-// === Checks
-void check_tau(float tau) {
-  if (!std::isfinite(tau) || tau < 0) {
-    throw std::invalid_argument("tau must be finite and >= 0, got " + std::to_string(tau));
-  }
-}
-
-void check_sphere(const Sphere& s) {
-  if (!is_finite(s.center)) throw std::invalid_argument("sphere centre is not finite");
-  if (!std::isfinite(s.radius) || !(s.radius > 0)) {
-    throw std::invalid_argument("sphere radius must be finite and > 0, got " +
-                                std::to_string(s.radius));
-  }
-}
-
-void check_ellipsoid(const Ellipsoid& e) {
-  if (!is_finite(e.center)) throw std::invalid_argument("ellipsoid centre is not finite");
-  for (int k = 0; k < 3; ++k) {
-    if (!std::isfinite(e.radii[k]) || !(e.radii[k] > 0)) {
-      throw std::invalid_argument("ellipsoid radii must be finite and > 0, got " +
-                                  std::to_string(e.radii[k]));
-    }
-    if (!is_finite(e.axes[k]) || std::fabs(dot(e.axes[k], e.axes[k]) - 1.0f) > 2e-3f) {
-      throw std::invalid_argument("ellipsoid axes must be unit vectors");
-    }
-  }
-  if (std::fabs(dot(e.axes[0], e.axes[1])) > 1e-3f ||
-      std::fabs(dot(e.axes[0], e.axes[2])) > 1e-3f ||
-      std::fabs(dot(e.axes[1], e.axes[2])) > 1e-3f) {
-    throw std::invalid_argument("ellipsoid axes must be orthogonal");
-  }
-}
-
-void check_receivers(PointsView positions, PointsView normals) {
-  if (positions.size != normals.size) {
-    throw std::invalid_argument("positions and normals must have the same number of rows, got " +
-                                std::to_string(positions.size) + " and " +
-                                std::to_string(normals.size));
-  }
-  if (positions.size > 0 && (!positions.data || !normals.data)) {
-    throw std::invalid_argument("positions/normals data pointer is null");
-  }
-}
-
 namespace {
 
 constexpr std::size_t kGrain = 16384;  // points per parallel block
 constexpr std::size_t kChunk = 256;    // points per vectorised pass (buffers stay in L1)
 
 // Hegeman Eq. 4–6 in the shell's unit frame (R = 1). u = receiver − centre, n = normal of any
-// length. Returns V and writes |u|² (to tell inside from outside). Branch-free so the loops
-// calling it vectorise.
+// length. Exact scalar version with every guard: the reference, and the fix-up path.
 inline float in_shell_unit(float ux, float uy, float uz, float nx, float ny, float nz,
-                           float tau, float& s2) {
+                           float tau) {
   const float uu = ux * ux + uy * uy + uz * uz;
   float nn = nx * nx + ny * ny + nz * nz;
   // Zero normal: face away from the centre (n = u). At the centre u = 0 too: then c = d = 0,
@@ -84,8 +41,25 @@ inline float in_shell_unit(float ux, float uy, float uz, float nx, float ny, flo
   const float h2 = h * h;
   const float f = h2 / std::max(h2 + d2, 1e-30f);
   const float cap = 0.5f * h2 * (3.0f - h);  // Vcap / Vhemi = h²(3 − h)/2 (DESIGN 3.1)
-  s2 = uu;
-  return fast_exp(-tau * f * cap);  // Eq. 6 with k = τ / Vhemi
+  return fast_exp(-tau * f * cap);           // Eq. 6 with k = τ / Vhemi
+}
+
+// The same law stripped for the vectorised pass: valid for points inside the shell with a
+// non-zero normal (there 1 + c ∈ [0, 2] already, and the two divisions fold into one). Points
+// it does not cover are flagged for in_shell_unit / the outside law.
+inline float in_shell_fast(float ux, float uy, float uz, float nx, float ny, float nz,
+                           float tau, int& flag) {
+  const float uu = ux * ux + uy * uy + uz * uz;
+  const float nn = nx * nx + ny * ny + nz * nz;
+  const float inv = 1.0f / std::sqrt(nn + 1e-30f);
+  const float c = -(ux * nx + uy * ny + uz * nz) * inv;
+  const float h = 1.0f + c;
+  const float h2 = h * h;
+  const float d2 = std::max(uu - c * c, 0.0f);
+  // τ f Vcap/Vhemi = τ · h²/(h² + d²) · h²(3 − h)/2
+  const float e = (0.5f * tau) * h2 * h2 * (3.0f - h) / (h2 + d2 + 1e-30f);
+  flag = (uu > 1.0f) | (nn < 1e-30f);
+  return fast_exp(-e);
 }
 
 // World → unit frame of a sphere: u = (p − C)/R; normals unchanged (uniform scale).
@@ -144,23 +118,31 @@ struct ShellEval {
 template <class Map>
 void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float* __restrict n,
                  std::size_t count, float* __restrict v) {
-  float s2[kChunk];
+  int flag[kChunk];
   const float tau = s.tau;
   for (std::size_t i = 0; i < count; ++i) {
     float ux, uy, uz, nx, ny, nz;
     s.map(p + 3 * i, n + 3 * i, ux, uy, uz, nx, ny, nz);
-    v[i] = in_shell_unit(ux, uy, uz, nx, ny, nz, tau, s2[i]);
+    v[i] = in_shell_fast(ux, uy, uz, nx, ny, nz, tau, flag[i]);
   }
-  int any_outside = 0;  // an int OR-reduction vectorises; a float max would not (NaN order)
-  for (std::size_t i = 0; i < count; ++i) any_outside |= s2[i] > 1.0f ? 1 : 0;
-  if (!any_outside) return;
+  int any = 0;  // an int OR-reduction vectorises
+  for (std::size_t i = 0; i < count; ++i) any |= flag[i];
+  if (!any) return;
   for (std::size_t i = 0; i < count; ++i) {
-    if (!(s2[i] > 1.0f)) continue;
+    if (!flag[i]) continue;
+    float ux, uy, uz, nx, ny, nz;
+    s.map(p + 3 * i, n + 3 * i, ux, uy, uz, nx, ny, nz);
+    const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
+    const float s2 = ux * ux + uy * uy + uz * uz;
+    if (!(s2 > 1.0f)) {
+      v[i] = v_in;
+      continue;
+    }
     const Vec3 x{p[3 * i], p[3 * i + 1], p[3 * i + 2]};
     const Vec3 nw{n[3 * i], n[3 * i + 1], n[3 * i + 2]};
     const float v_out = occluder_visibility(x, nw, s.shell, s.opacity);
-    const float w = s.band > 0 ? smoothstep01((std::sqrt(s2[i]) - 1.0f) / s.band) : 1.0f;
-    v[i] = clampf((1.0f - w) * v[i] + w * v_out, 0.0f, 1.0f);
+    const float w = s.band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) / s.band) : 1.0f;
+    v[i] = clampf((1.0f - w) * v_in + w * v_out, 0.0f, 1.0f);
   }
 }
 
@@ -169,12 +151,6 @@ ShellEval<Map> make_eval(const Map& map, const Ellipsoid& shell, const CanopyOpt
   return ShellEval<Map>{map, shell, o.tau, o.band, shell_opacity(o.tau)};
 }
 
-void check_options(const CanopyOptions& o) {
-  check_tau(o.tau);
-  if (!std::isfinite(o.band) || o.band < 0) {
-    throw std::invalid_argument("band must be finite and >= 0, got " + std::to_string(o.band));
-  }
-}
 
 template <class Map>
 void run_one_shell(PointsView positions, PointsView normals, const ShellEval<Map>& eval,
@@ -191,7 +167,7 @@ void run_one_shell(PointsView positions, PointsView normals, const ShellEval<Map
 
 // === One point
 float canopy_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, const CanopyOptions& options) {
-  check_options(options);
+  check_canopy_options(options);
   check_ellipsoid(shell);
   const float p[3] = {x.x, x.y, x.z};
   const float nn[3] = {n.x, n.y, n.z};
@@ -205,7 +181,7 @@ void ao_canopy_sphere(PointsView positions, PointsView normals, const Sphere& sp
                       const CanopyOptions& options, float* out) {
   check_receivers(positions, normals);
   check_sphere(sphere);
-  check_options(options);
+  check_canopy_options(options);
   run_one_shell(positions, normals,
                 make_eval(SphereMap(sphere), Ellipsoid::from_sphere(sphere), options), out);
 }
@@ -214,7 +190,7 @@ void ao_canopy_ellipsoid(PointsView positions, PointsView normals, const Ellipso
                          const CanopyOptions& options, float* out) {
   check_receivers(positions, normals);
   check_ellipsoid(ellipsoid);
-  check_options(options);
+  check_canopy_options(options);
   run_one_shell(positions, normals, make_eval(EllipsoidMap(ellipsoid), ellipsoid, options), out);
 }
 
@@ -222,7 +198,7 @@ void ao_canopy_shells(PointsView positions, PointsView normals,
                       const std::vector<Ellipsoid>& shells, const CanopyOptions& options,
                       ShellCombine combine, float* out) {
   check_receivers(positions, normals);
-  check_options(options);
+  check_canopy_options(options);
   if (shells.empty()) throw std::invalid_argument("shells must not be empty");
   for (const Ellipsoid& s : shells) check_ellipsoid(s);
   std::vector<ShellEval<EllipsoidMap>> evals;

@@ -68,6 +68,7 @@ void ao_canopy_shells(PointsView positions, PointsView normals,
 
 // === Checks shared by the models (throw std::invalid_argument naming the problem)
 void check_tau(float tau);
+void check_canopy_options(const CanopyOptions& o);
 void check_sphere(const Sphere& s);
 void check_ellipsoid(const Ellipsoid& e);
 void check_receivers(PointsView positions, PointsView normals);
