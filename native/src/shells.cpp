@@ -100,7 +100,20 @@ ShellFit fit_shells(PointsView points, const ShellFitOptions& o) {
   }
   const std::size_t kc = centres.size();
 
-  // 2. Lloyd iterations.
+  // 2. Lloyd iterations. Stop when no label changes, or (scikit-learn's rule) when the summed
+  // squared centroid shift drops to 1e-4 × the data's mean per-axis variance — then one last
+  // assignment makes the labels match the final centroids.
+  double var = 0;
+  {
+    P3 mean{0, 0, 0};
+    for (std::size_t j = 0; j < n; ++j)
+      for (int a = 0; a < 3; ++a) mean[a] += points.data[3 * j + a];
+    for (double& x : mean) x /= double(n);
+    for (std::size_t j = 0; j < n; ++j) var += dist2(points[j], mean);
+    var /= 3.0 * double(n);
+  }
+  const double shift_tol = 1e-4 * var;
+  bool settled = false;
   ShellFit out;
   std::vector<std::int32_t> label(n, -1);
   std::vector<double> dist(n);
@@ -128,13 +141,15 @@ ShellFit fit_shells(PointsView points, const ShellFitOptions& o) {
     out.iterations = it + 1;
     const bool changed =
         std::any_of(changed_block.begin(), changed_block.end(), [](char c) { return c != 0; });
-    if (!changed && it > 0) {
+    if ((!changed && it > 0) || settled) {
       out.converged = true;
       break;
     }
+    if (it + 1 == o.max_iterations) break;  // labels stay those of the current centroids
     // Update: centroids in double, summed in point order (thread-count independent).
     std::vector<P3> sum(kc, P3{0, 0, 0});
     std::vector<std::size_t> count(kc, 0);
+    const std::vector<P3> before = centres;
     for (std::size_t j = 0; j < n; ++j) {
       const Vec3 p = points[j];
       P3& s = sum[label[j]];
@@ -160,6 +175,10 @@ ShellFit fit_shells(PointsView points, const ShellFitOptions& o) {
       label[far] = static_cast<std::int32_t>(c);  // so the next empty cluster picks another
       count[c] = 1;
     }
+    double shift = 0;
+    for (std::size_t c = 0; c < kc; ++c)
+      for (int a = 0; a < 3; ++a) shift += (centres[c][a] - before[c][a]) * (centres[c][a] - before[c][a]);
+    settled = shift <= shift_tol;
   }
 
   // 3. Drop empty clusters, renumber, fit one shell per cluster.

@@ -2,8 +2,9 @@
 //
 // Clustering: k-means++ seeding (Arthur & Vassilvitskii, "k-means++: the advantages of careful
 // seeding", SODA 2007) from a SplitMix64 stream seeded with `seed` (same seed → same result, on
-// any machine and thread count), then Lloyd iterations until no label changes or
-// max_iterations. The assignment step runs in parallel (each point independently; ties go to
+// any machine and thread count), then Lloyd iterations until no label changes, the summed
+// squared centroid shift is ≤ 1e-4 × the points' mean per-axis variance (scikit-learn's
+// rule; one more assignment then matches labels to centroids), or max_iterations. The assignment step runs in parallel (each point independently; ties go to
 // the lowest cluster index); centroid sums are accumulated serially in double, in point order.
 // An emptied cluster is re-seeded at the point farthest from its centroid.
 // Fewer distinct points than k: seeding stops when every point is already a centre, so fewer
@@ -39,7 +40,7 @@ struct ShellFit {
   std::vector<std::int32_t> labels;   ///< (N,) cluster of each point, in [0, K')
   std::vector<Vec3> centroids;        ///< (K',) k-means centroids
   int iterations = 0;                 ///< Lloyd iterations run
-  bool converged = false;             ///< labels stopped changing before the cap
+  bool converged = false;             ///< labels or centroids settled before the cap
 };
 
 /// Clusters `points` (N ≥ 1, finite) into at most options.k groups and fits a shell to each.
