@@ -247,6 +247,16 @@ def m_grid(c):
     return g.ao(c["points"], c["normals"])
 
 
+def m_medium_sphere(c):
+    s = _core.fit_sphere(c["vertices"])
+    return _core.ao_medium_sphere(c["points"], c["normals"], s, TAU)
+
+
+def m_medium_shells(c):
+    shells, _ = _core.fit_shells(c["vertices"], 4)
+    return _core.ao_medium_shells(c["points"], c["normals"], list(shells), TAU)
+
+
 def _engine_method(method):
     def run(c):
         from canopy_ao import engine
@@ -277,10 +287,13 @@ METHODS = {
     "shells k=4": (m_shells, ("fit_shells", "ao_canopy_shells")),
     "occluders": (m_occluders, ("fit_ellipsoid", "ao_occluders")),
     "grass": (m_grass, ("ao_grass",)),
+    "medium sphere": (m_medium_sphere, ("fit_sphere", "ao_medium_sphere")),
+    "medium shells k=4": (m_medium_shells, ("fit_shells", "ao_medium_shells")),
     "density grid": (m_grid, ("DensityGrid",)),
     "engine auto": (_engine_method("auto"), ("RayTracer",)),
     "engine ellipsoid": (_engine_method("ellipsoid"), ()),
     "engine raytrace": (_engine_method("raytrace"), ("RayTracer",)),
+    "engine grid": (_engine_method("grid"), ("DensityGrid",)),
 }
 
 ACCEPTED_ERRORS = (ValueError,)   # plus RuntimeError subclasses with a message (see classify)
