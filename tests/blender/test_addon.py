@@ -204,6 +204,53 @@ def test_check_against_cycles(tree_scene_objects):
     assert "vs Cycles MAE" in bpy.data.objects["Ground"].canopy_ao.last_result
 
 
+class FakeLayout:
+    """Records what a panel draws, and checks every property it shows exists."""
+
+    def __init__(self, log=None):
+        self.log = [] if log is None else log
+        self.alert = self.enabled = True
+
+    def _child(self, *a, **k):
+        return FakeLayout(self.log)
+
+    column = row = box = _child
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", name))
+
+    def label(self, text="", **kw):
+        self.log.append(("label", text))
+
+    def operator(self, idname, **kw):
+        self.log.append(("operator", idname))
+
+    def separator(self, **kw):
+        pass
+
+
+def draw_panels():
+    from types import SimpleNamespace
+
+    from canopy_ao import panels
+    log = []
+    panels.CANOPY_AO_PT_main.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+    if panels.CANOPY_AO_PT_object.poll(bpy.context):
+        panels.CANOPY_AO_PT_object.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+    return log
+
+
+def test_panels_draw(tree_scene_objects):
+    bake(objects="Leaves", method="sphere", tau=1.0)
+    bpy.context.view_layer.objects.active = bpy.data.objects["Leaves"]
+    log = draw_panels()
+    props = {name for kind, name in log if kind == "prop"}
+    assert {"method", "tau", "distance", "attribute_name", "role", "tree"} <= props
+    assert ("operator", "canopy_ao.bake") in log
+    assert any(kind == "label" and text.startswith("CANOPY") for kind, text in log)
+
+
 def test_module_missing_path(monkeypatch):
     """Simulate a missing _core: the add-on still enables, the panel has the fix, the bake's
     poll explains itself."""
@@ -223,6 +270,8 @@ def test_module_missing_path(monkeypatch):
         ok, msg = engine.core_status()
         assert not ok and "cmake" in msg and "build-addon" in msg
         assert not bpy.ops.canopy_ao.bake.poll()
+        text = " ".join(t for kind, t in draw_panels() if kind == "label")
+        assert "not loaded" in text and "cmake" in text
         with pytest.raises(RuntimeError, match="native module is not loaded"):
             bpy.ops.canopy_ao.bake()
     finally:
