@@ -16,6 +16,7 @@
 #include "arrays.h"
 #include "canopy_ao/density_grid.h"
 #include "canopy_ao/medium_table.h"
+#include "canopy_ao/raytrace.h"
 
 namespace canopy_ao::py_bind {
 
@@ -88,7 +89,10 @@ std::unique_ptr<DensityGrid> make_grid(const py::array& vertices, const py::arra
 }
 
 DensityAOOptions grid_options(int directions, double distance, long long seed,
-                              double sigma_scale, double self_skip) {
+                              double sigma_scale, double self_skip, double start = 0.0) {
+  if (!std::isfinite(start) || start < 0) {
+    throw py::value_error("start must be a finite number >= 0 (scene units)");
+  }
   if (directions < 1 || directions > 4096) {
     throw py::value_error("directions must be in [1, 4096], got " + std::to_string(directions));
   }
@@ -112,6 +116,7 @@ DensityAOOptions grid_options(int directions, double distance, long long seed,
   o.seed = static_cast<std::uint32_t>(seed);
   o.sigma_scale = static_cast<float>(sigma_scale);
   o.self_skip = static_cast<float>(self_skip);
+  o.start = static_cast<float>(start);
   return o;
 }
 
@@ -210,24 +215,25 @@ void bind_medium(py::module_& m) {
           "ao",
           [](const DensityGrid& self, const py::array& points, const py::array& normals,
              int directions, double distance, long long seed, double sigma_scale,
-             double self_skip) {
+             double self_skip, double start) {
             const DensityAOOptions o =
-                grid_options(directions, distance, seed, sigma_scale, self_skip);
+                grid_options(directions, distance, seed, sigma_scale, self_skip, start);
             return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
               self.ao(p, n, o, out);
             });
           },
           py::arg("points"), py::arg("normals"), py::arg("directions") = 32,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("sigma_scale") = 1.0,
-          py::arg("self_skip") = 1.0,
+          py::arg("self_skip") = 1.0, py::arg("start") = 0.0,
           "ao(points, normals, directions=32, distance=inf, seed=0, sigma_scale=1.0, "
-          "self_skip=1.0) -> float32 (N,)\n\n"
+          "self_skip=1.0, start=0.0) -> float32 (N,)\n\n"
           "Mean over `directions` cosine-weighted directions of exp(-sigma_scale * integral of "
           "sigma) along each ray, cut at `distance` (Cycles' AO distance). The direction set "
           "is rotated per point from (row index, seed): deterministic, thread-count "
           "independent. self_skip: voxels at the start of each ray read from a coarser level, "
-          "so a receiver on a leaf is not shaded by its own leaf (0 = off). A zero normal "
-          "gives 1. Releases the GIL.")
+          "so a receiver on a leaf is not shaded by its own leaf (0 = off). start: integrate "
+          "only beyond this distance (scene units; see ao_near_far). A zero normal gives 1. "
+          "Releases the GIL.")
       .def(
           "optical_depth",
           [](const DensityGrid& self, const py::object& origin, const py::object& direction,
@@ -279,6 +285,34 @@ void bind_medium(py::module_& m) {
           << " voxel " << g.voxel_size() << ", area " << g.total_area() << ">";
         return s.str();
       });
+
+  m.def(
+      "ao_near_far",
+      [](const RayTracer& tracer, const DensityGrid& grid, const py::array& points,
+         const py::array& normals, double near, int samples, int directions, double distance,
+         long long seed, double sigma_scale) {
+        if (!(near > 0) || !std::isfinite(near)) {
+          throw py::value_error("near must be a finite number > 0 (scene units)");
+        }
+        if (samples < 1) throw py::value_error("samples must be at least 1");
+        const DensityAOOptions far = grid_options(directions, distance, seed, sigma_scale, 0.0);
+        RayTraceOptions rt;
+        rt.samples = samples;
+        rt.distance = static_cast<float>(distance);
+        rt.seed = far.seed;
+        return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
+          ao_near_far(tracer, grid, p, n, static_cast<float>(near), rt, far, out);
+        });
+      },
+      py::arg("tracer"), py::arg("grid"), py::arg("points"), py::arg("normals"),
+      py::arg("near"), py::arg("samples") = 64, py::arg("directions") = 32,
+      py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("sigma_scale") = 1.0,
+      "ao_near_far(tracer, grid, points, normals, near, samples=64, directions=32, "
+      "distance=inf, seed=0, sigma_scale=1.0) -> float32 (N,)\n\n"
+      "Near exact, far statistical: tracer.ao(points, normals, samples, distance=min(near, "
+      "distance)) times grid.ao(points, normals, directions, distance, start=near). Contact "
+      "shadows from real geometry, the canopy's bulk from the density grid; the product of "
+      "the two averages assumes near and far occlusion are independent.");
 }
 
 }  // namespace canopy_ao::py_bind

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "canopy_ao/parallel.h"
+#include "canopy_ao/raytrace.h"
 
 namespace canopy_ao {
 namespace {
@@ -255,17 +256,19 @@ float DensityGrid::dda(Vec3 o, Vec3 d, float t0, float t1) const {
   return acc;
 }
 
-float DensityGrid::march(Vec3 o, Vec3 d, float t_max, float skip_len, float cone_tan,
-                         float limit) const {
+float DensityGrid::march(Vec3 o, Vec3 d, float t_min, float t_max, float skip_len,
+                         float cone_tan, float limit) const {
+  if (!(t_min < t_max)) return 0.0f;
   const int last = levels() - 1;
   float acc = 0;
   // 1. Own-leaf stretch on the diluted level, where the finest level has any density (so the
   //    coarse level's blur cannot reach a receiver just outside a dense block).
-  const float ts = std::min(skip_len, t_max);
-  if (ts > 0) {
-    const Vec3 p = o + d * (0.5f * ts);
-    if (sample(0, p) > 0) acc += sample(std::min(2, last), p) * ts;
+  float ts = std::min(skip_len, t_max);
+  if (ts > t_min) {
+    const Vec3 p = o + d * (0.5f * (t_min + ts));
+    if (sample(0, p) > 0) acc += sample(std::min(2, last), p) * (ts - t_min);
   }
+  ts = std::max(ts, t_min);
   // 2. Exact near field.
   const float te = std::min(std::max(kExactVoxels * h_, ts), t_max);
   if (te > ts) acc += dda(o, d, ts, te);
@@ -285,7 +288,7 @@ float DensityGrid::march(Vec3 o, Vec3 d, float t_max, float skip_len, float cone
 
 float DensityGrid::optical_depth(Vec3 origin, Vec3 dir, float t_max, float self_skip,
                                  float cone_tan) const {
-  return march(origin, normalize(dir), t_max, self_skip * h_, cone_tan, INFINITY);
+  return march(origin, normalize(dir), 0.0f, t_max, self_skip * h_, cone_tan, INFINITY);
 }
 
 void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOptions& opt,
@@ -299,6 +302,9 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
   }
   if (!std::isfinite(opt.sigma_scale) || opt.sigma_scale < 0) {
     throw std::invalid_argument("sigma_scale must be a finite number >= 0");
+  }
+  if (!std::isfinite(opt.start) || opt.start < 0) {
+    throw std::invalid_argument("start must be a finite number >= 0");
   }
   if (!std::isfinite(opt.self_skip) || opt.self_skip < 0) {
     throw std::invalid_argument("self_skip must be a finite number >= 0");
@@ -334,11 +340,29 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
       for (const Vec3& l : dirs) {
         const float lx = cs * l.x - sn * l.y, ly = sn * l.x + cs * l.y;
         const Vec3 d = t1 * lx + t2 * ly + n * l.z;
-        sum += std::exp(-opt.sigma_scale * march(x, d, opt.distance, skip_len, cone_tan, limit));
+        sum += std::exp(-opt.sigma_scale *
+                        march(x, d, opt.start, opt.distance, skip_len, cone_tan, limit));
       }
       out[i] = std::clamp(sum / k, 0.0f, 1.0f);
     }
   });
+}
+
+void ao_near_far(const RayTracer& tracer, const DensityGrid& grid, PointsView positions,
+                 PointsView normals, float near, const RayTraceOptions& rt,
+                 const DensityAOOptions& far, float* out) {
+  if (!(near > 0) || std::isnan(near)) {
+    throw std::invalid_argument("near must be > 0 (scene units)");
+  }
+  RayTraceOptions r = rt;
+  r.distance = std::min(near, rt.distance);
+  tracer.ao(positions, normals, r, out);
+  DensityAOOptions f = far;
+  f.distance = rt.distance;
+  f.start = near;
+  std::vector<float> tail(positions.size);
+  grid.ao(positions, normals, f, tail.data());
+  for (std::size_t i = 0; i < positions.size; ++i) out[i] *= tail[i];
 }
 
 }  // namespace canopy_ao

@@ -55,6 +55,7 @@ struct DensityAOOptions {
   std::uint32_t seed = 0;              ///< rotates every point's direction set differently
   float sigma_scale = 1.0f;            ///< multiplies σ (≥ 0): calibration hook, 1 = physical
   float self_skip = 1.0f;              ///< voxels at the start of each ray on the diluted level
+  float start = 0.0f;                  ///< integrate from here on (world units; near/far split)
 };
 
 class DensityGrid {
@@ -101,7 +102,8 @@ class DensityGrid {
   float sample(int level, Vec3 p) const;  // trilinear, zero outside the grid
   float dda(Vec3 o, Vec3 d, float t0, float t1) const;
   bool clip(Vec3 o, Vec3 d, float* t0, float* t1) const;  // ray ∩ grid box
-  float march(Vec3 o, Vec3 d, float t_max, float skip_len, float cone_tan, float limit) const;
+  float march(Vec3 o, Vec3 d, float t_min, float t_max, float skip_len, float cone_tan,
+              float limit) const;
 
   Vec3 origin_;
   float h_ = 1;
@@ -109,5 +111,19 @@ class DensityGrid {
   std::vector<std::array<int, 3>> dims_;
   std::vector<std::vector<float>> sigma_;  // [level][voxel], level 0 = finest
 };
+
+class RayTracer;
+struct RayTraceOptions;
+
+/// "Near exact, far statistical": Embree rays (raytrace.h) out to `near` (scene units, > 0),
+/// the density grid from `near` to rt.distance, multiplied:
+///     AO ≈ AO_traced(0, near) · AO_grid(near, D)
+/// (the product of the two averages stands for the average of the products: exact when near
+/// and far occlusion are independent, which a random canopy roughly is). Contact shadows and
+/// the receiver's own leaf come from real geometry; the canopy's bulk costs a grid march.
+/// far.distance and far.start are overridden. Shapes and errors as RayTracer::ao/DensityGrid::ao.
+void ao_near_far(const RayTracer& tracer, const DensityGrid& grid, PointsView positions,
+                 PointsView normals, float near, const RayTraceOptions& rt,
+                 const DensityAOOptions& far, float* out);
 
 }  // namespace canopy_ao
