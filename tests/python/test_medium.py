@@ -156,3 +156,19 @@ def test_density_grid_empty_and_cutoff_and_errors():
     with pytest.raises(ValueError, match="distance"):
         g.ao(below, nrm, distance=0.0)
     assert "DensityGrid" in repr(g)
+
+
+@pytest.mark.skipif(core is None or not hasattr(core, "RayTracer"), reason="no RayTracer")
+def test_near_far_limits():
+    v, t = random_ball(5000, 1.5, seed=5)
+    g = core.DensityGrid(v, t, resolution=24)
+    rt = core.RayTracer(v, t)
+    rng = np.random.default_rng(6)
+    pos, nrm = f32(rng.normal(size=(50, 3)) * 0.3), f32(rng.normal(size=(50, 3)))
+    assert np.all(g.ao(pos, nrm, start=5.0) == 1.0)
+    np.testing.assert_array_equal(core.ao_near_far(rt, g, pos, nrm, near=5.0, samples=32),
+                                  rt.ao(pos, nrm, samples=32))
+    mixed = core.ao_near_far(rt, g, pos, nrm, near=4 * g.voxel_size, samples=32)
+    assert mixed.shape == (50,) and np.all((mixed >= 0) & (mixed <= 1))
+    with pytest.raises(ValueError, match="near"):
+        core.ao_near_far(rt, g, pos, nrm, near=0.0)
