@@ -313,6 +313,14 @@ def raw_runs(prep, ref, args):
     the leaf-medium expectation (ao_medium_shells over every tree's proxies, product) and the
     density grid at several resolutions (all geometry except the ground)."""
     PREP_CACHE.update(V=prep.V, N=prep.N)
+    # Experiment (not in the engine): an infinite ground plane under every non-ground receiver
+    # blocks exactly (1 - n_z)/2 of its cosine-weighted hemisphere (the part of the hemisphere
+    # below the horizon), when the AO distance reaches the ground.
+    gterm = None
+    grounds = [p for p in prep.scene if p.role == "ground"]
+    if grounds:
+        gterm = np.where(prep.role == "ground", 1.0,
+                         np.clip(0.5 * (1.0 + prep.N[:, 2]), 0.0, 1.0)).astype(np.float32)
     have_trees = bool(_tree_points(prep))
     rng = np.random.default_rng(1)
     best_idx = np.sort(rng.choice(len(prep.V), size=min(4000, len(prep.V)), replace=False))
@@ -338,6 +346,17 @@ def raw_runs(prep, ref, args):
                 ao, te = timed(lambda: f(prep.V, prep.N, tau_c), args.repeats)
                 yield fam, fam, setting, tau_c, "calibrated", ao, t_fit + t_cal, te, \
                     "256 points traced at 128 rays"
+                if gterm is not None and kind == "sphere":
+                    gsub = gterm[calib[0]]
+                    t0 = time.perf_counter()
+                    lt, _ = engine._golden_min(lambda x: float(np.mean(
+                        (f(prep.V[calib[0]], prep.N[calib[0]], math.exp(x)) * gsub - calib[1]) ** 2)),
+                        math.log(0.02), math.log(50.0), iters=20)
+                    tau_g = math.exp(lt)
+                    t_cal = calib[2] + time.perf_counter() - t0
+                    ao, te = timed(lambda: f(prep.V, prep.N, tau_g) * gterm, args.repeats)
+                    yield fam + "+ground", fam + "+ground", setting, tau_g, "calibrated", ao, \
+                        t_fit + t_cal, te, "experiment: times (1 + n_z)/2 for non-ground receivers"
                 if ref is not None:
                     tau_b = _fit_tau(f, best_idx, ref[best_idx])
                     ao, te = timed(lambda: f(prep.V, prep.N, tau_b), args.repeats)
@@ -358,6 +377,9 @@ def raw_runs(prep, ref, args):
                                args.repeats)
                 yield "grid", "grid", f"r={r}", math.nan, "", ao, tb, te, \
                     "32 directions; grid of all geometry but the ground"
+                if gterm is not None:
+                    yield "grid+ground", "grid+ground", f"r={r}", math.nan, "", ao * gterm, tb, \
+                        te, "experiment: times (1 + n_z)/2 for non-ground receivers"
             except Exception as exc:
                 yield "grid", "grid", f"r={r}", math.nan, "", None, math.nan, math.nan, \
                     f"{type(exc).__name__}: {exc}"

@@ -30,6 +30,8 @@ STYLE = {  # family -> (colour, marker)
     "medium_sphere": ("#e377c2", "o"),
     "medium_ellipsoid": ("#7f7f7f", "s"),
     "medium_shells": ("#000080", "D"),
+    "medium_sphere+ground": ("#e377c2", "h"),
+    "grid+ground": ("#bcbd22", "p"),
     "auto": ("#9467bd", "*"),
     "grid": ("#bcbd22", "P"),
     "raytrace": ("#d62728", "^"),
@@ -234,7 +236,8 @@ def strips(ao_dir, out_dir, quick, max_points=40000):
         wanted = ["ref_embree", "ref_cycles", "cycles|16 samples", "raytrace|16 rays",
                   "reeves_blau|calibrated", "sphere|calibrated", "ellipsoid|calibrated",
                   "shells|k=4|calibrated", "medium_sphere|calibrated",
-                  "medium_shells|k=4|calibrated", "grid|r=64", "auto|calibrated"]
+                  "medium_shells|k=4|calibrated", "grid|r=64", "grid+ground|r=64", "medium_sphere+ground|calibrated",
+                  "auto|calibrated"]
         shown = [k for k in wanted if k in z.files]
         shown += [k for k in z.files if k.startswith("auto|") and k not in shown][:1]
         if not shown:
