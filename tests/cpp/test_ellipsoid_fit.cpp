@@ -245,3 +245,28 @@ TEST(EllipsoidFit, EigenSolver) {
       EXPECT_NEAR(av, w[k] * v[i][k], 1e-12);
     }
 }
+
+TEST(EllipsoidFit, SimplexAndFarFromOrigin) {
+  // The MVEE of a regular tetrahedron is its circumsphere (radius √3 for (±1, ±1, ±1) even).
+  std::vector<float> tet;
+  add(tet, 1, 1, 1);
+  add(tet, 1, -1, -1);
+  add(tet, -1, 1, -1);
+  add(tet, -1, -1, 1);
+  const Ellipsoid e = fit_check(tet);
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(e.radii[k], std::sqrt(3.0), 2e-3 * std::sqrt(3.0));
+  // A small cloud 1e4 away from the origin: still contains every point after float rounding.
+  std::mt19937 g(12);
+  std::normal_distribution<double> n01;
+  std::vector<float> far;
+  for (int i = 0; i < 5000; ++i) add(far, 1e4 + 0.3 * n01(g), -2e4 + 0.1 * n01(g), 0.05 * n01(g));
+  const Ellipsoid f = fit_check(far);
+  EXPECT_LT(f.radii[0], 2.0);
+  // Two points: a segment, thickness 1e-2 of its half-length.
+  std::vector<float> two;
+  add(two, 0, 0, 0);
+  add(two, 0, 2, 0);
+  const Ellipsoid s = fit_check(two);
+  EXPECT_NEAR(s.radii[0], 1, 1e-5);
+  EXPECT_NEAR(s.radii[2], 0.01, 1e-6);
+}
