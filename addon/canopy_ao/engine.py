@@ -171,10 +171,14 @@ class ItemResult:
 # === Proxies =================================================================================
 
 def _fit_tree(points: np.ndarray, settings: BakeSettings):
-    """Fitted canopy proxies for one tree: (sphere, [ellipsoid], [k shells])."""
+    """Fitted canopy proxies for one tree: (sphere, ellipsoid, [k shells]). The k-means shells
+    cost most (1.2 s for 1M points), so only the methods that use them get them; the others
+    get [ellipsoid]."""
     sphere = _need("fit_sphere")(points, trim=settings.trim)
     ell = _need("fit_ellipsoid")(points, trim=settings.trim)
     k = max(1, min(settings.shells, len(points) // 64))
+    if settings.method not in ("auto", "shells", "medium"):
+        k = 1
     if k > 1 and hasattr(_core, "fit_shells"):
         shells, _labels = _core.fit_shells(points, k, kind="ellipsoid", trim=settings.trim,
                                            seed=settings.seed)

@@ -35,6 +35,18 @@ def tree_of(obj):
     return "Scene"
 
 
+# Guesses of this session, keyed by a cheap signature of the geometry (the guess costs ~1 s
+# per million vertices; re-bakes of an unchanged scene should not pay it again).
+_GUESSES = {}
+
+
+def _signature(obj, positions, triangles):
+    step = max(1, len(positions) // 997)
+    return (obj.name, len(positions), len(triangles),
+            float(np.asarray(positions[::step], np.float64).sum()),
+            int(np.asarray(triangles[::step], np.int64).sum()))
+
+
 def role_of(obj, positions, triangles):
     """(role, how) — the user's override, or a guess from the geometry."""
     if obj.canopy_ao.role != 'AUTO':
@@ -42,7 +54,12 @@ def role_of(obj, positions, triangles):
     tagged = obj.get("canopy_ao_role")  # set by a scene generator (examples/blender_scene.py)
     if isinstance(tagged, str) and tagged.upper() in roles.ROLES:
         return tagged.upper(), "tagged canopy_ao_role"
-    role, why = roles.guess_role(positions, triangles)
+    key = _signature(obj, positions, triangles)
+    if key not in _GUESSES:
+        if len(_GUESSES) > 4096:
+            _GUESSES.clear()
+        _GUESSES[key] = roles.guess_role(positions, triangles)
+    role, why = _GUESSES[key]
     return role, f"guessed: {why}"
 
 
@@ -191,6 +208,8 @@ class BakeJob:
                 mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, engine.proxy_dicts(self.plan))
+        elif mesh_io.PROXY_COLLECTION in bpy.data.collections:
+            mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
         rep = engine.report(self.plan, self.results)
         rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
         rep["mode"] = o["mode"].lower()
