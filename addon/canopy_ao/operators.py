@@ -450,15 +450,7 @@ class CANOPY_AO_OT_guess_roles(bpy.types.Operator):
 
 classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles)
 
-
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
 
 
 def run_bake(context, object_names, opts):

@@ -5,12 +5,15 @@ import bpy
 from . import engine
 
 
-class CANOPY_AO_PT_main(bpy.types.Panel):
-    bl_idname = "CANOPY_AO_PT_main"
-    bl_label = "Canopy AO"
+class _Sidebar:
     bl_space_type = 'VIEW_3D'
     bl_region_type = 'UI'
     bl_category = "Canopy AO"
+
+
+class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
+    bl_idname = "CANOPY_AO_PT_main"
+    bl_label = "Canopy AO"
 
     def draw(self, context):
         layout = self.layout
@@ -70,12 +73,9 @@ class CANOPY_AO_PT_main(bpy.types.Panel):
             col.label(text=f"Last: {s.last_report}", icon='INFO')
 
 
-class CANOPY_AO_PT_object(bpy.types.Panel):
+class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
     bl_idname = "CANOPY_AO_PT_object"
     bl_label = "Object Role"
-    bl_space_type = 'VIEW_3D'
-    bl_region_type = 'UI'
-    bl_category = "Canopy AO"
     bl_parent_id = "CANOPY_AO_PT_main"
 
     @classmethod
@@ -97,12 +97,4 @@ class CANOPY_AO_PT_object(bpy.types.Panel):
 
 classes = (CANOPY_AO_PT_main, CANOPY_AO_PT_object)
 
-
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
