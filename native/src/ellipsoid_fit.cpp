@@ -11,14 +11,13 @@
 
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/sphere_fit.h"
+#include "fit_detail.h"
 
 namespace canopy_ao {
 
 namespace {
 
-using P3 = std::array<double, 3>;
-
-P3 to_p3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
+using namespace fit_detail;
 
 void check_options(const EllipsoidFitOptions& o) {
   check_trim(o.trim);

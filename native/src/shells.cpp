@@ -10,29 +10,15 @@
 
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/sphere_fit.h"
+#include "fit_detail.h"
 
 namespace canopy_ao {
 
 namespace {
 
-using P3 = std::array<double, 3>;
+using namespace fit_detail;
 
-// SplitMix64 (Steele et al. 2014): portable, so a seed means the same clusters everywhere.
-struct SplitMix64 {
-  std::uint64_t s;
-  std::uint64_t next() {
-    std::uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
-};
-
-double dist2(Vec3 a, const P3& c) {
-  const double x = a.x - c[0], y = a.y - c[1], z = a.z - c[2];
-  return x * x + y * y + z * z;
-}
+double dist2(Vec3 a, const P3& c) { return fit_detail::dist2(to_p3(a), c); }
 
 constexpr std::size_t kGrain = 4096;
 

@@ -11,31 +11,13 @@
 #include <utility>
 
 #include "canopy_ao/parallel.h"
+#include "fit_detail.h"
 
 namespace canopy_ao {
 
 namespace {
 
-using P3 = std::array<double, 3>;
-
-// SplitMix64 (Steele et al. 2014): a fixed, portable stream, so shuffles match everywhere.
-struct SplitMix64 {
-  std::uint64_t s;
-  std::uint64_t next() {
-    std::uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  std::size_t below(std::size_t n) { return static_cast<std::size_t>(next() % n); }
-};
-
-P3 to_p3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
-
-double dist2(const P3& a, const P3& b) {
-  const double x = a[0] - b[0], y = a[1] - b[1], z = a[2] - b[2];
-  return x * x + y * y + z * z;
-}
+using namespace fit_detail;
 
 // Gärtner's Miniball (ESA 1999) in 3-D: the ball is built incrementally from its boundary
 // points ("push"), each new point orthogonalised against the previous ones, which keeps the
@@ -280,7 +262,7 @@ MinSphere min_sphere_exact(PointsView points, const std::vector<std::size_t>* in
   // Deterministic Fisher-Yates: the expected-linear bound of move-to-front needs a random
   // order; a fixed seed keeps results reproducible.
   SplitMix64 rng{0x5EEDC0DEull};
-  for (std::size_t i = m - 1; i > 0; --i) std::swap(order[i], order[rng.below(i + 1)]);
+  for (std::size_t i = m - 1; i > 0; --i) std::swap(order[i], order[static_cast<std::size_t>(rng.below(i + 1))]);
   std::vector<P3> pts(m);
   for (std::size_t i = 0; i < m; ++i) pts[i] = to_p3(points[order[i]]);
 
