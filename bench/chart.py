@@ -139,12 +139,15 @@ def chart(rows, path, reference, role, metric="mae"):
     for ax in axes.ravel():
         for h, l in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(l, h)
+    cols = max(2, min(6, int(fig.get_figwidth() / 3.0)))
+    rows_leg = math.ceil(len(handles) / cols)
     fig.legend(list(handles.values()), list(handles.keys()), loc="lower center",
-               ncol=min(6, len(handles)), fontsize=8, frameon=False)
-    fig.suptitle(f"Canopy AO: error against time per scene — reference: {reference}, "
-                 f"receivers: {role}. Filled = product path (τ calibrated), open = best τ.",
-                 fontsize=11)
-    fig.tight_layout(rect=(0, 0.06, 1, 0.96))
+               ncol=cols, fontsize=8, frameon=False)
+    fig.suptitle(f"Canopy AO: error against time — reference: {reference}, receivers: {role}\n"
+                 "filled = product path (τ calibrated), open = best τ, circled = Pareto front",
+                 fontsize=10)
+    fig.set_figheight(fig.get_figheight() + 0.22 * rows_leg)
+    fig.tight_layout(rect=(0, 0.22 * rows_leg / fig.get_figheight() + 0.02, 1, 0.95))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     print(f"chart: wrote {path}")
