@@ -47,10 +47,6 @@ DEFAULT_TAU = 1.5
 UP = np.array([0.0, 0.0, 1.0], dtype=np.float32)
 
 
-# Native functions this process had to replace with numpy stand-ins (see _fallback.py).
-FALLBACKS_USED: set = set()
-
-
 class EngineError(RuntimeError):
     """A bake that cannot be done, with a message a user can act on."""
 
@@ -78,11 +74,6 @@ def _need(name: str):
         raise EngineError(core_status()[1])
     fn = getattr(_core, name, None)
     if fn is None:
-        from . import _fallback
-        fn = getattr(_fallback, name, None)
-        if fn is not None:
-            FALLBACKS_USED.add(name)
-            return fn
         raise EngineError(
             f"the native module has no '{name}' yet (built from an older source?): rebuild with "
             "'cmake --build build-addon -j2' and restart Blender")
@@ -567,9 +558,7 @@ def report(plan: Plan, results) -> dict:
         "proxies": proxy_dicts(plan),
         "calibration": plan.calibration,
         "timings": dict(plan.timings),
-        "notes": list(plan.notes) + (
-            [f"numpy stand-ins used for missing native functions: {sorted(FALLBACKS_USED)}"]
-            if FALLBACKS_USED else []),
+        "notes": list(plan.notes),
         "objects": {r.name: {"role": r.role, "tree": r.tree, "method": r.method,
                              "vertices": r.vertices, "seconds": r.seconds,
                              "ao_mean": float(r.ao.mean()) if r.vertices else None}
