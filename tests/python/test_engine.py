@@ -134,3 +134,14 @@ def test_ignored_items_stay_white(scene):
                            ts.vertex_normals(p, t), t)
     res = by_name(engine.bake(scene + [ign], engine.BakeSettings(method="sphere", tau=2.0))[0])
     assert np.all(res["Rock"] == 1.0)
+
+
+def test_a_missing_native_function_says_rebuild(monkeypatch):
+    class Partial:  # a module built from older sources
+        Ellipsoid = engine._core.Ellipsoid
+
+    monkeypatch.setattr(engine, "_core", Partial)
+    with pytest.raises(engine.EngineError, match="rebuild"):
+        engine._need("ao_canopy_sphere")
+    assert engine.available_methods()[:4] == ("auto", "sphere", "ellipsoid", "shells")
+    assert "grid" not in engine.available_methods()
