@@ -105,11 +105,15 @@ DensityGrid::DensityGrid(PointsView vertices, const std::int32_t* triangles,
     dims[k] = std::clamp(static_cast<int>(std::ceil(ext[k] / h_ - 1e-4f)), 1, res);
     origin_[k] = lo[k] - 0.5f * (dims[k] * h_ - ext[k]);  // centre the box on the geometry
   }
+  const std::size_t nvox = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
+  if (nvox > (std::size_t{1} << 26)) {  // 64M voxels: 256 MB of σ plus 512 MB while building
+    throw std::invalid_argument("resolution " + std::to_string(res) + " gives " +
+                                std::to_string(nvox) + " voxels (max 67108864): lower it");
+  }
   dims_.push_back(dims);
 
   // Deposit area: m² equal sub-triangles per triangle (≥ 2 per voxel along its longest edge),
   // each at its centroid. Serial, so the sums do not depend on the thread count.
-  const std::size_t nvox = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
   std::vector<double> acc(nvox, 0.0);
   auto deposit = [&](Vec3 p, double a) {
     int idx[3];

@@ -307,6 +307,8 @@ TEST(DensityGrid, BadInputThrows) {
   DensityGridOptions o;
   o.resolution = 0;
   EXPECT_THROW(DensityGrid(m.view(), m.t.data(), 2, o), std::invalid_argument);
+  o.resolution = 1025;
+  EXPECT_THROW(DensityGrid(m.view(), m.t.data(), 2, o), std::invalid_argument);
   o.resolution = 16;
   std::vector<float> v = m.v;
   v[4] = NAN;

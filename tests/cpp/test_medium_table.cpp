@@ -151,6 +151,22 @@ TEST(MediumTable, SphereAndEllipsoidAgree) {
   }
 }
 
+TEST(MediumTable, ThreadCountIndependent) {
+  std::vector<float> pos, nrm;
+  for (int i = 0; i < 5000; ++i) {
+    pos.insert(pos.end(), {std::sin(0.7f * i) * 1.3f, std::cos(1.1f * i), std::sin(0.3f * i)});
+    nrm.insert(nrm.end(), {std::cos(0.2f * i), 0.5f, std::sin(0.9f * i)});
+  }
+  const PointsView p{pos.data(), 5000}, n{nrm.data(), 5000};
+  std::vector<float> a(5000), b(5000);
+  const int prev = set_max_threads(1);
+  ao_medium_sphere(p, n, Sphere{{0.1f, 0, 0}, 1.2f}, 3.0f, a.data());
+  set_max_threads(0);
+  ao_medium_sphere(p, n, Sphere{{0.1f, 0, 0}, 1.2f}, 3.0f, b.data());
+  set_max_threads(prev);
+  EXPECT_EQ(a, b);
+}
+
 TEST(MediumTable, BadInputThrows) {
   std::vector<float> pos = {0, 0, NAN}, nrm = {0, 0, 1}, out(1);
   const PointsView p{pos.data(), 1}, n{nrm.data(), 1};

@@ -45,7 +45,8 @@
 namespace canopy_ao {
 
 struct DensityGridOptions {
-  /// Voxels along the box's longest side (1..1024). The others get as many cubic voxels as fit.
+  /// Voxels along the box's longest side (1..1024). The others get as many cubic voxels as fit;
+  /// at most 2^26 voxels in all (a cube up to 406³), else std::invalid_argument.
   int resolution = 48;
 };
 
