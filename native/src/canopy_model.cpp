@@ -7,6 +7,9 @@
 #include "canopy_ao/canopy_model.h"
 
 #include <algorithm>
+#ifdef __AVX__
+#include <immintrin.h>
+#endif
 #include <cmath>
 #include <limits>
 
@@ -47,7 +50,7 @@ inline float in_shell_unit(float ux, float uy, float uz, float nx, float ny, flo
 // The same law stripped for the vectorised pass: valid for points inside the shell with a
 // non-zero normal (there 1 + c ∈ [0, 2] already, and the two divisions fold into one). Points
 // it does not cover are flagged for in_shell_unit / the outside law.
-inline float in_shell_fast(float ux, float uy, float uz, float nx, float ny, float nz,
+inline float in_shell_fast_exponent(float ux, float uy, float uz, float nx, float ny, float nz,
                            float tau, int& flag) {
   const float uu = ux * ux + uy * uy + uz * uz;
   const float nn = nx * nx + ny * ny + nz * nz;
@@ -59,7 +62,7 @@ inline float in_shell_fast(float ux, float uy, float uz, float nx, float ny, flo
   // τ f Vcap/Vhemi = τ · h²/(h² + d²) · h²(3 − h)/2
   const float e = (0.5f * tau) * h2 * h2 * (3.0f - h) / (h2 + d2 + 1e-30f);
   flag = (uu > 1.0f) | (nn < 1e-30f);
-  return fast_exp(-e);
+  return -e;  // the exponent; exp is taken in a second pass (see shell_chunk)
 }
 
 // World → unit frame of a sphere: u = (p − C)/R; normals unchanged (uniform scale).
@@ -67,14 +70,14 @@ struct SphereMap {
   float cx, cy, cz, inv_r;
   explicit SphereMap(const Sphere& s)
       : cx(s.center.x), cy(s.center.y), cz(s.center.z), inv_r(1.0f / s.radius) {}
-  void operator()(const float* p, const float* n, float& ux, float& uy, float& uz, float& nx,
-                  float& ny, float& nz) const {
-    ux = (p[0] - cx) * inv_r;
-    uy = (p[1] - cy) * inv_r;
-    uz = (p[2] - cz) * inv_r;
-    nx = n[0];
-    ny = n[1];
-    nz = n[2];
+  void operator()(float px, float py, float pz, float qx, float qy, float qz, float& ux,
+                  float& uy, float& uz, float& nx, float& ny, float& nz) const {
+    ux = (px - cx) * inv_r;
+    uy = (py - cy) * inv_r;
+    uz = (pz - cz) * inv_r;
+    nx = qx;
+    ny = qy;
+    nz = qz;
   }
 };
 
@@ -93,17 +96,46 @@ struct EllipsoidMap {
       }
     }
   }
-  void operator()(const float* p, const float* n, float& ux, float& uy, float& uz, float& nx,
-                  float& ny, float& nz) const {
-    const float dx = p[0] - c[0], dy = p[1] - c[1], dz = p[2] - c[2];
+  void operator()(float px, float py, float pz, float qx, float qy, float qz, float& ux,
+                  float& uy, float& uz, float& nx, float& ny, float& nz) const {
+    const float dx = px - c[0], dy = py - c[1], dz = pz - c[2];
     ux = m[0] * dx + m[1] * dy + m[2] * dz;
     uy = m[3] * dx + m[4] * dy + m[5] * dz;
     uz = m[6] * dx + m[7] * dy + m[8] * dz;
-    nx = nm[0] * n[0] + nm[1] * n[1] + nm[2] * n[2];
-    ny = nm[3] * n[0] + nm[4] * n[1] + nm[5] * n[2];
-    nz = nm[6] * n[0] + nm[7] * n[1] + nm[8] * n[2];
+    nx = nm[0] * qx + nm[1] * qy + nm[2] * qz;
+    ny = nm[3] * qx + nm[4] * qy + nm[5] * qz;
+    nz = nm[6] * qx + nm[7] * qy + nm[8] * qz;
   }
 };
+
+// AoS (count × 3) → three SoA arrays. GCC vectorises a stride-3 loop with long vpermd/blend
+// chains (about 1 ns per point for positions + normals here, as much as the whole model); with
+// AVX, the classic 8-point transpose takes 6 half-loads and 5 in-lane shuffles per array.
+inline void deinterleave(const float* __restrict a, std::size_t count, float* __restrict x,
+                         float* __restrict y, float* __restrict z) {
+  std::size_t i = 0;
+#ifdef __AVX__
+  for (; i + 8 <= count; i += 8) {
+    const float* q = a + 3 * i;
+    __m256 m03 = _mm256_castps128_ps256(_mm_loadu_ps(q));       // x0 y0 z0 x1 | x4 y4 z4 x5
+    __m256 m14 = _mm256_castps128_ps256(_mm_loadu_ps(q + 4));   // y1 z1 x2 y2 | y5 z5 x6 y6
+    __m256 m25 = _mm256_castps128_ps256(_mm_loadu_ps(q + 8));   // z2 x3 y3 z3 | z6 x7 y7 z7
+    m03 = _mm256_insertf128_ps(m03, _mm_loadu_ps(q + 12), 1);
+    m14 = _mm256_insertf128_ps(m14, _mm_loadu_ps(q + 16), 1);
+    m25 = _mm256_insertf128_ps(m25, _mm_loadu_ps(q + 20), 1);
+    const __m256 xy = _mm256_shuffle_ps(m14, m25, _MM_SHUFFLE(2, 1, 3, 2));  // x2 y2 x3 y3
+    const __m256 yz = _mm256_shuffle_ps(m03, m14, _MM_SHUFFLE(1, 0, 2, 1));  // y0 z0 y1 z1
+    _mm256_storeu_ps(x + i, _mm256_shuffle_ps(m03, xy, _MM_SHUFFLE(2, 0, 3, 0)));
+    _mm256_storeu_ps(y + i, _mm256_shuffle_ps(yz, xy, _MM_SHUFFLE(3, 1, 2, 0)));
+    _mm256_storeu_ps(z + i, _mm256_shuffle_ps(yz, m25, _MM_SHUFFLE(3, 0, 3, 1)));
+  }
+#endif
+  for (; i < count; ++i) {
+    x[i] = a[3 * i];
+    y[i] = a[3 * i + 1];
+    z[i] = a[3 * i + 2];
+  }
+}
 
 // Everything one shell needs per chunk.
 template <class Map>
@@ -119,19 +151,26 @@ template <class Map>
 void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float* __restrict n,
                  std::size_t count, float* __restrict v) {
   int flag[kChunk];
+  alignas(32) float px[kChunk], py[kChunk], pz[kChunk], qx[kChunk], qy[kChunk], qz[kChunk];
+  deinterleave(p, count, px, py, pz);
+  deinterleave(n, count, qx, qy, qz);
   const float tau = s.tau;
   for (std::size_t i = 0; i < count; ++i) {
     float ux, uy, uz, nx, ny, nz;
-    s.map(p + 3 * i, n + 3 * i, ux, uy, uz, nx, ny, nz);
-    v[i] = in_shell_fast(ux, uy, uz, nx, ny, nz, tau, flag[i]);
+    s.map(px[i], py[i], pz[i], qx[i], qy[i], qz[i], ux, uy, uz, nx, ny, nz);
+    v[i] = in_shell_fast_exponent(ux, uy, uz, nx, ny, nz, tau, flag[i]);
   }
+  // Two short loops rather than one long one: each iteration of the fused loop is one long
+  // dependency chain (sqrt → div → div → polynomial) and too few of them fit in the
+  // out-of-order window; split, each pass runs near its throughput limit.
+  for (std::size_t i = 0; i < count; ++i) v[i] = fast_exp(v[i]);
   int any = 0;  // an int OR-reduction vectorises
   for (std::size_t i = 0; i < count; ++i) any |= flag[i];
   if (!any) return;
   for (std::size_t i = 0; i < count; ++i) {
     if (!flag[i]) continue;
     float ux, uy, uz, nx, ny, nz;
-    s.map(p + 3 * i, n + 3 * i, ux, uy, uz, nx, ny, nz);
+    s.map(px[i], py[i], pz[i], qx[i], qy[i], qz[i], ux, uy, uz, nx, ny, nz);
     const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
     const float s2 = ux * ux + uy * uy + uz * uz;
     if (!(s2 > 1.0f)) {

@@ -286,3 +286,17 @@ TEST(ReevesBlau, DepthLaw) {
   EXPECT_FLOAT_EQ(v[3], 1.0f);
   EXPECT_THROW(ao_reeves_blau(r.pv(), e, -1.0f, v.data()), std::invalid_argument);
 }
+
+TEST(CanopySphere, ArrayPathMatchesOnePointPathForAnyLength) {
+  // The array path deinterleaves AoS input in blocks of 8 with a scalar tail: every length and
+  // offset must give the one-point values.
+  const Ellipsoid e = rotated_ellipsoid({0.3f, -0.2f, 0.1f}, {1.5f, 1.0f, 0.8f}, 0.9f);
+  for (std::size_t count : {1u, 7u, 8u, 9u, 255u, 256u, 257u, 1003u}) {
+    const Receivers r = random_receivers(count, e.center, 1.6f, static_cast<unsigned>(count));
+    std::vector<float> v(count);
+    ao_canopy_ellipsoid(r.pv(), r.nv(), e, {1.1f}, v.data());
+    for (std::size_t i = 0; i < count; ++i) {
+      ASSERT_FLOAT_EQ(v[i], canopy_visibility(r.pv()[i], r.nv()[i], e, {1.1f})) << count << " " << i;
+    }
+  }
+}
