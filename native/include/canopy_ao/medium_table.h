@@ -15,6 +15,8 @@
 //   τ    = σ R                                 (optical depth centre → surface).
 // τ is exactly the DESIGN's scale-free τ: at the centre every chord is R, so AO = exp(−τ) for any
 // normal. Hegeman's Eq. 4–6 (canopy_model) approximates the same quantity; this is the expectation.
+// No AO distance: rays run to the shell boundary (D = ∞, or D ≥ 2R); a finite D would need a
+// fourth table axis (D/R) — use the density grid, which honours D, for that.
 //
 // Table. The azimuth around the radial axis is integrated in closed form, leaving a 1D integral
 // over the angle to the radial axis (512-point midpoint rule, |ΔAO| ≤ 1.1e-4 against 8192
