@@ -66,6 +66,11 @@ FIELDS = ["scene", "vertices", "family", "method", "setting", "tau", "tau_mode",
           "note"]
 
 
+def FALLBACKS():
+    """Native functions the engine replaced with numpy stand-ins (older engines only)."""
+    return getattr(engine, "FALLBACKS_USED", set())
+
+
 def log(*a):
     print(*a, flush=True)
 
@@ -209,6 +214,8 @@ def analytic_methods():
             ("ellipsoid", "ellipsoid", "", {})]
     for k in (2, 4, 8):
         rows.append(("shells", "shells", f"k={k}", {"shells": k}))
+    for k in (1, 4):
+        rows.append(("medium", "medium", f"k={k}", {"shells": k}))
     return rows
 
 
@@ -441,9 +448,9 @@ def run_scene(name, args, writer, fh):
             writer.writerow({k: fmt(v) for k, v in dict(base, reference="", role="").items()})
             log(f"  {family:12s} {setting:8s} {tau_mode:10s} FAILED {note}")
             return
-        if engine.FALLBACKS_USED and family not in ("raytrace", "cycles", "embree_ref"):
+        if FALLBACKS() and family not in ("raytrace", "cycles", "embree_ref"):
             base["note"] = (base["note"] + "; numpy stand-ins for "
-                            + ",".join(sorted(engine.FALLBACKS_USED))).strip("; ")
+                            + ",".join(sorted(FALLBACKS()))).strip("; ")
         bad = int(np.count_nonzero(~np.isfinite(ao)))
         if bad:
             base["note"] = (note + f"; {bad} non-finite values").strip("; ")
@@ -500,9 +507,9 @@ def main(argv=None):
         w.writeheader()
         for name in scenes:
             run_scene(name, args, w, fh)
-    if engine.FALLBACKS_USED:
+    if FALLBACKS():
         log(f"NOTE: numpy stand-ins used for missing native functions: "
-            f"{sorted(engine.FALLBACKS_USED)}")
+            f"{sorted(FALLBACKS())}")
     log(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 

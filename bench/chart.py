@@ -27,6 +27,7 @@ STYLE = {  # family -> (colour, marker)
     "sphere": ("#1f77b4", "o"),
     "ellipsoid": ("#2ca02c", "s"),
     "shells": ("#17becf", "D"),
+    "medium": ("#000000", "h"),
     "medium_sphere": ("#e377c2", "o"),
     "medium_ellipsoid": ("#7f7f7f", "s"),
     "medium_shells": ("#000080", "D"),

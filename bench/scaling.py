@@ -50,7 +50,7 @@ def main(argv=None):
     a = ap.parse_args(argv)
     top = 1e6 if a.quick else a.max
     sizes = [n for n in (1e4, 3e4, 1e5, 3e5, 1e6, 3e6, 1e7) if n <= top * 1.001]
-    methods = [m for m in ("reeves_blau", "sphere", "ellipsoid", "shells", "grid")
+    methods = [m for m in ("reeves_blau", "sphere", "ellipsoid", "shells", "medium", "grid")
                if m in engine.available_methods()]
     rows = []
     os.makedirs(OUT, exist_ok=True)
@@ -63,13 +63,13 @@ def main(argv=None):
                  for p, o in zip(scene, np.cumsum([0] + [q.n_vertices for q in scene])[:-1])]
         nv = len(V)
         for m in methods:
-            engine.FALLBACKS_USED.clear()
+            used = getattr(engine, "FALLBACKS_USED", set())
+            used.clear()
             try:
                 s = engine.BakeSettings(method=m, tau=1.5, shells=4)
                 plan, tp = timed(lambda: engine.prepare(items, s))
                 _, te = timed(lambda: [engine.evaluate_item(plan, it) for it in items])
-                note = ("numpy stand-ins: " + ",".join(sorted(engine.FALLBACKS_USED))
-                        if engine.FALLBACKS_USED else "")
+                note = ("numpy stand-ins: " + ",".join(sorted(used)) if used else "")
             except Exception as exc:
                 tp = te = math.nan
                 note = f"{type(exc).__name__}: {exc}"
@@ -77,6 +77,14 @@ def main(argv=None):
                              mvps=nv / te / 1e6 if te > 0 else math.nan, note=note))
             print(f"{nv:10d} {m:12s} prepare {tp:8.3f} s eval {te:8.3f} s "
                   f"({rows[-1]['mvps']:.1f} M vertices/s) {note}", flush=True)
+        if hasattr(_core, "ao_medium_sphere") and hasattr(_core, "fit_sphere"):
+            leaves = np.ascontiguousarray(scene.parts_by_role("canopy")[0].vertices)
+            sph, tp = timed(lambda: _core.fit_sphere(leaves))
+            _, te = timed(lambda: _core.ao_medium_sphere(V, N, sph, 1.0))
+            rows.append(dict(method="medium_sphere (core)", vertices=nv, t_prepare=tp, t_eval=te,
+                             t_total=tp + te, mvps=nv / te / 1e6, note="fit_sphere + ao_medium_sphere"))
+            print(f"{nv:10d} medium_sphere prepare {tp:8.3f} s eval {te:8.3f} s "
+                  f"({rows[-1]['mvps']:.1f} M vertices/s)", flush=True)
         if hasattr(_core, "RayTracer"):
             tr, tb = timed(lambda: _core.RayTracer(V, T), 1)
             for r in (1, a.rays):
