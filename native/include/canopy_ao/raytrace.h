@@ -54,7 +54,9 @@ namespace canopy_ao {
 /// Per-call settings of the ray-traced AO. Defaults match the Python API.
 struct RayTraceOptions {
   /// Cosine-weighted rays per point (≥ 1). The standard error at AO = a is at most
-  /// sqrt(a(1−a)/samples) and, thanks to stratification, usually well below it.
+  /// sqrt(a(1−a)/samples) (independent rays); stratification does much better on smooth
+  /// occluders: measured RMS error at 1024 samples 0.0008 (half-plane edge, binomial 0.016)
+  /// and 0.0014 (sphere 30° off the normal, binomial 0.007); at 64 samples 0.013 and 0.011.
   int samples = 64;
   /// AO distance D in scene units (> 0; +inf = unlimited): occluders farther than D along a ray
   /// do not count (Cycles' world.light_settings.distance, a hard cut-off).
