@@ -336,13 +336,13 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         self.report({'ERROR'}, str(exc))
         return {'CANCELLED'}
 
-    def _finish(self, context, job):
+    def _finish(self, context, job, lines_reported=False):
         try:
             job.commit(context)
         except (BakeError, mesh_io.MeshIOError, RuntimeError) as exc:
             return self._report_error(exc)
         rep = job.report_dict
-        for line in job.lines:
+        for line in job.lines if not lines_reported else ():
             self.report({'INFO'}, line)
         where = f"'{rep['attribute']}'" if rep["attribute"] else "images"
         self.report({'INFO'}, f"Canopy AO: {rep['method']}, τ {rep['tau']:.3g}, "
@@ -393,7 +393,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         context.workspace.status_text_set(None)
 
     def modal(self, context, event):
-        if event.type == 'ESC':
+        if event.type == 'ESC' and event.value == 'PRESS':
             self._stop(context)
             self.report({'WARNING'}, "Canopy AO bake cancelled; nothing was changed")
             return {'CANCELLED'}
@@ -407,7 +407,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                 line = job.step()
                 if line is None:
                     self._stop(context)
-                    return self._finish(context, job)
+                    return self._finish(context, job, lines_reported=True)
                 job.lines.append(line)
                 self.report({'INFO'}, line)
             context.window_manager.progress_update(job.index + 1)
