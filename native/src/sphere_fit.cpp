@@ -164,10 +164,8 @@ class Miniball {
 };
 
 // Solves the small symmetric system G x = b (n ≤ 3) by Gaussian elimination with partial
-// pivoting; a (numerically) zero pivot sets that unknown to 0 (least-norm-ish for degenerate
-// support sets, enough for a self-check).
-void solve_small(int n, double g[3][3], double b[3], double x[3]) {
-  int perm[3] = {0, 1, 2};
+// pivoting; false if G is (numerically) singular.
+bool solve_small(int n, double g[3][3], double b[3], double x[3]) {
   double scale = 0;
   for (int i = 0; i < n; ++i) scale = std::max(scale, std::abs(g[i][i]));
   for (int col = 0; col < n; ++col) {
@@ -176,8 +174,7 @@ void solve_small(int n, double g[3][3], double b[3], double x[3]) {
       if (std::abs(g[r][col]) > std::abs(g[piv][col])) piv = r;
     std::swap(g[col], g[piv]);
     std::swap(b[col], b[piv]);
-    std::swap(perm[col], perm[piv]);
-    if (std::abs(g[col][col]) <= 1e-12 * scale) continue;
+    if (!(std::abs(g[col][col]) > 1e-12 * scale)) return false;
     for (int r = col + 1; r < n; ++r) {
       const double f = g[r][col] / g[col][col];
       for (int c = col; c < n; ++c) g[r][c] -= f * g[col][c];
@@ -185,14 +182,11 @@ void solve_small(int n, double g[3][3], double b[3], double x[3]) {
     }
   }
   for (int i = n - 1; i >= 0; --i) {
-    if (std::abs(g[i][i]) <= 1e-12 * scale) {
-      x[i] = 0;
-      continue;
-    }
     double s = b[i];
     for (int c = i + 1; c < n; ++c) s -= g[i][c] * x[c];
     x[i] = s / g[i][i];
   }
+  return true;
 }
 
 }  // namespace
@@ -286,30 +280,55 @@ SphereFitCheck sphere_fit_check(PointsView points, const MinSphere& s) {
     chk.support_error =
         std::max(chk.support_error, std::abs(std::sqrt(dist2(to_p3(points[i]), c)) - s.radius) / r);
   }
-  // Barycentric coordinates of the centre w.r.t. the support points, by least squares in their
-  // affine hull: c − s0 = Σ μᵢ (sᵢ − s0), λ0 = 1 − Σ μᵢ.
-  const int k = static_cast<int>(std::min<std::size_t>(s.support.size(), 4));
-  if (k >= 2) {
-    const P3 s0 = to_p3(points[s.support[0]]);
+  // Barycentric coordinates of the centre w.r.t. boundary points. With cospherical input (a
+  // lattice, a cube's corners) the support is not unique and the reported one may be affinely
+  // dependent; by Carathéodory the centre is in the hull of the boundary points iff it is in
+  // the hull of an affinely independent subset of ≤ 4 of them. Candidates: the support, then
+  // other distinct points on the sphere (to 1e-10 relative), at most 12 in all. For each
+  // subset whose affine hull holds c: c − s0 = Σ μᵢ (sᵢ − s0), λ0 = 1 − Σ μᵢ (Gram system).
+  std::vector<P3> cand;
+  auto add_cand = [&](const P3& q) {
+    if (cand.size() < 12 && std::find(cand.begin(), cand.end(), q) == cand.end()) cand.push_back(q);
+  };
+  for (std::size_t i : s.support) add_cand(to_p3(points[i]));
+  for (std::size_t i = 0; i < points.size && cand.size() < 12; ++i) {
+    const P3 q = to_p3(points[i]);
+    if (std::abs(std::sqrt(dist2(q, c)) - s.radius) <= 1e-10 * r) add_cand(q);
+  }
+  const int k = static_cast<int>(cand.size());
+  double best = INFINITY;
+  for (unsigned mask = 1; mask < (1u << k); ++mask) {
+    int sel[4] = {0, 0, 0, 0}, m = 0;
+    for (int i = 0; i < k; ++i)
+      if (mask & (1u << i)) {
+        if (m == 4) {
+          m = 5;
+          break;
+        }
+        sel[m++] = i;
+      }
+    if (m > 4) continue;
+    const P3 s0 = cand[sel[0]];
     double v[3][3], g[3][3], b[3], mu[3] = {0, 0, 0};
-    for (int i = 0; i < k - 1; ++i) {
-      const P3 si = to_p3(points[s.support[i + 1]]);
-      for (int j = 0; j < 3; ++j) v[i][j] = si[j] - s0[j];
-    }
-    for (int i = 0; i < k - 1; ++i) {
+    for (int i = 0; i < m - 1; ++i)
+      for (int j = 0; j < 3; ++j) v[i][j] = cand[sel[i + 1]][j] - s0[j];
+    for (int i = 0; i < m - 1; ++i) {
       b[i] = 0;
       for (int j = 0; j < 3; ++j) b[i] += v[i][j] * (c[j] - s0[j]);
-      for (int l = 0; l < k - 1; ++l) g[i][l] = v[i][0] * v[l][0] + v[i][1] * v[l][1] + v[i][2] * v[l][2];
+      for (int l = 0; l < m - 1; ++l) g[i][l] = v[i][0] * v[l][0] + v[i][1] * v[l][1] + v[i][2] * v[l][2];
     }
-    solve_small(k - 1, g, b, mu);
+    if (m > 1 && !solve_small(m - 1, g, b, mu)) continue;  // dependent subset
+    P3 res{c[0] - s0[0], c[1] - s0[1], c[2] - s0[2]};
     double lam0 = 1, min_lam = 0;
-    for (int i = 0; i < k - 1; ++i) {
+    for (int i = 0; i < m - 1; ++i) {
+      for (int j = 0; j < 3; ++j) res[j] -= mu[i] * v[i][j];
       lam0 -= mu[i];
       min_lam = std::min(min_lam, mu[i]);
     }
-    min_lam = std::min(min_lam, lam0);
-    chk.suboptimality = -min_lam;
+    if (std::sqrt(dist2(res, {0, 0, 0})) > 1e-9 * r) continue;  // c not in this affine hull
+    best = std::min(best, -std::min(min_lam, lam0));
   }
+  chk.suboptimality = std::isfinite(best) ? best : 1.0;
   return chk;
 }
 

@@ -166,6 +166,26 @@ TEST(SphereFit, RandomCloudsMatchBruteForce) {
   }
 }
 
+TEST(SphereFit, DegenerateLatticeSetsMatchBruteForce) {
+  // Points on the lattice {-1, 0, 1}³ (scaled, offset): duplicates, collinear, cocircular and
+  // cospherical subsets everywhere — the inputs that break naive circumsphere code.
+  std::mt19937 g(21);
+  std::uniform_int_distribution<int> c(-1, 1);
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<float> p;
+    const int n = 2 + trial % 10;
+    for (int i = 0; i < n; ++i) add(p, 3 + 0.5 * c(g), -7 + 0.5 * c(g), 0.5 * c(g));
+    const Sphere s = fit_and_check(p);
+    const double bf = brute_force_radius(p);
+    if (bf == 0) {  // all duplicates: the documented floor
+      EXPECT_NEAR(s.radius, min_proxy_radius(s.center), 1e-9);
+    } else {
+      EXPECT_NEAR(min_sphere_exact(view(p)).radius, bf, 1e-9 * bf) << "trial " << trial;
+      EXPECT_NEAR(s.radius, bf, 1e-5 * bf) << "trial " << trial;
+    }
+  }
+}
+
 TEST(SphereFit, SinglePointAndDuplicates) {
   std::vector<float> one;
   add(one, 4, 5, 6);

@@ -65,8 +65,10 @@ MinSphere min_sphere_exact(PointsView points, const std::vector<std::size_t>* in
 struct SphereFitCheck {
   double max_excess = 0;     ///< max over points of (|p − c| − r) / r, ≤ ~1e-12 if valid
   double support_error = 0;  ///< max over support points of ||p − c| − r| / r
-  /// How far the centre is from the convex hull of the support points: −min barycentric
-  /// coordinate (0 if inside). A ball is minimal iff its centre lies in that hull.
+  /// How far the centre is from the convex hull of the points on the sphere (the support plus
+  /// up to 12 distinct boundary points in all, for cospherical input where the support is not
+  /// unique): −min barycentric coordinate over affinely independent subsets (0 if inside).
+  /// A ball enclosing the points is minimal iff its centre lies in that hull.
   double suboptimality = 0;
   double relative_error() const {
     return max_excess > support_error ? max_excess : support_error;
