@@ -131,21 +131,22 @@ class BakeJob:
             members.setdefault(o.name, o)
         depsgraph = context.evaluated_depsgraph_get()
         self.items, self.objects, self.how = [], {}, {}
+        target_names = {o.name for o in targets}
         for name, obj in members.items():
+            # Only a target's result goes back onto its mesh: a non-target may change its
+            # vertex count (it only occludes and shapes the proxies).
             try:
                 pos, nor, tris = mesh_io.evaluated_arrays(
-                    obj, depsgraph, same_count=opts["mode"] == 'VERTEX')
+                    obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names)
             except mesh_io.MeshIOError as exc:
-                if obj in targets:
-                    raise BakeError(str(exc)) from None
-                continue  # a non-target still occludes in a later version; skip it for now
+                raise BakeError(str(exc)) from None
             role, how = role_of(obj, pos, tris)
             if role == "IGNORE":
                 continue
             self.items.append(engine.SceneItem(name, role, tree_of(obj), pos, nor, tris))
             self.objects[name] = obj
             self.how[name] = how
-        self.targets = [it for it in self.items if it.name in {o.name for o in targets}]
+        self.targets = [it for it in self.items if it.name in target_names]
         if not self.targets:
             raise BakeError("every object to bake has the role Ignore")
         for it in self.targets if opts["mode"] == 'VERTEX' else ():

@@ -151,6 +151,8 @@ def test_vertex_count_changing_modifier_is_refused(tree_scene_objects):
         bake(objects="Ground,Leaves", method="sphere", tau=1.0)
     assert ATTR not in ground.data.attributes
     assert ATTR not in bpy.data.objects["Leaves"].data.attributes
+    # As a non-target it still takes part (it only occludes): no error.
+    assert bake(objects="Leaves", method="sphere", tau=1.0) == {'FINISHED'}
 
 
 def test_evaluated_mesh_is_used(tree_scene_objects):
