@@ -91,11 +91,10 @@ class BakeJob:
         if not ok:
             raise BakeError(msg)
         if opts["mode"] == 'TEXEL':
-            try:
-                from . import texel  # noqa: F401  (written when the texel path lands)
-            except ImportError:
-                raise BakeError("per-texel output is not available in this build yet (no "
-                                "canopy_ao.texel); bake per vertex") from None
+            import importlib.util
+            if importlib.util.find_spec(f"{__package__}.texel") is None:
+                raise BakeError("per-texel output is not available in this build (no "
+                                "canopy_ao.texel); bake per vertex")
         if opts["wire_material"] or opts["add_aov"]:
             try:
                 from . import materials

@@ -4,7 +4,6 @@ Known answers are orderings a correct AO must show, with the margins stated: gro
 crown darker than open ground, the crown's core darker than its rim, a denser canopy darker.
 """
 import json
-import math
 import os
 import sys
 
