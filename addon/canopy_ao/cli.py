@@ -148,6 +148,8 @@ def _run(args):
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
                 f"{e['seconds']:.3f} s, mean AO {e['ao_mean']:.3f}")
+        if "texel" in e:
+            line += f", {e['texel'].get('texels', 0)} texels -> {e['texel'].get('path', '?')}"
         if "cycles" in e:
             c = e["cycles"]
             line += (f", vs Cycles MAE {c.get('mae', float('nan')):.4f} "
