@@ -103,13 +103,14 @@ void Models_Grass(benchmark::State& state) {
   g.blade_height = 4.0f;
   run(state, [&](PointsView p, PointsView n, float* o) { ao_grass(p, n, g, o); });
 }
-// A forest of 32×32 trees (radius 3 on an 8-unit lattice, ε = 1e-3) over the receivers.
+// A forest of 32×32 trees (radius 3 on a 12-unit lattice, ε = 1e-2: d_far ≈ 53) around the
+// receivers (which sit in and around the central tree).
 void Models_Occluders1024(benchmark::State& state) {
   std::vector<Ellipsoid> forest;
   for (int i = 0; i < 32; ++i)
     for (int j = 0; j < 32; ++j)
-      forest.push_back(Ellipsoid::from_sphere({{8.0f * (i - 16), 8.0f * (j - 16), 20}, 3.0f}));
-  const OccluderField field(forest, OccluderOptions{1.5f, 1e-3f, false});
+      forest.push_back(Ellipsoid::from_sphere({{12.0f * (i - 16), 12.0f * (j - 16), 6}, 3.0f}));
+  const OccluderField field(forest, OccluderOptions{1.5f, 1e-2f, false});
   state.counters["max_candidates"] = static_cast<double>(field.max_candidates());
   run(state, [&](PointsView p, PointsView n, float* o) { field.ao(p, n, o); });
 }

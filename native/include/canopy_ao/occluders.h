@@ -81,7 +81,8 @@ class OccluderField {
 
  private:
   std::vector<Ellipsoid> shells_;
-  std::vector<float> far_;  // d_far per occluder
+  std::vector<float> far_;   // d_far per occluder
+  std::vector<float> rmax_;  // largest semi-axis per occluder (bounding sphere)
   float opacity_ = 1.0f;
   bool unbounded_ = false;  // ε = 0: one list holds every occluder
   Vec3 lo_;                 // grid origin
