@@ -496,7 +496,7 @@ def main(argv=None):
     if args.ref_samples is None:
         args.ref_samples = 1024
     if args.ray_samples is None:
-        args.ray_samples = [1, 4, 16, 64] if args.quick else [1, 4, 16, 64, 256]
+        args.ray_samples = [1, 4, 16, 64, 256]
     scenes = args.scenes or DEFAULT_SCENES
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     log(f"canopy_ao._core {getattr(_core, '__version__', '?')}, engine methods "
