@@ -256,8 +256,12 @@ def strips(ao_dir, out_dir, quick, max_points=40000):
         depth = V[:, 0] * np.sin(phi) + V[:, 1] * np.cos(phi)
         sy = V[:, 2] * np.cos(theta) + depth * np.sin(theta)
         idx = idx[np.argsort(depth[idx] * np.cos(theta) - V[idx, 2] * np.sin(theta))[::-1]]
-        fig, axes = plt.subplots(1, len(shown), figsize=(2.6 * len(shown), 3.0), squeeze=False)
-        for ax, k in zip(axes[0], shown):
+        nc = min(5, len(shown))
+        nr = math.ceil(len(shown) / nc)
+        fig, axes = plt.subplots(nr, nc, figsize=(3.4 * nc, 2.9 * nr + 0.4), squeeze=False)
+        for ax in axes.ravel()[len(shown):]:
+            ax.axis("off")
+        for ax, k in zip(axes.ravel(), shown):
             a = z[k].astype(np.float32)
             ax.scatter(sx[idx], sy[idx], c=a[idx], s=0.8, cmap="gray", vmin=0, vmax=1,
                        linewidths=0)
