@@ -57,7 +57,7 @@ Ellipsoid tilted() {
   e.axes[0] = {c, s, 0};
   e.axes[1] = {-s, c, 0};
   e.axes[2] = {0, 0, 1};
-  e.radii = {5, 4, 6};
+  e.radii = {5.5f, 5.2f, 6};  // contains every receiver, like a fitted shell
   return e;
 }
 

@@ -39,23 +39,24 @@ float shell_opacity(float tau) {
 float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity) {
   const Vec3 u = shell.to_unit(x);
   if (!(dot(u, u) > 1.0f)) return 1.0f;  // inside: the canopy model's job
-  const double nn = static_cast<double>(dot(n, n));
-  if (!(nn > 1e-30)) return 1.0f;  // zero normal: facing away, the occluder is below horizon
+  const float nn = dot(n, n);
+  if (!(nn > 1e-30f)) return 1.0f;  // zero normal: facing away, the occluder is below horizon
   const Vec3 dv = shell.center - x;
-  const double d2 = static_cast<double>(dot(dv, dv));
-  const double d = std::sqrt(d2);
-  const double cos_theta = static_cast<double>(dot(n, dv)) / (std::sqrt(nn) * d);
-  // Sphere with the ellipsoid's projected area along the view direction (exact for spheres).
-  double q = 0;
+  const float nd = dot(n, dv) / std::sqrt(nn);  // d · cos θ
+  const float rmax = std::max({shell.radii.x, shell.radii.y, shell.radii.z});
+  if (nd <= -rmax) return 1.0f;  // even the bounding sphere is below the horizon
+  const float d2 = dot(dv, dv);
+  const float d = std::sqrt(d2);
+  // Sphere with the ellipsoid's projected area along the view direction (exact for spheres):
+  // r_eq² = r₁r₂r₃ sqrt(Σ (t_k/r_k)²), t_k = dot(dv/d, a_k); sin²σ = r_eq²/d², evaluated as
+  // (r₁/d)(r₂/d) · sqrt(Σ (t_k r₃/r_k)²) so that no intermediate overflows.
+  float q = 0;
   for (int k = 0; k < 3; ++k) {
-    const double t = static_cast<double>(dot(dv, shell.axes[k])) / (d * shell.radii[k]);
+    const float t = dot(dv, shell.axes[k]) / d * (shell.radii.z / shell.radii[k]);
     q += t * t;
   }
-  const double r_eq2 = static_cast<double>(shell.radii.x) * shell.radii.y * shell.radii.z *
-                       std::sqrt(q);
-  const double sin2 = std::min(r_eq2 / d2, 1.0);
-  const float occ = opacity * sphere_occlusion(static_cast<float>(cos_theta),
-                                               static_cast<float>(sin2));
+  const float sin2 = std::min((shell.radii.x / d) * (shell.radii.y / d) * std::sqrt(q), 1.0f);
+  const float occ = opacity * sphere_occlusion(nd / d, sin2);
   return std::clamp(1.0f - occ, 0.0f, 1.0f);
 }
 
