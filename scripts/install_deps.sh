@@ -8,7 +8,7 @@ pkgs=(
   python3 python3-dev python3-numpy python3-pytest
   pybind11-dev libembree-dev libopenimageio-dev libtbb-dev
   libgtest-dev libbenchmark-dev
-  blender
+  blender xvfb xauth
 )
 if [[ "${1:-}" == "--with-bench" ]]; then
   pkgs+=(python3-matplotlib)
