@@ -173,17 +173,18 @@ void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float
     if (!flag[i]) continue;
     float ux, uy, uz, nx, ny, nz;
     s.map(px[i], py[i], pz[i], qx[i], qy[i], qz[i], ux, uy, uz, nx, ny, nz);
-    const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
     const float s2 = ux * ux + uy * uy + uz * uz;
-    if (!(s2 > 1.0f)) {
-      v[i] = v_in;
+    if (!(s2 > 1.0f)) {  // inside with a zero normal
+      v[i] = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
       continue;
     }
-    const Vec3 x{p[3 * i], p[3 * i + 1], p[3 * i + 2]};
-    const Vec3 nw{n[3 * i], n[3 * i + 1], n[3 * i + 2]};
+    const Vec3 x{px[i], py[i], pz[i]};
+    const Vec3 nw{qx[i], qy[i], qz[i]};
     const float v_out = occluder_visibility(x, nw, s.shell, s.opacity);
     const float w = s.band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) / s.band) : 1.0f;
-    v[i] = clampf((1.0f - w) * v_in + w * v_out, 0.0f, 1.0f);
+    v[i] = w >= 1.0f ? v_out
+                     : clampf((1.0f - w) * in_shell_unit(ux, uy, uz, nx, ny, nz, tau) + w * v_out,
+                              0.0f, 1.0f);
   }
 }
 
