@@ -143,6 +143,7 @@ class Plan:
     calibration: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    forest: object = None  # forest.Forest: instanced trees occluding every receiver (attach_forest)
 
 
 @dataclass
@@ -541,10 +542,31 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
     else:
         ao = _evaluate_points(plan, item.role, item.tree, item.name, item.positions,
                               item.normals, plan.method, plan.tau)
+        if plan.forest is not None:  # instances: V = Π (1 − occ), so their field multiplies
+            ao = ao * plan.forest.ao(item.positions, item.normals)
     if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
         raise EngineError(f"{item.name}: the {plan.method} model gave invalid values")
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,
                       time.perf_counter() - t0)
+
+
+def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
+    """Make instanced trees occlude every item :func:`evaluate_item` bakes with this plan.
+
+    prototypes: :class:`forest.Prototype` list (shells in the prototype's space, instance
+    matrices). Attached after :func:`prepare`, so calibration (which traces only the real
+    triangles) does not see occluders its reference has not got."""
+    from . import forest as _forest
+    t0 = time.perf_counter()
+    kw = {} if epsilon is None else {"epsilon": float(epsilon)}
+    plan.forest = _forest.Forest(prototypes, **kw) if prototypes else None
+    plan.timings["forest"] = time.perf_counter() - t0
+    if plan.forest is not None:
+        plan.notes.append(
+            f"forest: {plan.forest.instances} instance(s) of {len(plan.forest.prototypes)} "
+            f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
+            f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
+            "per receiver)")
 
 
 def report(plan: Plan, results) -> dict:
