@@ -24,8 +24,12 @@
 // Zero-length normals: treated as facing away from the shell centre (n = x − C; at the centre
 // itself any normal gives exp(−τ)). Never NaN. All results in [0, 1], 1 = open sky.
 //
-// Throughput: the in-shell part is one vectorised pass (fast_math.h); outside points take a
-// scalar fix-up. Evaluated in parallel blocks; results do not depend on the thread count.
+// Throughput (bench/bench_models.cpp): points are processed in blocks of 16k (parallel) and
+// chunks of 256: AoS → SoA transpose (AVX), a vectorised pass computing the exponent, a
+// vectorised fast_exp pass, then a scalar fix-up of the flagged points (outside the shell or
+// zero normal). Points inside the shell therefore cost ~1.6 ns on one core (measured ~600 M/s
+// at 10^5 points on this shared 2-core machine); points outside cost the scalar occluder law
+// (~50–100 ns). Results do not depend on the thread count.
 #pragma once
 
 #include <cstddef>
