@@ -227,6 +227,16 @@ def _own_shells(plan, tree, method):
 
 def _evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
                      p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
+    """AO for receiver points p, n of an item: the scene's own objects (below) times the
+    instanced trees of :func:`attach_forest`, if any (V = Π (1 − occ), so the fields multiply)."""
+    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau)
+    if plan.forest is not None and len(p):
+        ao = np.clip(ao * plan.forest.ao(p, n), 0.0, 1.0).astype(np.float32, copy=False)
+    return ao
+
+
+def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | None,
+                           p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
     """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree.
 
     Any receiver inside a tree's shells (its own canopy, a trunk, but also ground or grass that
@@ -542,8 +552,6 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
     else:
         ao = _evaluate_points(plan, item.role, item.tree, item.name, item.positions,
                               item.normals, plan.method, plan.tau)
-        if plan.forest is not None:  # instances: V = Π (1 − occ), so their field multiplies
-            ao = ao * plan.forest.ao(item.positions, item.normals)
     if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
         raise EngineError(f"{item.name}: the {plan.method} model gave invalid values")
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,
