@@ -145,6 +145,40 @@ struct ShellEval {
   float tau, band, opacity;
 };
 
+// The occluder law of occluders.h (occluder_visibility) for a receiver outside the shell,
+// branch-free so that the fix-up pass vectorises: the sphere with the shell's projected area
+// seen from x, Snyder's horizon-clipped form with fast_acos / fast_atan2_pos. Tested against
+// occluder_visibility (CanopyEllipsoid.OutsideMatchesOccluderLaw).
+inline float outside_law(float x, float y, float z, float nx, float ny, float nz,
+                         const Ellipsoid& e, float opacity) {
+  const float nn = nx * nx + ny * ny + nz * nz;
+  const float dx = e.center.x - x, dy = e.center.y - y, dz = e.center.z - z;
+  const float inv_d = 1.0f / std::sqrt(dx * dx + dy * dy + dz * dz + 1e-30f);
+  const float c = clampf((nx * dx + ny * dy + nz * dz) * inv_d / std::sqrt(nn + 1e-30f), -1.0f,
+                         1.0f);
+  float q = 0;
+  for (int k = 0; k < 3; ++k) {
+    const float t = (dx * e.axes[k].x + dy * e.axes[k].y + dz * e.axes[k].z) * inv_d *
+                    (e.radii.z / e.radii[k]);
+    q += t * t;
+  }
+  const float s2 = std::min((e.radii.x * inv_d) * (e.radii.y * inv_d) * std::sqrt(q), 1.0f);
+  // Snyder / Frostbite, as sphere_occlusion, every branch computed and selected.
+  const float s = std::sqrt(std::max(1.0f - c * c, 0.0f));
+  const float xs = std::sqrt(std::max(1.0f / s2 - 1.0f, 0.0f));
+  const float yv = clampf(-xs * c / std::max(s, 1e-20f), -1.0f, 1.0f);
+  const float sy = std::sqrt(std::max(1.0f - yv * yv, 0.0f));
+  const float crossing =
+      clampf(((c * fast_acos(yv) - xs * s * sy) * s2 + fast_atan2_pos(s * sy, xs)) *
+                 0.318309886183791f,
+             0.0f, 1.0f);
+  const float clear = std::max(c, 0.0f) * s2;  // wholly above (or below: 0) the horizon
+  float occ = c * c > s2 ? clear : crossing;
+  occ = s2 >= 1.0f ? 0.5f * (1.0f + c) : occ;  // on the shell: the half-space
+  occ = nn < 1e-30f ? 0.0f : occ;               // zero normal: faces away, nothing blocked
+  return clampf(1.0f - opacity * occ, 0.0f, 1.0f);
+}
+
 // V of one shell for `count` points starting at p/n (AoS). One vectorised in-shell pass, then a
 // scalar fix-up of the (usually few) points outside the shell.
 template <class Map>
@@ -169,23 +203,31 @@ void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float
   int any = 0;  // an int OR-reduction vectorises
   for (std::size_t i = 0; i < count; ++i) any |= flag[i];
   if (!any) return;
+  // Fix-up of the flagged points (outside the shell, or a zero normal), vectorised too:
+  // compact them, evaluate in-shell law, occluder law and blend branch-free, scatter back.
+  int idx[kChunk];
+  std::size_t m = 0;
   for (std::size_t i = 0; i < count; ++i) {
     if (!flag[i]) continue;
-    float ux, uy, uz, nx, ny, nz;
-    s.map(px[i], py[i], pz[i], qx[i], qy[i], qz[i], ux, uy, uz, nx, ny, nz);
-    const float s2 = ux * ux + uy * uy + uz * uz;
-    if (!(s2 > 1.0f)) {  // inside with a zero normal
-      v[i] = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
-      continue;
-    }
-    const Vec3 x{px[i], py[i], pz[i]};
-    const Vec3 nw{qx[i], qy[i], qz[i]};
-    const float v_out = occluder_visibility(x, nw, s.shell, s.opacity);
-    const float w = s.band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) / s.band) : 1.0f;
-    v[i] = w >= 1.0f ? v_out
-                     : clampf((1.0f - w) * in_shell_unit(ux, uy, uz, nx, ny, nz, tau) + w * v_out,
-                              0.0f, 1.0f);
+    idx[m] = static_cast<int>(i);
+    px[m] = px[i], py[m] = py[i], pz[m] = pz[i];  // m ≤ i: compaction in place is safe
+    qx[m] = qx[i], qy[m] = qy[i], qz[m] = qz[i];
+    ++m;
   }
+  float out[kChunk];
+  const float band = s.band, inv_band = band > 0 ? 1.0f / band : 0.0f, opacity = s.opacity;
+  const Ellipsoid& shell = s.shell;
+  for (std::size_t j = 0; j < m; ++j) {
+    float ux, uy, uz, nx, ny, nz;
+    s.map(px[j], py[j], pz[j], qx[j], qy[j], qz[j], ux, uy, uz, nx, ny, nz);
+    const float s2 = ux * ux + uy * uy + uz * uz;
+    const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
+    const float v_out = outside_law(px[j], py[j], pz[j], qx[j], qy[j], qz[j], shell, opacity);
+    const float outside = s2 > 1.0f ? 1.0f : 0.0f;
+    const float w = band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) * inv_band) : outside;
+    out[j] = clampf((1.0f - w) * v_in + w * v_out, 0.0f, 1.0f);
+  }
+  for (std::size_t j = 0; j < m; ++j) v[idx[j]] = out[j];
 }
 
 template <class Map>

@@ -67,6 +67,23 @@ TEST(FastMath, ExpRelativeErrorBelow1e6) {
   EXPECT_TRUE(std::isfinite(fast_exp(1000.0f)));
 }
 
+TEST(FastMath, AcosAndAtan2) {
+  double worst_acos = 0, worst_atan = 0;
+  for (int i = 0; i <= 200000; ++i) {
+    const float y = -1.0f + 2.0f * static_cast<float>(i) / 200000.0f;
+    worst_acos = std::max(worst_acos, std::fabs(fast_acos(y) - std::acos(double(y))));
+  }
+  for (int i = 0; i <= 2000; ++i) {
+    for (float b : {0.0f, 1e-6f, 0.01f, 0.3f, 1.0f, 3.0f, 100.0f}) {
+      const float a = 5.0f * static_cast<float>(i) / 2000.0f;
+      worst_atan = std::max(worst_atan, std::fabs(fast_atan2_pos(a, b) - std::atan2(double(a), double(b))));
+    }
+  }
+  EXPECT_LT(worst_acos, 1e-6);
+  EXPECT_LT(worst_atan, 1e-6);
+  EXPECT_EQ(fast_atan2_pos(0.0f, 0.0f), 0.0f);
+}
+
 // === Canopy sphere: closed forms
 TEST(CanopySphere, CentreGivesExpMinusTauForAnyNormal) {
   const Sphere s{{1, 2, 3}, 2.5f};
@@ -223,6 +240,32 @@ TEST(CanopyEllipsoid, CentreAndAffineInvariance) {
   EXPECT_NEAR(v[0], std::exp(-0.8f), 2e-6f);
   EXPECT_NEAR(v[1], 1.0f, 1e-6f);
   EXPECT_NEAR(canopy_visibility(r.pv()[0], r.nv()[0], e, {0.8f}), v[0], 1e-6f);
+}
+
+TEST(CanopyEllipsoid, OutsideMatchesOccluderLaw) {
+  // Beyond the blend band the array path (vectorised, fast_acos/fast_atan2_pos) must give
+  // occluders.h's occluder_visibility (scalar, libm) — incl. horizon-crossing receivers.
+  const Ellipsoid e = rotated_ellipsoid({1, 0, 2}, {2.0f, 1.0f, 1.5f}, 0.4f);
+  Receivers r;
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> u(-1, 1);
+  while (r.size() < 20000) {
+    const Vec3 x = e.center + 6.0f * Vec3{u(rng), u(rng), u(rng)};
+    const Vec3 ux = e.to_unit(x);
+    if (dot(ux, ux) < 1.12f * 1.12f) continue;  // beyond the band (0.1) only
+    r.add(x, Vec3{u(rng), u(rng), u(rng)});
+  }
+  r.n[0] = r.n[1] = r.n[2] = 0;  // one zero normal
+  std::vector<float> v(r.size());
+  const float tau = 1.7f;
+  ao_canopy_ellipsoid(r.pv(), r.nv(), e, {tau}, v.data());
+  double worst = 0;
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    const float ref = occluder_visibility(r.pv()[i], r.nv()[i], e, shell_opacity(tau));
+    worst = std::max(worst, double(std::fabs(v[i] - ref)));
+  }
+  EXPECT_LT(worst, 2e-6);
+  EXPECT_EQ(v[0], 1.0f);
 }
 
 // === Several shells

@@ -26,10 +26,11 @@
 //
 // Throughput (bench/bench_models.cpp): points are processed in blocks of 16k (parallel) and
 // chunks of 256: AoS → SoA transpose (AVX), a vectorised pass computing the exponent, a
-// vectorised fast_exp pass, then a scalar fix-up of the flagged points (outside the shell or
-// zero normal). Points inside the shell therefore cost ~1.6 ns on one core (measured ~600 M/s
-// at 10^5 points on this shared 2-core machine); points outside cost the scalar occluder law
-// (~50–100 ns). Results do not depend on the thread count.
+// vectorised fast_exp pass; the flagged points (outside the shell, or a zero normal) are then
+// compacted and get the in-shell law, the occluder law (fast_acos / fast_atan2_pos) and the
+// blend in one more vectorised pass. Points inside cost ~1.6 ns on one core (~600 M/s at 10^5
+// points on this shared 2-core machine); outside points ~20–30 ns per shell. Results do not
+// depend on the thread count.
 #pragma once
 
 #include <cstddef>

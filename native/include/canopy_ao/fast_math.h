@@ -15,8 +15,11 @@
 //             0 for x < -87.3 (true value < 1.2e-38, below the normal float range);
 //             x > 88.3 gives e^88.3 ≈ 2.2e38 (never inf). NaN input: unspecified (callers
 //             validate their inputs).
+//   fast_acos: |error| < 1e-6 on [-1, 1];  fast_atan2_pos: |error| < 1e-6 on the first
+//             quadrant (both tested).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 
@@ -54,6 +57,38 @@ inline float fast_exp(float x) {
   std::memcpy(&scale, &bits, sizeof scale);
   const float y = p * scale;
   return x < -87.3f ? 0.0f : y;
+}
+
+/// acos(y) for y in [-1, 1], vectorisable: Abramowitz & Stegun 4.4.46,
+/// acos|y| = sqrt(1 − |y|)·P₇(|y|) (|error| ≤ 2e-8 in exact arithmetic), reflected for y < 0.
+inline float fast_acos(float y) {
+  const float a = y < 0 ? -y : y;
+  float p = -0.0012624911f;
+  p = p * a + 0.0066700901f;
+  p = p * a - 0.0170881256f;
+  p = p * a + 0.0308918810f;
+  p = p * a - 0.0501743046f;
+  p = p * a + 0.0889789874f;
+  p = p * a - 0.2145988016f;
+  p = p * a + 1.5707963050f;
+  const float r = std::sqrt(1.0f - (a > 1.0f ? 1.0f : a)) * p;
+  return y < 0 ? 3.14159265358979f - r : r;
+}
+
+/// atan2(a, b) for a ≥ 0, b ≥ 0 (the first quadrant), vectorisable: Cephes atanf's reduction
+/// of t = a/b to |t| ≤ tan(π/8) and its degree-9 odd polynomial (error ~1e-7).
+/// atan2(0, 0) = 0.
+inline float fast_atan2_pos(float a, float b) {
+  const float t = a / (b > 1e-30f ? b : 1e-30f);
+  const bool big = t > 2.414213562373095f;   // tan(3π/8)
+  const bool mid = t > 0.4142135623730950f;  // tan(π/8)
+  const float x = big ? -1.0f / (t > 1e-30f ? t : 1e-30f) : (mid ? (t - 1.0f) / (t + 1.0f) : t);
+  const float y0 = big ? 1.5707963267948966f : (mid ? 0.7853981633974483f : 0.0f);
+  const float z = x * x;
+  const float p =
+      (((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z -
+       3.33329491539e-1f) * z * x + x;
+  return y0 + p;
 }
 
 /// Hermite smoothstep on [0, 1]: 0 for t ≤ 0, 1 for t ≥ 1, C¹ in between.
