@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from . import engine, mesh_io, roles
+from . import engine, instances, mesh_io, roles
 from .properties import method_items
 
 
@@ -153,6 +153,16 @@ class BakeJob:
                                           opts["overwrite"])
             if why:
                 raise BakeError(why + " (nothing was changed)")
+        # Instanced trees (particles, collection instances, geometry nodes): each prototype is
+        # baked once (its instances share its mesh) and every instance occludes (instances.py).
+        try:
+            self.prototypes = instances.Prototypes(depsgraph, role_of, tree_of,
+                                                   vertex_mode=opts["mode"] == 'VERTEX')
+        except mesh_io.MeshIOError as exc:
+            raise BakeError(str(exc)) from None
+        why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
+        if why:
+            raise BakeError(why + " (nothing was changed)")
         self.settings = engine.BakeSettings(
             method=opts["method"], tau=opts["tau"], distance=opts["distance"],
             samples=opts["samples"], time_budget=opts.get("time_budget", 2.0))
@@ -166,6 +176,10 @@ class BakeJob:
     def prepare(self):
         try:
             self.plan = engine.prepare(self.items, self.settings)
+            if self.prototypes:
+                skip = {it.name for it in self.targets}
+                engine.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
+                self.lines.extend(self.prototypes.lines())
         except (engine.EngineError, ValueError, RuntimeError) as exc:
             raise BakeError(f"bake failed: {exc}") from exc
 
@@ -206,6 +220,7 @@ class BakeJob:
             for r in self.results:
                 obj = self.objects[r.name]
                 mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
+            self.prototypes.commit(o["attribute"], o["overwrite"])
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, engine.proxy_dicts(self.plan))
         elif mesh_io.PROXY_COLLECTION in bpy.data.collections:
@@ -213,6 +228,12 @@ class BakeJob:
         rep = engine.report(self.plan, self.results)
         rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
         rep["mode"] = o["mode"].lower()
+        rep["instances"] = {
+            "instances": self.prototypes.count if self.prototypes else 0,
+            "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
+                                    "seconds": r.seconds, "ao_mean": float(r.ao.mean())
+                                    if r.vertices else None}
+                           for r in self.prototypes.results}}
         for name, st in texel_stats.items():
             rep["objects"][name]["texel"] = {k: v for k, v in st.items()
                                              if isinstance(v, (int, float, str, list))}
@@ -245,6 +266,9 @@ class BakeJob:
         if o["wire_material"]:
             for r in self.results:
                 materials.wire_vertex_ao(self.objects[r.name], o["attribute"], o["aov_name"])
+            for r in self.prototypes.results:
+                materials.wire_vertex_ao(self.prototypes.objects[r.name], o["attribute"],
+                                         o["aov_name"])
         if o["add_aov"]:
             materials.ensure_view_layer_aov(self.scene, o["aov_name"])
 

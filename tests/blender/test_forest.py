@@ -1,0 +1,113 @@
+"""Instanced trees in Blender (issue 6, item 6): a tree collection instanced over a plane by
+collection-instance empties and by a particle system. Known answers: the ground under an
+instance is darker than open ground (by ≥ 0.05, as for a real tree in test_addon.py); the
+prototype's meshes get the attribute once (one mesh, shared by every instance) and the report
+counts the instances."""
+
+import bpy
+import numpy as np
+import pytest
+
+import tree_scene
+from conftest import _clear_scene, add_mesh
+from canopy_ao import mesh_io, operators
+
+ATTR = "CanopyAO"
+PLACES = [((-5.0, -5.0, 0.0), 0.0, 1.0), ((5.0, -4.0, 0.0), 0.8, 1.2), ((0.0, 5.0, 0.0), 2.0, 0.9)]
+
+
+@pytest.fixture
+def proto():
+    """Collection 'TreeProto' (Trunk + Leaves of tree_scene, excluded from the view layer, so
+    only its instances are in the scene) and a 24 × 24 m Ground."""
+    _clear_scene()
+    coll = bpy.data.collections.new("TreeProto")
+    bpy.context.scene.collection.children.link(coll)
+    parts = tree_scene.scene(False)
+    for name in ("Trunk", "Leaves"):
+        add_mesh(name, *parts[name], collection=coll)
+    p, t = tree_scene.plane(size=24.0, cuts=48)
+    add_mesh("Ground", p, t)
+    bpy.context.view_layer.layer_collection.children["TreeProto"].exclude = True
+    bpy.context.scene.canopy_ao.tau_auto = True
+    yield coll
+    _clear_scene()
+
+
+def ground_xy():
+    me = bpy.data.objects["Ground"].data
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)[:, :2]
+
+
+def bake_all():
+    opts = operators.scene_settings_opts(bpy.context.scene)
+    opts.update(method="ellipsoid", tau=2.0, distance=0.0, show_proxies=False)
+    return operators.run_bake(bpy.context, ["Ground"], opts)
+
+
+def check(rep, places):
+    g = mesh_io.read_ao_attribute(bpy.data.objects["Ground"], ATTR)
+    xy = ground_xy()
+    open_ground = np.ones(len(xy), bool)
+    for (x, y, _z), _a, _s in places:
+        d = np.linalg.norm(xy - [x, y], axis=1)
+        open_ground &= d > 5.0
+        assert g[d < 0.8].mean() < g[open_ground | (d > 5.0)].mean() - 0.05, (x, y)
+    assert rep["instances"]["instances"] == len(places)
+    assert set(rep["instances"]["prototypes"]) == {"Trunk", "Leaves"}
+    for name in ("Trunk", "Leaves"):
+        me = bpy.data.objects[name].data
+        assert len([a for a in me.attributes if a.name == ATTR]) == 1
+        a = mesh_io.read_ao_attribute(bpy.data.objects[name], ATTR)
+        assert np.all((a >= 0) & (a <= 1)) and a.min() < 0.9, name
+    assert any("forest: " in n for n in rep["notes"])
+
+
+def test_collection_instances(proto):
+    for i, (loc, angle, scale) in enumerate(PLACES):
+        e = bpy.data.objects.new(f"TreeInstance{i}", None)
+        e.instance_type = 'COLLECTION'
+        e.instance_collection = proto
+        e.location, e.rotation_euler[2], e.scale = loc, angle, (scale,) * 3
+        bpy.context.scene.collection.objects.link(e)
+    bpy.context.view_layer.update()
+    _job, rep = bake_all()
+    check(rep, PLACES)
+    # A re-bake replaces the prototype's attribute, it does not add one.
+    _job, rep = bake_all()
+    check(rep, PLACES)
+
+
+def test_particle_instances(proto):
+    ground = bpy.data.objects["Ground"]
+    emitter = add_mesh("Emitter", np.float32([[-6, -6, 0], [6, -6, 0], [6, 6, 0], [-6, 6, 0]]),
+                       np.int32([[0, 1, 2], [0, 2, 3]]))
+    mod = emitter.modifiers.new("Trees", 'PARTICLE_SYSTEM')
+    ps = mod.particle_system.settings
+    ps.type = 'HAIR'
+    ps.count = 4
+    ps.use_advanced_hair = True
+    ps.use_rotations = True
+    ps.rotation_mode = 'NONE'  # keep the tree upright (hair would lay its x axis along the hair)
+    ps.render_type = 'COLLECTION'
+    ps.instance_collection = proto
+    ps.use_whole_collection = True  # each particle a whole tree, not one of its objects
+    ps.particle_size = 1.0
+    ps.hair_length = 1.0
+    emitter.show_instancer_for_render = False
+    emitter.show_instancer_for_viewport = False
+    bpy.context.view_layer.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    places = []
+    for inst in dg.object_instances:
+        if inst.is_instance and inst.instance_object.original.name == "Leaves":
+            crown = np.array(inst.matrix_world) @ [0.0, 0.0, 2.6, 1.0]  # Leaves' centre
+            assert crown[2] > 1.5, "the instanced tree should stand upright"
+            places.append((tuple(crown[:3]), 0.0, 1.0))
+    assert len(places) == 4
+    emitter.canopy_ao.role = 'IGNORE'
+    _job, rep = bake_all()
+    assert ground.name in rep["objects"]
+    check(rep, places)
