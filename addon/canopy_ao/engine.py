@@ -112,7 +112,10 @@ class BakeSettings:
     "raytrace". shells: k for "shells". calibration_points: reference points traced for "auto".
     time_budget: seconds the whole bake may take; "auto" does not pick a rung predicted to take
     longer (0 = no limit). target_rmse: "auto" stops climbing once a rung's sample RMSE is
-    below it."""
+    below it. forest_epsilon: the cut-off ε (Shanmugam–Arikan Eq. 5) for instanced trees
+    (attach_forest): each instance's shell is ignored where it would block < ε; 1e-2 keeps a
+    ground vertex under a 10,000-tree forest to ~1000 occluders (bench/forest.py) at a cost
+    of < 0.08 AO against no cut-off."""
 
     method: str = "auto"
     tau: float | None = None
@@ -125,6 +128,7 @@ class BakeSettings:
     time_budget: float = 2.0
     target_rmse: float = 0.02
     seed: int = 0
+    forest_epsilon: float = 1e-2
 
 
 @dataclass
@@ -566,8 +570,8 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     triangles) does not see occluders its reference has not got."""
     from . import forest as _forest
     t0 = time.perf_counter()
-    kw = {} if epsilon is None else {"epsilon": float(epsilon)}
-    plan.forest = _forest.Forest(prototypes, **kw) if prototypes else None
+    eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
+    plan.forest = _forest.Forest(prototypes, epsilon=eps) if prototypes else None
     plan.timings["forest"] = time.perf_counter() - t0
     if plan.forest is not None:
         plan.notes.append(

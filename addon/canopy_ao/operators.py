@@ -165,7 +165,8 @@ class BakeJob:
             raise BakeError(why + " (nothing was changed)")
         self.settings = engine.BakeSettings(
             method=opts["method"], tau=opts["tau"], distance=opts["distance"],
-            samples=opts["samples"], time_budget=opts.get("time_budget", 2.0))
+            samples=opts["samples"], time_budget=opts.get("time_budget", 2.0),
+            forest_epsilon=opts.get("forest_epsilon", 1e-2))
         self.plan = None
         self.index = 0
 

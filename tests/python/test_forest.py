@@ -121,8 +121,9 @@ def test_ground_under_an_instance_equals_a_real_tree():
     want = {r.name: r.ao for r in real}["Ground"]
     proto = engine.prepare(items(ground=False), settings)  # the tree at the origin, baked once
     plan = engine.prepare(items(tree=False), settings)
-    engine.attach_forest(plan, [forest.prototype_from_plan(proto, "T",
-                                                           affine(t=offset)[None])])
+    # ε as the scene's own occluders use it (the core's default), to compare one law.
+    engine.attach_forest(plan, [forest.prototype_from_plan(proto, "T", affine(t=offset)[None])],
+                         epsilon=forest.DEFAULT_EPSILON)
     (ground,) = [it for it in items(tree=False)]
     got = engine.evaluate_item(plan, ground).ao
     assert want.min() < 0.8  # the tree does shade the ground
