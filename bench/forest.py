@@ -1,0 +1,146 @@
+"""Forest: ground AO cost per vertex against the number of instanced trees (issue 6, item 6).
+
+    /usr/bin/python3 bench/forest.py [--vertices 1e6] [--counts 10,100,1000,10000]
+                                     [--epsilon 1e-2] [--side 1000]
+
+One prototype, the round tree of examples/canopy_scenes.py (crown r ≈ 3 m at 5.5 m, 2.5 m
+trunk), fitted once by the add-on's engine (4 ellipsoid shells + 1 solid trunk); N instances at
+random places (fixed seed), random heading, scale 0.8–1.2, the same transforms the add-on gets
+from Blender's depsgraph. Receivers: a ground grid of --vertices vertices, normals up.
+
+Two tables, because "the tree count" can grow two ways:
+- fixed ground (--side m square) with more and more trees: the density grows, so the occluders
+  in reach of a ground point grow too; the cut-off bounds the cost by that local count
+  ("in reach" column: shells whose d_far reaches the median vertex), never by N;
+  brute force (ε = 0: every shell for every vertex, timed on a subsample of ≤ 20k vertices) is
+  O(N) per vertex.
+- fixed density (the forest grows with N, 1 tree per 100 m² as the 10,000-tree, 1 km² case):
+  ns per vertex should stay flat once the forest is wider than the cut-off reach.
+Also printed: the largest AO change the cut-off makes on the subsample (against ε = 0).
+Wall-clock on a shared 2-core machine; the field build (grid) is timed apart from evaluation.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(REPO, "examples"))
+sys.path.insert(0, os.path.join(REPO, "addon"))
+
+import numpy as np  # noqa: E402
+
+import canopy_scenes as cs  # noqa: E402
+from canopy_ao import engine, forest  # noqa: E402
+
+
+def prototype_plan():
+    """The round tree fitted once by the engine (τ fixed: calibration is not what is timed)."""
+    scene = cs.round_tree(seed=0, leaves=4000, ground=False)
+    items = [engine.SceneItem(p.name, p.role.upper(), "T", p.vertices,
+                              cs.vertex_normals(p.vertices, p.triangles), p.triangles)
+             for p in scene]
+    return engine.prepare(items, engine.BakeSettings(method="shells", tau=1.5, shells=4))
+
+
+def instance_matrices(count, side, seed=0):
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0, 2 * math.pi, count)
+    s = rng.uniform(0.8, 1.2, count)
+    m = np.zeros((count, 4, 4))
+    m[:, 0, 0], m[:, 0, 1] = s * np.cos(a), -s * np.sin(a)
+    m[:, 1, 0], m[:, 1, 1] = s * np.sin(a), s * np.cos(a)
+    m[:, 2, 2] = s
+    m[:, :2, 3] = rng.uniform(-side / 2, side / 2, (count, 2))
+    m[:, 3, 3] = 1.0
+    return m
+
+
+def ground(vertices, side):
+    k = int(round(math.sqrt(vertices)))
+    x = np.linspace(-side / 2, side / 2, k, dtype=np.float32)
+    X, Y = np.meshgrid(x, x)
+    p = np.ascontiguousarray(np.stack([X.ravel(), Y.ravel(), np.zeros(k * k, np.float32)], 1))
+    n = np.ascontiguousarray(np.tile(np.float32([0, 0, 1]), (k * k, 1)))
+    return p, n
+
+
+def in_reach(shells, epsilon, point):
+    """Shells whose cut-off sphere (d_far about the centre, Shanmugam–Arikan Eq. 5) holds point."""
+    c, _q, r = forest.shell_arrays(shells)
+    d_far = r.max(1) / math.sin(math.acos(1 - epsilon / (2 * math.pi)))
+    return int(np.sum(np.linalg.norm(c - point, axis=1) <= d_far))
+
+
+def run(proto, count, side, vertices, epsilon, sub):
+    mats = instance_matrices(count, side)
+    p, n = ground(vertices, side)
+    pr = forest.prototype_from_plan(proto, "T", mats)
+    t0 = time.perf_counter()
+    f = forest.Forest([pr], epsilon=epsilon)
+    build = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ao = f.ao(p, n)
+    dt = time.perf_counter() - t0
+    # ε = 0 costs every occluder for every vertex: at most ~1e8 pairs, at least 500 vertices.
+    sub = int(min(sub, len(p), max(500, 1e8 / max(count * 5, 1))))
+    idx = np.random.default_rng(1).choice(len(p), size=sub, replace=False)
+    ps, ns = np.ascontiguousarray(p[idx]), np.ascontiguousarray(n[idx])
+    brute = forest.Forest([pr], epsilon=0.0)
+    t0 = time.perf_counter()
+    full = brute.ao(ps, ns)
+    dt_full = time.perf_counter() - t0
+    shells = forest.instance_shells(pr.shells, mats)
+    return {
+        "trees": count, "side": side, "shells": f.shell_count + f.solid_count,
+        "reach": in_reach(shells, epsilon, np.zeros(3)), "max_cand": f.max_candidates,
+        "build_s": build, "eval_s": dt, "ns_vertex": dt / len(p) * 1e9,
+        "brute_ns_vertex": dt_full / len(ps) * 1e9,
+        "max_err": float(np.max(np.abs(ao[idx] - full))), "mean_ao": float(ao.mean()),
+    }
+
+
+def table(title, rows):
+    print(f"\n{title}")
+    head = ("trees", "side m", "occluders", "in reach", "max cand", "build s", "eval s",
+            "ns/vertex", "ε=0 ns/vertex", "max |Δ| vs ε=0", "mean AO")
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    for r in rows:
+        print(f"| {r['trees']} | {r['side']:.0f} | {r['shells']} | {r['reach']} | "
+              f"{r['max_cand']} | {r['build_s']:.2f} | {r['eval_s']:.2f} | "
+              f"{r['ns_vertex']:.0f} | {r['brute_ns_vertex']:.0f} | {r['max_err']:.4f} | "
+              f"{r['mean_ao']:.3f} |", flush=True)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vertices", type=float, default=1e6)
+    ap.add_argument("--counts", default="10,100,1000,10000")
+    ap.add_argument("--epsilon", type=float, default=1e-2)
+    ap.add_argument("--side", type=float, default=1000.0, help="fixed ground side, m")
+    ap.add_argument("--density", type=float, default=0.01, help="trees per m², second table")
+    ap.add_argument("--subsample", type=int, default=20000,
+                    help="most vertices timed at ε = 0 (fewer for big forests: ≤ 1e8 pairs)")
+    args = ap.parse_args(argv)
+    counts = [int(float(c)) for c in args.counts.split(",")]
+    verts = int(args.vertices)
+    proto = prototype_plan()
+    ex = proto.proxies["T"]
+    print(f"prototype: round tree, {len(ex)} shells (largest semi-axis "
+          f"{max(float(np.max(e.radii)) for e in ex):.2f} m) + {len(proto.trunks.get('T', []))} "
+          f"trunk, τ {proto.tau}; ground {int(round(math.sqrt(verts))) ** 2} vertices; "
+          f"ε {args.epsilon:g}")
+    table(f"Fixed ground, {args.side:.0f} m square (density grows with the count)",
+          [run(proto, c, args.side, verts, args.epsilon, args.subsample) for c in counts])
+    table(f"Fixed density, {args.density:g} trees/m² (the forest grows with the count)",
+          [run(proto, c, math.sqrt(c / args.density), verts, args.epsilon, args.subsample)
+           for c in counts])
+
+
+if __name__ == "__main__":
+    main()
