@@ -4,7 +4,8 @@
                                      [--epsilon 1e-2] [--side 1000]
 
 One prototype, the round tree of examples/canopy_scenes.py (crown r ≈ 3 m at 5.5 m, 2.5 m
-trunk), fitted once by the add-on's engine (4 ellipsoid shells + 1 solid trunk); N instances at
+trunk), fitted once by the add-on's engine (4 ellipsoid shells + 1 solid trunk, τ calibrated
+against Embree on the lone tree); N instances at
 random places (fixed seed), random heading, scale 0.8–1.2, the same transforms the add-on gets
 from Blender's depsgraph. Receivers: a ground grid of --vertices vertices, normals up.
 
@@ -18,6 +19,7 @@ Two tables, because "the tree count" can grow two ways:
   ns per vertex should stay flat once the forest is wider than the cut-off reach.
 Also printed: the largest AO change the cut-off makes on the subsample (against ε = 0).
 Wall-clock on a shared 2-core machine; the field build (grid) is timed apart from evaluation.
+--check also compares a small forest of real tree meshes with Embree (the law, not the speed).
 """
 from __future__ import annotations
 
@@ -39,12 +41,13 @@ from canopy_ao import engine, forest  # noqa: E402
 
 
 def prototype_plan():
-    """The round tree fitted once by the engine (τ fixed: calibration is not what is timed)."""
+    """The round tree fitted once by the engine, τ calibrated against Embree on the lone tree
+    (as the add-on does for each prototype; not part of the timed evaluation)."""
     scene = cs.round_tree(seed=0, leaves=4000, ground=False)
     items = [engine.SceneItem(p.name, p.role.upper(), "T", p.vertices,
                               cs.vertex_normals(p.vertices, p.triangles), p.triangles)
              for p in scene]
-    return engine.prepare(items, engine.BakeSettings(method="shells", tau=1.5, shells=4))
+    return engine.prepare(items, engine.BakeSettings(method="shells", tau=None, shells=4))
 
 
 def instance_matrices(count, side, seed=0):
@@ -104,6 +107,43 @@ def run(proto, count, side, vertices, epsilon, sub):
     }
 
 
+def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256):
+    """The law, not the speed: a small forest of real tree meshes traced by Embree against the
+    instances' occluders (and the same trees as real objects through the engine, which must
+    agree with the instances: same law, same shells)."""
+    from canopy_ao import _core
+    scene = cs.round_tree(seed=0, leaves=4000, ground=False)
+    mats = instance_matrices(trees, side, seed=3)
+    verts, tris, base, items = [], [], 0, []
+    for i, m in enumerate(mats):
+        for part in scene:
+            v = (part.vertices @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+            verts.append(v)
+            tris.append(part.triangles + base)
+            base += len(v)
+            items.append(engine.SceneItem(f"{part.name}{i}", part.role.upper(), f"T{i}", v,
+                                          cs.vertex_normals(v, part.triangles), part.triangles))
+    rng = np.random.default_rng(0)
+    p = np.c_[rng.uniform(-side / 2 + 5, side / 2 - 5, (points, 2)), np.zeros(points)]
+    p = np.ascontiguousarray(p, dtype=np.float32)
+    n = np.ascontiguousarray(np.tile(np.float32([0, 0, 1]), (points, 1)))
+    ref = _core.RayTracer(np.concatenate(verts), np.concatenate(tris).astype(np.int32)).ao(
+        p, n, samples=samples)
+    inst = forest.Forest([forest.prototype_from_plan(proto, "T", mats)],
+                         epsilon=forest.DEFAULT_EPSILON).ao(p, n)
+    ground = engine.SceneItem("ground", "GROUND", "", p, n, np.zeros((0, 3), np.int32))
+    plan = engine.prepare(items + [ground], engine.BakeSettings(method=proto.method,
+                                                                  tau=proto.tau, shells=4))
+    real = engine.evaluate_item(plan, ground).ao
+    print(f"\nAgainst Embree ({samples} rays, {points} ground points, {trees} real round trees "
+          f"on {side:g} m, τ {proto.tau:.3g}, {proto.method}):")
+    for name, a in (("instances", inst), ("real objects", real)):
+        print(f"  {name:12s} mean AO {a.mean():.3f} (traced {ref.mean():.3f}), MAE "
+              f"{np.abs(a - ref).mean():.3f}, bias {(a - ref).mean():+.3f}, "
+              f"corr {np.corrcoef(a, ref)[0, 1]:.3f}")
+    print(f"  instances vs real objects: max |Δ| {np.abs(inst - real).max():.4f}")
+
+
 def table(title, rows):
     print(f"\n{title}")
     head = ("trees", "side m", "occluders", "in reach", "max cand", "build s", "eval s",
@@ -126,6 +166,8 @@ def main(argv=None):
     ap.add_argument("--density", type=float, default=0.01, help="trees per m², second table")
     ap.add_argument("--subsample", type=int, default=20000,
                     help="most vertices timed at ε = 0 (fewer for big forests: ≤ 1e8 pairs)")
+    ap.add_argument("--check", action="store_true",
+                    help="also compare a small forest with Embree (the law, not the speed)")
     args = ap.parse_args(argv)
     counts = [int(float(c)) for c in args.counts.split(",")]
     verts = int(args.vertices)
@@ -133,13 +175,15 @@ def main(argv=None):
     ex = proto.proxies["T"]
     print(f"prototype: round tree, {len(ex)} shells (largest semi-axis "
           f"{max(float(np.max(e.radii)) for e in ex):.2f} m) + {len(proto.trunks.get('T', []))} "
-          f"trunk, τ {proto.tau}; ground {int(round(math.sqrt(verts))) ** 2} vertices; "
+          f"trunk, τ {proto.tau:.3g} (calibrated); ground {int(round(math.sqrt(verts))) ** 2} vertices; "
           f"ε {args.epsilon:g}")
     table(f"Fixed ground, {args.side:.0f} m square (density grows with the count)",
           [run(proto, c, args.side, verts, args.epsilon, args.subsample) for c in counts])
     table(f"Fixed density, {args.density:g} trees/m² (the forest grows with the count)",
           [run(proto, c, math.sqrt(c / args.density), verts, args.epsilon, args.subsample)
            for c in counts])
+    if args.check:
+        check_against_raytrace(proto)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
     blender -b --factory-startup --python examples/forest_scene.py -- \
         [--trees 10000] [--ground-vertices 1e6] [--side 1000] [--method ellipsoid] \
-        [--tau 1.5] [--epsilon 1e-2] [--save /tmp/forest.blend]
+        [--tau 0 (calibrate)] [--epsilon 1e-2] [--save /tmp/forest.blend]
 
 (with the add-on installed, or BLENDER_USER_SCRIPTS pointing at a folder whose addons/ links
 addon/canopy_ao, as in the README). Two prototype trees from examples/canopy_scenes.py (the
@@ -88,7 +88,7 @@ def main(argv):
     ap.add_argument("--ground-vertices", type=float, default=1e6)
     ap.add_argument("--side", type=float, default=1000.0, help="ground side, m")
     ap.add_argument("--method", default="ellipsoid")
-    ap.add_argument("--tau", type=float, default=1.5, help="0 = calibrate")
+    ap.add_argument("--tau", type=float, default=0.0, help="0 = calibrate per prototype")
     ap.add_argument("--epsilon", type=float, default=1e-2, help="forest cut-off ε")
     ap.add_argument("--save", default="")
     args = ap.parse_args(argv)
