@@ -60,7 +60,7 @@ void bind_models(py::module_& m) {
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("sphere"), py::arg("tau"),
-      py::arg("band") = 0.1f,
+      py::arg("band") = 0.1,
       "Canopy-shell AO for one sphere (Hegeman 2006 Eq. 4-6, scale-free tau: AO at the centre "
       "= exp(-tau)). positions, normals: float32 (N, 3); returns float32 (N,) in [0, 1], "
       "1 = open sky. Points outside the shell see it as a horizon-clipped sphere occluder of "
@@ -77,7 +77,7 @@ void bind_models(py::module_& m) {
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
-      py::arg("band") = 0.1f,
+      py::arg("band") = 0.1,
       "Canopy-shell AO for one ellipsoid: mapped to the unit sphere (DESIGN 3.2), then as "
       "ao_canopy_sphere. Returns float32 (N,) in [0, 1].");
 
@@ -93,7 +93,7 @@ void bind_models(py::module_& m) {
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
-      py::arg("combine") = "product", py::arg("band") = 0.1f,
+      py::arg("combine") = "product", py::arg("band") = 0.1,
       "AO from several shells (list of Ellipsoid). combine=\"product\": product of every "
       "shell's visibility (in-shell law inside, occluder law outside) - no seams; "
       "\"nearest\": the paper's closest-centre shell alone. Returns float32 (N,) in [0, 1].");
@@ -121,7 +121,7 @@ void bind_models(py::module_& m) {
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
-      py::arg("epsilon") = 1e-3f, py::arg("solid") = false,
+      py::arg("epsilon") = 1e-3, py::arg("solid") = false,
       "Shells seen from outside as horizon-clipped, cosine-weighted sphere occluders scaled by "
       "their opacity 1 - exp(-4 tau/3) (1 if solid), combined as prod(1 - occ_i); each ignored "
       "beyond d_far = r / sin(acos(1 - epsilon/2pi)) (epsilon=0: no cut-off), found through a "
@@ -134,7 +134,7 @@ void bind_models(py::module_& m) {
                        bool solid) {
              return new OccluderField(shells, OccluderOptions{tau, epsilon, solid});
            }),
-           py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3f,
+           py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3,
            py::arg("solid") = false)
       .def(
           "ao",
@@ -171,7 +171,7 @@ void bind_models(py::module_& m) {
       },
       py::arg("positions"), py::arg("normals"), py::arg("ground_height"),
       py::arg("blade_height"), py::arg("up") = py::make_tuple(0.0f, 0.0f, 1.0f),
-      py::arg("floor") = 0.05f,
+      py::arg("floor") = 0.05,
       "Grass AO (Hegeman 2006 Eq. 9): (Pz / 2h)(1 + cos theta), Pz = height above "
       "ground_height along `up` clamped to [0, h], theta the angle between normal and up; "
       "clamped to [floor, 1] (ground points under grass get `floor`). Zero normals count as "
