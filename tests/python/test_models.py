@@ -4,6 +4,7 @@ import math
 import os
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -178,7 +179,10 @@ def test_bad_arguments(sphere):
 
 
 def test_releases_the_gil(sphere):
-    p, n = random_receivers(2_000_000, [1, 2, 3], 3.0)
+    # With a long switch interval the main thread keeps the GIL across the call unless the call
+    # itself releases it; only then can the counter thread tick while the model runs.
+    p, n = random_receivers(1_000_000, [1, 2, 3], 3.0)
+    shells = [_core.Ellipsoid.from_sphere(sphere)] * 4
     ticks = []
     stop = threading.Event()
 
@@ -186,12 +190,17 @@ def test_releases_the_gil(sphere):
         while not stop.is_set():
             ticks.append(1)
 
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(0.5)
     t = threading.Thread(target=count)
     t.start()
     try:
-        for _ in range(5):
-            _core.ao_canopy_shells(p, n, [_core.Ellipsoid.from_sphere(sphere)] * 4, 1.0)
+        time.sleep(0.01)  # let the counter start
+        before = len(ticks)
+        _core.ao_canopy_shells(p, n, shells, 1.0)
+        during = len(ticks) - before
     finally:
         stop.set()
         t.join()
-    assert len(ticks) > 0
+        sys.setswitchinterval(old)
+    assert during > 0
