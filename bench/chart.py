@@ -227,7 +227,7 @@ def summary(rows, all_rows, fronts, reference, role, path):
     print(f"chart: wrote {path}")
 
 
-def strips(ao_dir, out_dir, quick, max_points=25000):
+def strips(ao_dir, out_dir, quick, tag="", max_points=25000):
     """One PNG per scene: side views coloured by AO (reference, then each family's best)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -276,7 +276,7 @@ def strips(ao_dir, out_dir, quick, max_points=25000):
             ax.set_facecolor("#6a8fb5")
         fig.suptitle(f"{scene}: AO per vertex (three-quarter view from above; black = 0, white = 1 open sky)", fontsize=9)
         fig.tight_layout()
-        p = os.path.join(out_dir, f"strip_{scene}.png")
+        p = os.path.join(out_dir, f"strip_{scene}{tag}.png")
         fig.savefig(p, dpi=65)
         plt.close(fig)
         paths.append(p)
@@ -293,13 +293,14 @@ def main(argv=None):
     ap.add_argument("--metric", default="mae", choices=("mae", "rmse", "p95"))
     ap.add_argument("--quick", action="store_true", help="picture strips from the --quick run")
     ap.add_argument("--out", default=OUT)
+    ap.add_argument("--tag", default="", help="suffix for the output names, e.g. _full")
     a = ap.parse_args(argv)
     rows = load(a.csv, a.reference, a.role)
     all_rows = load_all(a.csv)
-    suffix = "" if a.reference == "embree" else f"_{a.reference}"
+    suffix = ("" if a.reference == "embree" else f"_{a.reference}") + a.tag
     fronts = chart(rows, os.path.join(a.out, f"chart{suffix}.png"), a.reference, a.role, a.metric)
     summary(rows, all_rows, fronts, a.reference, a.role, os.path.join(a.out, f"summary{suffix}.md"))
-    strips(os.path.join(a.out, "ao"), a.out, a.quick)
+    strips(os.path.join(a.out, "ao"), a.out, a.quick, a.tag)
     return 0
 
 
