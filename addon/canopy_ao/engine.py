@@ -69,6 +69,19 @@ def available_methods() -> tuple[str, ...]:
                  if m not in _OPTIONAL or (_core is not None and hasattr(_core, _OPTIONAL[m])))
 
 
+def triangles_needed(method: str, tau, role: str) -> bool:
+    """Whether an item's triangles take part in a bake (the add-on skips fetching them
+    otherwise: Blender's loop triangulation costs more than positions and normals together).
+    They are rays' targets (method "raytrace", and the calibration of "auto" or of any method
+    with tau None), the density grid's input, and grass blades (connected components); the
+    analytic models with a given τ need positions and normals only."""
+    if role == "IGNORE":
+        return False
+    if method in ("raytrace", "grid", "auto") or tau is None:
+        return True
+    return role == "GRASS"
+
+
 def _need(name: str):
     if _core is None:
         raise EngineError(core_status()[1])

@@ -47,13 +47,22 @@ def _signature(obj, positions, triangles):
             int(np.asarray(triangles[::step], np.int64).sum()))
 
 
-def role_of(obj, positions, triangles):
-    """(role, how) — the user's override, or a guess from the geometry."""
+def declared_role(obj):
+    """(role, how) when the user set the role or a scene generator tagged it, else None (the
+    role must be guessed from the geometry, which needs its triangles)."""
     if obj.canopy_ao.role != 'AUTO':
         return obj.canopy_ao.role, "set"
     tagged = obj.get("canopy_ao_role")  # set by a scene generator (examples/blender_scene.py)
     if isinstance(tagged, str) and tagged.upper() in roles.ROLES:
         return tagged.upper(), "tagged canopy_ao_role"
+    return None
+
+
+def role_of(obj, positions, triangles):
+    """(role, how) — the user's override, or a guess from the geometry."""
+    declared = declared_role(obj)
+    if declared is not None:
+        return declared
     key = _signature(obj, positions, triangles)
     if key not in _GUESSES:
         if len(_GUESSES) > 4096:
@@ -61,6 +70,10 @@ def role_of(obj, positions, triangles):
         _GUESSES[key] = roles.guess_role(positions, triangles)
     role, why = _GUESSES[key]
     return role, f"guessed: {why}"
+
+
+# Seconds per stage of the last committed bake (for bench/blender_bake_speed.py).
+LAST_TIMINGS = {}
 
 
 def _is_candidate(obj):
@@ -86,6 +99,9 @@ class BakeJob:
         self.opts = opts
         self.scene = context.scene
         self.results = []
+        # Seconds per stage of this bake (bench/blender_bake_speed.py prints them).
+        self.timings = {}
+        t_start = time.perf_counter()
         self.lines = []
         ok, msg = engine.core_status()
         if not ok:
@@ -132,14 +148,26 @@ class BakeJob:
         self.items, self.objects, self.how = [], {}, {}
         target_names = {o.name for o in targets}
         for name, obj in members.items():
+            # A declared role costs nothing; a guess needs the triangles (connected components).
+            declared = declared_role(obj)
+            if declared is not None and declared[0] == "IGNORE":
+                continue
+            tris_needed = declared is None or engine.triangles_needed(
+                opts["method"], opts["tau"], declared[0])
             # Only a target's result goes back onto its mesh: a non-target may change its
             # vertex count (it only occludes and shapes the proxies).
             try:
                 pos, nor, tris = mesh_io.evaluated_arrays(
-                    obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names)
+                    obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
+                    triangles=tris_needed, timings=self.timings)
             except mesh_io.MeshIOError as exc:
                 raise BakeError(str(exc)) from None
-            role, how = role_of(obj, pos, tris)
+            t0 = time.perf_counter()
+            role, how = declared or role_of(obj, pos, tris)
+            if declared is None and not engine.triangles_needed(opts["method"], opts["tau"],
+                                                                role):
+                tris = tris[:0]  # not part of this bake (kept only for the guess)
+            self.timings["roles"] = self.timings.get("roles", 0.0) + time.perf_counter() - t0
             if role == "IGNORE":
                 continue
             self.items.append(engine.SceneItem(name, role, tree_of(obj), pos, nor, tris))
@@ -153,6 +181,7 @@ class BakeJob:
                                           opts["overwrite"])
             if why:
                 raise BakeError(why + " (nothing was changed)")
+        t0 = time.perf_counter()
         # Instanced trees (particles, collection instances, geometry nodes): each prototype is
         # baked once (its instances share its mesh) and every instance occludes (instances.py).
         try:
@@ -169,18 +198,29 @@ class BakeJob:
             forest_epsilon=opts.get("forest_epsilon", 1e-2))
         self.plan = None
         self.index = 0
+        self._lap("instances", t0)
+        self._lap("gather (total)", t_start)
+
+    def _lap(self, key, t0):
+        """Add the seconds since t0 to timings[key]; returns now."""
+        t1 = time.perf_counter()
+        self.timings[key] = self.timings.get(key, 0.0) + t1 - t0
+        return t1
 
     @property
     def steps(self):
         return len(self.targets) + 1
 
     def prepare(self):
+        t0 = time.perf_counter()
         try:
             self.plan = engine.prepare(self.items, self.settings)
+            t0 = self._lap("prepare (fit, calibrate)", t0)
             if self.prototypes:
                 skip = {it.name for it in self.targets}
                 engine.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
                 self.lines.extend(self.prototypes.lines())
+                self._lap("instances", t0)
         except (engine.EngineError, ValueError, RuntimeError) as exc:
             raise BakeError(f"bake failed: {exc}") from exc
 
@@ -190,10 +230,12 @@ class BakeJob:
             return None
         it = self.targets[self.index]
         self.index += 1
+        t0 = time.perf_counter()
         try:
             r = engine.evaluate_item(self.plan, it)
         except (engine.EngineError, ValueError, RuntimeError) as exc:
             raise BakeError(f"{it.name}: bake failed: {exc}") from exc
+        self._lap("evaluate", t0)
         self.results.append(r)
         line = (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method {r.method}, "
                 f"{r.vertices} vertices, {r.seconds:.3f} s")
@@ -211,6 +253,7 @@ class BakeJob:
         """Write every result, then the optional extras. Returns the JSON-ready report."""
         o = self.opts
         texel_stats = {}
+        t0 = time.perf_counter()
         if o["mode"] == 'TEXEL':
             from . import texel
             try:
@@ -222,10 +265,12 @@ class BakeJob:
                 obj = self.objects[r.name]
                 mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
             self.prototypes.commit(o["attribute"], o["overwrite"])
+        t0 = self._lap("write", t0)
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, engine.proxy_dicts(self.plan))
         elif mesh_io.PROXY_COLLECTION in bpy.data.collections:
             mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
+        t0 = self._lap("proxies", t0)
         rep = engine.report(self.plan, self.results)
         rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
         rep["mode"] = o["mode"].lower()
@@ -254,6 +299,10 @@ class BakeJob:
             self.objects[r.name].canopy_ao.last_result = text
         self.scene.canopy_ao.last_report = (
             f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)")
+        self._lap("report, extras", t0)
+        rep["stage_seconds"] = dict(self.timings)
+        LAST_TIMINGS.clear()
+        LAST_TIMINGS.update(self.timings)
         self.report_dict = rep
         return rep
 

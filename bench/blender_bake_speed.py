@@ -1,0 +1,235 @@
+"""Whole-bake wall time in Blender for a large leaf mesh (issue 3's speed target).
+
+    blender -b --factory-startup --python bench/blender_bake_speed.py -- \
+        [--vertices 1000000] [--method sphere] [--tau 1.5|auto] [--repeats 3]
+
+The add-on is found through BLENDER_USER_SCRIPTS (addons/canopy_ao) or, failing that, in this
+repository's addon/ folder. Builds one leaf mesh (quads, 4 vertices each, smooth shaded, role
+set explicitly to Canopy so no guessing is paid), then:
+
+- times ``bpy.ops.canopy_ao.bake`` end to end: one warm-up, best of ``--repeats``;
+- prints the operator's own per-stage times for that best run (``operators.LAST_TIMINGS``);
+- times each bpy / numpy / core primitive on its own, including the ones the operator skips
+  for this method (loop triangles, role guessing), and one memfile undo push of the scene.
+
+The machine is shared: the load average is printed with the numbers. Exits non-zero (message
+on stderr) on failure.
+"""
+
+import argparse
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def leaf_mesh(name, n_vertices, seed=0):
+    """A crown of random leaf quads (4 vertices each) in an ellipsoid 5 × 5 × 4 m, as a mesh
+    built with vertices.add + foreach_set (from_pydata would take minutes at 1M vertices)."""
+    import bpy
+    sys.path.insert(0, os.path.join(REPO, "examples"))
+    from canopy_scenes import leaf_quads
+
+    rng = np.random.default_rng(seed)
+    n_leaves = max(1, n_vertices // 4)
+    d = rng.normal(size=(n_leaves, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = rng.uniform(0.0, 1.0, size=(n_leaves, 1)) ** (1.0 / 3.0)
+    anchors = d * r * np.array([2.5, 2.5, 2.0]) + np.array([0.0, 0.0, 4.0])
+    facing = d + 0.6 * rng.normal(size=(n_leaves, 3))
+    facing /= np.linalg.norm(facing, axis=1, keepdims=True)
+    verts, _tris, _uv = leaf_quads(anchors, facing, rng)
+    verts = np.ascontiguousarray(verts, dtype=np.float32)
+
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(verts))
+    me.vertices.foreach_set("co", verts.ravel())
+    me.loops.add(4 * n_leaves)
+    me.loops.foreach_set("vertex_index", np.arange(4 * n_leaves, dtype=np.int32))
+    me.polygons.add(n_leaves)
+    me.polygons.foreach_set("loop_start", np.arange(0, 4 * n_leaves, 4, dtype=np.int32))
+    try:  # writable in 3.x; derived from loop_start in 4.x
+        me.polygons.foreach_set("loop_total", np.full(n_leaves, 4, dtype=np.int32))
+    except (AttributeError, TypeError, RuntimeError):
+        pass
+    me.polygons.foreach_set("use_smooth", np.ones(n_leaves, dtype=bool))
+    me.update(calc_edges=True)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _best(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def primitives(ob, method, tau, repeats):
+    """Each stage on its own, best of ``repeats``: {stage: seconds}."""
+    import bpy
+    from canopy_ao import engine, mesh_io, roles
+
+    out = {}
+    dg = bpy.context.evaluated_depsgraph_get()
+    me = ob.data
+    n = len(me.vertices)
+    out["evaluated object (depsgraph, no copy)"] = _best(
+        lambda: ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data, repeats)
+
+    def copy():
+        oe = ob.evaluated_get(dg)
+        oe.to_mesh()
+        oe.to_mesh_clear()
+    out["evaluated mesh copy (to_mesh)"] = _best(copy, repeats)
+    co = np.empty(n * 3, np.float32)
+    out["positions foreach_get (float32)"] = _best(lambda: me.vertices.foreach_get("co", co),
+                                                   repeats)
+    co64 = np.empty(n * 3, np.float64)
+    out["positions foreach_get (float64)"] = _best(lambda: me.vertices.foreach_get("co", co64),
+                                                   1)
+    nor = np.empty(n * 3, np.float32)
+    if hasattr(me, "vertex_normals"):
+        out["normals vertex_normals 'vector'"] = _best(
+            lambda: me.vertex_normals.foreach_get("vector", nor), repeats)
+    out["normals vertices 'normal'"] = _best(lambda: me.vertices.foreach_get("normal", nor),
+                                             repeats)
+
+    def tris():
+        me.calc_loop_triangles()
+        t = np.empty(len(me.loop_triangles) * 3, np.int32)
+        me.loop_triangles.foreach_get("vertices", t)
+        return t
+    out["triangles (calc_loop_triangles + get)"] = _best(tris, 1)
+    t = tris().reshape(-1, 3)
+    p = co.reshape(-1, 3)
+    nv = nor.reshape(-1, 3)
+    out["role guessing (not paid: role set)"] = _best(lambda: roles.guess_role(p, t), 1)
+    s = engine.BakeSettings(method=method, tau=tau)
+    item = engine.SceneItem(ob.name, "CANOPY", "Tree", p, nv, np.zeros((0, 3), np.int32))
+    plan = None
+
+    def prep():
+        nonlocal plan
+        plan = engine.prepare([item], s)
+    out["fit (engine.prepare)"] = _best(prep, repeats)
+    out["evaluate (engine.evaluate_item)"] = _best(lambda: engine.evaluate_item(plan, item),
+                                                   repeats)
+    ao = engine.evaluate_item(plan, item).ao
+    name = "CanopyAO_bench"
+    out["attribute write (FLOAT_COLOR, float32)"] = _best(
+        lambda: mesh_io.write_ao_attribute(ob, name, ao), repeats)
+    attr = me.attributes[name]
+    rgba64 = np.ones(n * 4, np.float64)
+    out["  same from float64 (avoided)"] = _best(lambda: attr.data.foreach_set("color", rgba64), 1)
+    me.attributes.remove(me.attributes[name])
+    proxies = engine.proxy_dicts(plan)
+    out["proxies (show_proxies)"] = _best(lambda: mesh_io.show_proxies(bpy.context.scene,
+                                                                       proxies), repeats)
+    def reeval():
+        me.update_tag()
+        bpy.context.view_layer.update()
+    out["depsgraph re-evaluation of the changed mesh"] = _best(reeval, repeats)
+    try:
+        out["undo push (memfile, whole scene)"] = _best(
+            lambda: bpy.ops.ed.undo_push(message="bench"), repeats)
+    except RuntimeError as exc:
+        print(f"undo push not measurable here: {exc}")
+    return out
+
+
+def main(argv):
+    import bpy
+
+    ap = argparse.ArgumentParser(prog="blender_bake_speed.py")
+    ap.add_argument("--vertices", type=int, default=1_000_000)
+    ap.add_argument("--method", default="sphere")
+    ap.add_argument("--tau", default="1.5", help="a number, or 'auto' to calibrate (traces)")
+    ap.add_argument("--repeats", type=int, default=3)
+    a = ap.parse_args(argv)
+
+    import importlib.util
+    if importlib.util.find_spec("canopy_ao") is None:
+        sys.path.insert(0, os.path.join(REPO, "addon"))
+    import addon_utils
+    if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
+        raise RuntimeError("the canopy_ao add-on did not enable")
+    from canopy_ao import engine, operators
+
+    ok, msg = engine.core_status()
+    if not ok:
+        raise RuntimeError(msg)
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob, do_unlink=True)
+    t0 = time.perf_counter()
+    ob = leaf_mesh("Leaves", a.vertices)
+    n = len(ob.data.vertices)
+    print(f"built a {n}-vertex leaf mesh in {time.perf_counter() - t0:.2f} s")
+    ob.canopy_ao.role = 'CANOPY'
+    ob.canopy_ao.tree = "Tree"
+    bpy.context.view_layer.update()
+
+    kw = dict(objects=ob.name, method=a.method, attribute="CanopyAO", show_proxies=True)
+    if a.tau != "auto":
+        kw["tau"] = float(a.tau)
+    else:
+        bpy.context.scene.canopy_ao.tau_auto = True
+
+    def bake():
+        r = bpy.ops.canopy_ao.bake(**kw)
+        if r != {'FINISHED'}:
+            raise RuntimeError(f"bake returned {r}")
+
+    bake()  # warm-up: first-call imports, first attribute creation
+    times, stages = [], []
+    for _ in range(a.repeats):
+        t0 = time.perf_counter()
+        bake()
+        times.append(time.perf_counter() - t0)
+        stages.append(dict(getattr(operators, "LAST_TIMINGS", {}) or {}))
+    best = int(np.argmin(times))
+    load = os.getloadavg()
+    print(f"\nbpy.ops.canopy_ao.bake, {n} vertices, method {a.method}, tau {a.tau}: "
+          f"best {times[best]:.3f} s of {a.repeats} (all: "
+          f"{', '.join(f'{t:.3f}' for t in times)}); load average {load[0]:.2f} {load[1]:.2f}")
+    if stages[best]:
+        print("\n| operator stage (best run) | ms |\n|---|---:|")
+        for k, v in stages[best].items():
+            print(f"| {k} | {1e3 * v:.1f} |")
+        total = sum(v for k, v in stages[best].items() if "total" not in k
+                    and k not in ("fetch", "positions", "normals", "triangles", "transform",
+                                  "roles", "instances"))
+        print(f"| operator, sum of gather + later stages | {1e3 * total:.1f} |")
+        print(f"| bpy.ops overhead + Blender's re-evaluation of the changed mesh "
+              f"| {1e3 * (times[best] - total):.1f} |")
+
+    print("\n| primitive, on its own (best of 3 unless slow) | ms |\n|---|---:|")
+    tau = None if a.tau == "auto" else float(a.tau)
+    for k, v in primitives(ob, a.method, tau, a.repeats).items():
+        print(f"| {k} | {1e3 * v:.1f} |")
+    load = os.getloadavg()
+    print(f"\nload average at the end: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    try:
+        rc = main(argv)
+    except SystemExit as e:
+        rc = e.code if isinstance(e.code, int) else 1
+    except Exception as e:  # background mode: a message and a non-zero exit code
+        import traceback
+        traceback.print_exc()
+        print(f"blender_bake_speed: error: {e}", file=sys.stderr)
+        rc = 1
+    sys.stdout.flush()
+    if rc:
+        os._exit(rc)
