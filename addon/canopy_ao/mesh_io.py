@@ -110,7 +110,7 @@ def _to_world(co, nor, matrix_world):
     if zero.any():
         nor[zero] = (0.0, 0.0, 1.0)
         l2[zero] = 1.0
-    if not identity or np.abs(l2 - 1.0).max() > 1e-6:
+    if len(l2) and (not identity or np.abs(l2 - 1.0).max() > 1e-6):  # empty: GN scatter
         nor /= np.sqrt(l2)[:, None]
     return np.ascontiguousarray(co), np.ascontiguousarray(nor)
 

@@ -111,3 +111,26 @@ def test_particle_instances(proto):
     _job, rep = bake_all()
     assert ground.name in rep["objects"]
     check(rep, places)
+
+
+def test_geometry_nodes_instances(proto):
+    """Instance on Points of a Collection Info (the scatter object's own mesh is empty)."""
+    scatter = add_mesh("Scatter", np.float32([[0, 0, 0]]), np.zeros((0, 3), np.int32))
+    ng = bpy.data.node_groups.new("Forest", 'GeometryNodeTree')
+    ng.inputs.new('NodeSocketGeometry', "Geometry")
+    ng.outputs.new('NodeSocketGeometry', "Geometry")
+    out = ng.nodes.new('NodeGroupOutput')
+    line = ng.nodes.new('GeometryNodeMeshLine')
+    line.inputs["Count"].default_value = 3
+    line.inputs["Start Location"].default_value = (-6.0, -3.0, 0.0)
+    line.inputs["Offset"].default_value = (6.0, 3.0, 0.0)
+    iop = ng.nodes.new('GeometryNodeInstanceOnPoints')
+    info = ng.nodes.new('GeometryNodeCollectionInfo')
+    info.inputs["Collection"].default_value = proto
+    ng.links.new(line.outputs["Mesh"], iop.inputs["Points"])
+    ng.links.new(info.outputs[0], iop.inputs["Instance"])
+    ng.links.new(iop.outputs[0], out.inputs[0])
+    scatter.modifiers.new("GN", 'NODES').node_group = ng
+    bpy.context.view_layer.update()
+    _job, rep = bake_all()
+    check(rep, [((-6.0 + 6 * i, -3.0 + 3 * i, 0.0), 0.0, 1.0) for i in range(3)])
