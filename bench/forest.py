@@ -73,7 +73,8 @@ def ground(vertices, side):
 
 
 def in_reach(shells, epsilon, point):
-    """Shells whose cut-off sphere (d_far about the centre, Shanmugam–Arikan Eq. 5) holds point."""
+    """Shells whose cut-off sphere (d_far about the centre, Shanmugam–Arikan Eq. 5) holds
+    point."""
     c, _q, r = forest.shell_arrays(shells)
     d_far = r.max(1) / math.sin(math.acos(1 - epsilon / (2 * math.pi)))
     return int(np.sum(np.linalg.norm(c - point, axis=1) <= d_far))
@@ -175,7 +176,8 @@ def main(argv=None):
     ex = proto.proxies["T"]
     print(f"prototype: round tree, {len(ex)} shells (largest semi-axis "
           f"{max(float(np.max(e.radii)) for e in ex):.2f} m) + {len(proto.trunks.get('T', []))} "
-          f"trunk, τ {proto.tau:.3g} (calibrated); ground {int(round(math.sqrt(verts))) ** 2} vertices; "
+          f"trunk, τ {proto.tau:.3g} (calibrated); "
+          f"ground {int(round(math.sqrt(verts))) ** 2} vertices; "
           f"ε {args.epsilon:g}")
     table(f"Fixed ground, {args.side:.0f} m square (density grows with the count)",
           [run(proto, c, args.side, verts, args.epsilon, args.subsample) for c in counts])

@@ -132,7 +132,7 @@ def main(argv):
         print("note:", note)
     ao = mesh_io.read_ao_attribute(g, opts["attribute"])
     gr = rep["objects"]["Ground"]
-    print(f"prototypes self-baked: " + ", ".join(
+    print("prototypes self-baked: " + ", ".join(
         f"{n} ({p['vertices']} v, {p['seconds']:.2f} s)"
         for n, p in rep["instances"]["prototypes"].items()))
     print(f"timings: {', '.join(f'{k} {v:.2f} s' for k, v in rep['timings'].items())}")

@@ -73,7 +73,8 @@ class Prototypes:
             self.objects[name] = obj
             self.how[name] = how
         # Only trees with leaves are fitted (instanced rocks have no shells to occlude with).
-        for tree in [t for t, its in self.items.items() if not any(i.role == "CANOPY" for i in its)]:
+        leafless = [t for t, its in self.items.items() if not any(i.role == "CANOPY" for i in its)]
+        for tree in leafless:
             for it in self.items.pop(tree):
                 self.objects.pop(it.name)
                 self.writable.discard(it.name)
