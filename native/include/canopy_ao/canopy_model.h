@@ -59,8 +59,9 @@ enum class ShellCombine {
 float canopy_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, const CanopyOptions& options);
 
 // === Arrays. positions, normals: N×3 float32 (world space); out: N floats, written.
-/// PRE: positions.size == normals.size; sphere.radius > 0; 0 ≤ τ < ∞; band ≥ 0.
-/// Bad input throws std::invalid_argument.
+/// PRE: positions.size == normals.size; sphere.radius > 0; 0 ≤ τ < ∞; band ≥ 0 (else
+/// std::invalid_argument). Coordinates must be finite: not re-checked here (a second pass over
+/// the data would cost as much as the model); the Python layer (arrays.h) checks them.
 void ao_canopy_sphere(PointsView positions, PointsView normals, const Sphere& sphere,
                       const CanopyOptions& options, float* out);
 /// PRE: ellipsoid radii > 0, axes orthonormal (to 1e-3).
