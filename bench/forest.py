@@ -12,7 +12,7 @@ from Blender's depsgraph. Receivers: a ground grid of --vertices vertices, norma
 Two tables, because "the tree count" can grow two ways:
 - fixed ground (--side m square) with more and more trees: the density grows, so the occluders
   in reach of a ground point grow too; the cut-off bounds the cost by that local count
-  ("in reach" column: shells whose d_far reaches the median vertex), never by N;
+  ("in reach": mean over 2000 vertices of the occluders whose d_far reaches them), never by N;
   brute force (ε = 0: every shell for every vertex, timed on a subsample of ≤ 20k vertices) is
   O(N) per vertex.
 - fixed density (the forest grows with N, 1 tree per 100 m² as the 10,000-tree, 1 km² case):
@@ -72,12 +72,16 @@ def ground(vertices, side):
     return p, n
 
 
-def in_reach(shells, epsilon, point):
-    """Shells whose cut-off sphere (d_far about the centre, Shanmugam–Arikan Eq. 5) holds
-    point."""
+def in_reach(shells, epsilon, points, chunk=256):
+    """Mean number of shells whose cut-off sphere (d_far about the centre, Shanmugam–Arikan
+    Eq. 5) holds a point: the per-receiver work a perfect grid would leave (machine-free)."""
     c, _q, r = forest.shell_arrays(shells)
-    d_far = r.max(1) / math.sin(math.acos(1 - epsilon / (2 * math.pi)))
-    return int(np.sum(np.linalg.norm(c - point, axis=1) <= d_far))
+    far2 = (r.max(1) / math.sin(math.acos(1 - epsilon / (2 * math.pi)))) ** 2
+    total = 0
+    for i in range(0, len(points), chunk):
+        d2 = ((points[i:i + chunk, None, :] - c[None]) ** 2).sum(-1)
+        total += int(np.sum(d2 <= far2))
+    return total / max(len(points), 1)
 
 
 def run(proto, count, side, vertices, epsilon, sub):
@@ -87,9 +91,13 @@ def run(proto, count, side, vertices, epsilon, sub):
     t0 = time.perf_counter()
     f = forest.Forest([pr], epsilon=epsilon)
     build = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    ao = f.ao(p, n)
-    dt = time.perf_counter() - t0
+    dt, ao = math.inf, None
+    for _ in range(2):  # best of 2 when short: the machine is shared
+        t0 = time.perf_counter()
+        ao = f.ao(p, n)
+        dt = min(dt, time.perf_counter() - t0)
+        if dt > 20:
+            break
     # ε = 0 costs every occluder for every vertex: at most ~1e8 pairs, at least 500 vertices.
     sub = int(min(sub, len(p), max(500, 1e8 / max(count * 5, 1))))
     idx = np.random.default_rng(1).choice(len(p), size=sub, replace=False)
@@ -98,11 +106,13 @@ def run(proto, count, side, vertices, epsilon, sub):
     t0 = time.perf_counter()
     full = brute.ao(ps, ns)
     dt_full = time.perf_counter() - t0
-    shells = forest.instance_shells(pr.shells, mats)
+    shells = forest.instance_shells(pr.shells + pr.solids, mats)
+    reach = in_reach(shells, epsilon, ps[:2000].astype(np.float64))
     return {
         "trees": count, "side": side, "shells": f.shell_count + f.solid_count,
-        "reach": in_reach(shells, epsilon, np.zeros(3)), "max_cand": f.max_candidates,
+        "reach": reach, "max_cand": f.max_candidates,
         "build_s": build, "eval_s": dt, "ns_vertex": dt / len(p) * 1e9,
+        "ns_reach": dt / len(p) * 1e9 / max(reach, 1e-9),
         "brute_ns_vertex": dt_full / len(ps) * 1e9,
         "max_err": float(np.max(np.abs(ao[idx] - full))), "mean_ao": float(ao.mean()),
     }
@@ -147,14 +157,16 @@ def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256)
 
 def table(title, rows):
     print(f"\n{title}")
-    head = ("trees", "side m", "occluders", "in reach", "max cand", "build s", "eval s",
-            "ns/vertex", "ε=0 ns/vertex", "max |Δ| vs ε=0", "mean AO")
+    head = ("trees", "side m", "occluders", "in reach (mean)", "max cand", "build s", "eval s",
+            "ns/vertex", "ns per occluder in reach", "ε=0 ns/vertex", "max |Δ| vs ε=0",
+            "mean AO")
     print("| " + " | ".join(head) + " |")
     print("|" + "---|" * len(head))
     for r in rows:
-        print(f"| {r['trees']} | {r['side']:.0f} | {r['shells']} | {r['reach']} | "
+        print(f"| {r['trees']} | {r['side']:.0f} | {r['shells']} | {r['reach']:.0f} | "
               f"{r['max_cand']} | {r['build_s']:.2f} | {r['eval_s']:.2f} | "
-              f"{r['ns_vertex']:.0f} | {r['brute_ns_vertex']:.0f} | {r['max_err']:.4f} | "
+              f"{r['ns_vertex']:.0f} | {r['ns_reach']:.0f} | {r['brute_ns_vertex']:.0f} | "
+              f"{r['max_err']:.4f} | "
               f"{r['mean_ao']:.3f} |", flush=True)
 
 
