@@ -184,7 +184,12 @@ def _fit_tree(points: np.ndarray, settings: BakeSettings):
     cost most (1.2 s for 1M points), so only the methods that use them get them; the others
     get [ellipsoid]."""
     sphere = _need("fit_sphere")(points, trim=settings.trim)
-    ell = _need("fit_ellipsoid")(points, trim=settings.trim)
+    if settings.method == "sphere":
+        # The sphere model uses no ellipsoid: skip its fit (~40 ms per million points); the
+        # sphere is then also the crown a trunk's bole is cut from (_bole), as it is the medium.
+        ell = _core.Ellipsoid.from_sphere(sphere)
+    else:
+        ell = _need("fit_ellipsoid")(points, trim=settings.trim)
     k = max(1, min(settings.shells, len(points) // 64))
     if settings.method not in ("auto", "shells", "medium"):
         k = 1
@@ -287,18 +292,28 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         claimed |= ins
         if not done.any():
             continue
-        pi, ni = np.ascontiguousarray(p[done]), np.ascontiguousarray(n[done])
+        every = bool(done.all())  # one crown and all its leaves: no gather / scatter copies
+        pi, ni = (p, n) if every else (np.ascontiguousarray(p[done]),
+                                       np.ascontiguousarray(n[done]))
         # Inside several trees' shells (crowns that interlock): the in-shell model of the
         # first, the others as occluders (which skip shells a point is inside).
         others = [e for u, es in shells.items() if u != t for e in es]
-        ao[done] = _in_shell(pi, ni, plan.fits[t], method, tau) * _occluders(pi, ni, others, tau)
+        val = _in_shell(pi, ni, plan.fits[t], method, tau)
+        if others:
+            val = val * _occluders(pi, ni, others, tau)
+        if every:
+            ao = np.asarray(val, dtype=np.float32)
+        else:
+            ao[done] = val
     solids = [e for t, es in plan.trunks.items()
               if t != tree or role in ("GROUND", "GRASS") for e in es]
-    ao *= _occluders(p, n, solids, tau, solid=True)
+    if solids:
+        ao = ao * _occluders(p, n, solids, tau, solid=True)
     if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
         ao *= _need("ao_grass")(p, n, float(ground), float(blade))
-    return np.clip(ao, 0.0, 1.0).astype(np.float32, copy=False)
+    ao = np.asarray(ao, dtype=np.float32)
+    return np.clip(ao, 0.0, 1.0, out=ao)  # ao is this function's own array
 
 
 def _trace(plan: Plan, p, n, samples):
@@ -441,7 +456,8 @@ def prepare(items, settings: BakeSettings) -> Plan:
         if it.role == "CANOPY" and len(it.positions):
             trees.setdefault(it.tree, []).append(it.positions)
     for tree, pts in trees.items():
-        pts = np.ascontiguousarray(np.concatenate(pts), dtype=np.float32)
+        pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
+                                   dtype=np.float32)
         sphere, ell, shells = _fit_tree(pts, settings)
         plan.fits[tree] = (sphere, ell, shells)
     for it in items:

@@ -171,9 +171,10 @@ def write_ao_attribute(obj, name, ao, overwrite=False):
         attr = None
     if attr is None:
         attr = mesh.color_attributes.new(name=name, type='FLOAT_COLOR', domain='POINT')
-    rgba = np.empty((n, 4), dtype=np.float32)
-    rgba[:, :3] = ao[:, None]
-    rgba[:, 3] = 1.0
+    rgba = np.ones((n, 4), dtype=np.float32)  # column by column: the fastest fill measured
+    rgba[:, 0] = ao
+    rgba[:, 1] = ao
+    rgba[:, 2] = ao
     attr.data.foreach_set("color", rgba.reshape(-1))
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
