@@ -106,6 +106,8 @@ def _to_world(co, nor, matrix_world):
             nm = np.eye(3)
         nor = nor @ nm.T.astype(np.float32)
     l2 = np.einsum("ij,ij->i", nor, nor)
+    if identity and len(l2) and l2.min() >= 1.0 - 1e-6 and l2.max() <= 1.0 + 1e-6:
+        return co, nor  # Blender's own unit normals (NaN fails the test and is fixed below)
     zero = ~(l2 > 1e-40)  # also NaN
     if zero.any():
         nor[zero] = (0.0, 0.0, 1.0)
