@@ -348,3 +348,62 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
         cli.main(["--objects", "Ground", "--method", "sphere", "--tau", "2", "--no-proxies"])
     assert exc.value.code == 0
     assert capsys.readouterr().out.startswith("Ground: role GROUND, method sphere")
+
+
+def test_fast_read_matches_evaluated_copy(tree_scene_objects):
+    """With nothing changing the geometry the mesh is read in place (no to_mesh copy): same
+    positions, normals and triangles as the evaluated copy, in world space, unit normals."""
+    from canopy_ao import mesh_io as mio
+    ob = bpy.data.objects["Leaves"]
+    ob.location = (1.0, -2.0, 0.5)
+    ob.rotation_euler = (0.3, 0.0, 1.1)
+    ob.scale = (2.0, 1.0, 0.5)  # non-uniform: normals by the inverse transpose, renormalised
+    bpy.context.view_layer.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    assert mio._evaluated_is_original(ob)
+    fast = mio.evaluated_arrays(ob, dg)
+    t = {}
+    no_tris = mio.evaluated_arrays(ob, dg, triangles=False, timings=t)
+    assert no_tris[2].shape == (0, 3) and t["triangles"] < 0.01 and "positions" in t
+    mod = ob.modifiers.new("Nothing", 'DISPLACE')  # forces the evaluated-copy path
+    mod.strength = 0.0
+    bpy.context.view_layer.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    assert not mio._evaluated_is_original(ob)
+    copy = mio.evaluated_arrays(ob, dg)
+    np.testing.assert_allclose(fast[0], copy[0], atol=1e-5)
+    np.testing.assert_allclose(fast[1], copy[1], atol=1e-5)
+    np.testing.assert_array_equal(fast[2], copy[2])
+    np.testing.assert_array_equal(no_tris[0], fast[0])
+    np.testing.assert_allclose(np.linalg.norm(fast[1], axis=1), 1.0, atol=1e-5)
+    m = np.array(ob.matrix_world)
+    co = np.array([v.co[:] for v in ob.data.vertices[:50]])
+    np.testing.assert_allclose(fast[0][:50], co @ m[:3, :3].T + m[:3, 3], atol=1e-5)
+
+
+def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
+    """Set roles and a given τ with an analytic model: no object's triangles are fetched, and
+    the bake equals the one that fetched them (grass keeps its blades)."""
+    from canopy_ao import mesh_io as mio, operators
+    roles = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
+    for name, role in roles.items():
+        bpy.data.objects[name].canopy_ao.role = role
+    asked, force = {}, [True]
+    real = mio.evaluated_arrays
+
+    def spy(obj, depsgraph, same_count=True, triangles=True, timings=None):
+        asked[obj.name] = triangles
+        return real(obj, depsgraph, same_count, triangles or force[0], timings)
+    monkeypatch.setattr(mio, "evaluated_arrays", spy)
+    assert bake(method="sphere", tau=1.5) == {'FINISHED'}  # every triangle fetched
+    before = {n: ao_of(n) for n in roles}
+    force[0] = False
+    assert bake(method="sphere", tau=1.5) == {'FINISHED'}
+    assert asked == {"Trunk": False, "Leaves": False, "Ground": False, "Grass": True}
+    for n in roles:
+        np.testing.assert_array_equal(ao_of(n), before[n])
+    assert set(operators.LAST_TIMINGS) >= {"positions", "normals", "evaluate", "write"}
+    asked.clear()
+    bpy.context.scene.canopy_ao.tau_auto = True  # calibration traces every triangle
+    assert bake(method="sphere") == {'FINISHED'}
+    assert all(asked.values())

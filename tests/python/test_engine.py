@@ -144,3 +144,35 @@ def test_a_missing_native_function_says_rebuild(monkeypatch):
         engine._need("ao_canopy_sphere")
     assert engine.available_methods()[:4] == ("auto", "sphere", "ellipsoid", "shells")
     assert "grid" not in engine.available_methods()
+
+
+def test_triangles_needed_only_by_rays_grid_calibration_and_grass(scene):
+    """The add-on skips Blender's loop triangulation when this says no: an analytic bake with a
+    given τ then gives the same AO without any triangles but the grass's."""
+    need = engine.triangles_needed
+    for role in ("CANOPY", "TRUNK", "GROUND"):
+        assert not need("sphere", 1.5, role) and not need("shells", 2.0, role)
+        assert need("sphere", None, role) and need("auto", 1.5, role)
+        assert need("raytrace", 1.5, role) and need("grid", 1.5, role)
+    assert need("ellipsoid", 1.5, "GRASS") and not need("auto", None, "IGNORE")
+    for method in ("sphere", "ellipsoid", "shells"):
+        s = engine.BakeSettings(method=method, tau=1.5)
+        lean = [engine.SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
+                                 it.triangles if need(method, 1.5, it.role)
+                                 else np.zeros((0, 3), np.int32)) for it in scene]
+        full, _ = engine.bake(scene, s)
+        got, _ = engine.bake(lean, s)
+        for a, b in zip(full, got):
+            np.testing.assert_array_equal(a.ao, b.ao)
+
+
+def test_sphere_method_fits_no_ellipsoid(scene, monkeypatch):
+    calls = []
+    real = engine._core.fit_ellipsoid
+    monkeypatch.setattr(engine._core, "fit_ellipsoid",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+    plan = engine.prepare(scene, engine.BakeSettings(method="sphere", tau=1.5))
+    sphere, ell, shells = plan.fits["T"]
+    assert np.allclose(ell.radii, sphere.radius) and shells == [ell]
+    # trunks still get their solid (fit_ellipsoid on the bole, outside the sphere)
+    assert len(calls) == len(plan.trunks.get("T", []))
