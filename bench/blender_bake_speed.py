@@ -1,11 +1,14 @@
 """Whole-bake wall time in Blender for a large leaf mesh (issue 3's speed target).
 
     blender -b --factory-startup --python bench/blender_bake_speed.py -- \
-        [--vertices 1000000] [--method sphere] [--tau 1.5|auto] [--repeats 3]
+        [--vertices 1000000] [--method sphere] [--tau 1.5|auto] [--repeats 3] \
+        [--scene leaves|large_tree]
 
 The add-on is found through BLENDER_USER_SCRIPTS (addons/canopy_ao) or, failing that, in this
 repository's addon/ folder. Builds one leaf mesh (quads, 4 vertices each, smooth shaded, role
-set explicitly to Canopy so no guessing is paid), then:
+set explicitly to Canopy so no guessing is paid) — or, with ``--scene large_tree``, the round
+tree of examples/canopy_scenes.py with ~``--vertices`` leaf vertices plus its trunk and ground
+(roles set explicitly too) — then:
 
 - times ``bpy.ops.canopy_ao.bake`` end to end: one warm-up, best of ``--repeats``;
 - prints the operator's own per-stage times for that best run (``operators.LAST_TIMINGS``);
@@ -161,6 +164,7 @@ def main(argv):
     ap.add_argument("--method", default="sphere")
     ap.add_argument("--tau", default="1.5", help="a number, or 'auto' to calibrate (traces)")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--scene", choices=("leaves", "large_tree"), default="leaves")
     a = ap.parse_args(argv)
 
     import importlib.util
@@ -177,14 +181,27 @@ def main(argv):
     for ob in list(bpy.data.objects):
         bpy.data.objects.remove(ob, do_unlink=True)
     t0 = time.perf_counter()
-    ob = leaf_mesh("Leaves", a.vertices)
-    n = len(ob.data.vertices)
-    print(f"built a {n}-vertex leaf mesh in {time.perf_counter() - t0:.2f} s")
-    ob.canopy_ao.role = 'CANOPY'
-    ob.canopy_ao.tree = "Tree"
+    if a.scene == "leaves":
+        ob = leaf_mesh("Leaves", a.vertices)
+        ob.canopy_ao.role = 'CANOPY'
+        ob.canopy_ao.tree = "Tree"
+        names = [ob.name]
+    else:
+        sys.path.insert(0, os.path.join(REPO, "examples"))
+        from blender_scene import build_blender
+        from canopy_scenes import round_tree
+        objs = build_blender(round_tree(0, leaves=max(1, a.vertices // 4)))
+        for part_ob in objs.values():
+            part_ob.canopy_ao.role = part_ob["canopy_ao_role"].upper()
+        ob = max(objs.values(), key=lambda o: len(o.data.vertices))
+        names = list(objs)
+    n = sum(len(bpy.data.objects[nm].data.vertices) for nm in names)
+    print(f"built {a.scene}: {n} vertices in {len(names)} object(s) in "
+          f"{time.perf_counter() - t0:.2f} s")
     bpy.context.view_layer.update()
 
-    kw = dict(objects=ob.name, method=a.method, attribute="CanopyAO", show_proxies=True)
+    kw = dict(objects=",".join(names), method=a.method, attribute="CanopyAO",
+              show_proxies=True)
     if a.tau != "auto":
         kw["tau"] = float(a.tau)
     else:
