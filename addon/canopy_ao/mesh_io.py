@@ -32,9 +32,12 @@ def _vertex_normals(mesh, n):
 def _evaluated_is_original(obj):
     """True when the evaluated mesh has the same geometry as obj.data, so it can be read without
     a to_mesh() copy (~35 ms per million vertices): no modifiers, no shape keys, not in edit
-    mode (whose data lives in a BMesh until it is left)."""
+    mode (whose data lives in a BMesh until it is left), and no armature / lattice / curve
+    parent deforming it (a "virtual" modifier, not in obj.modifiers)."""
     me = obj.data
-    return not obj.modifiers and me.shape_keys is None and not me.is_editmode
+    return (not obj.modifiers and me.shape_keys is None and not me.is_editmode
+            and (obj.parent is None or obj.parent_type in ('OBJECT', 'VERTEX', 'VERTEX_3',
+                                                             'BONE')))
 
 
 def _lap(timings, key, t0):

@@ -379,6 +379,13 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     m = np.array(ob.matrix_world)
     co = np.array([v.co[:] for v in ob.data.vertices[:50]])
     np.testing.assert_allclose(fast[0][:50], co @ m[:3, :3].T + m[:3, 3], atol=1e-5)
+    ob.modifiers.remove(mod)
+    lat = bpy.data.objects.new("Lattice", bpy.data.lattices.new("Lattice"))
+    bpy.context.scene.collection.objects.link(lat)
+    ob.parent = lat
+    assert mio._evaluated_is_original(ob)
+    ob.parent_type = 'LATTICE'  # deforms through a virtual modifier
+    assert not mio._evaluated_is_original(ob)
 
 
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
