@@ -53,8 +53,9 @@ def build_parser():
                    help="model to use (default: auto)")
     p.add_argument("--tau", type=_tau, default=None,
                    help="optical depth, or 'auto' to calibrate (default: auto)")
-    p.add_argument("--distance", type=_nonneg, default=10.0,
-                   help="AO distance, 0 = unlimited (default: 10)")
+    p.add_argument("--distance", type=_nonneg, default=None,
+                   help="AO distance, 0 = unlimited (default: the World's AO distance, as "
+                        "Cycles uses it; unlimited without a world)")
     p.add_argument("--samples", type=_positive_int, default=64,
                    help="rays per vertex for --method raytrace (default: 64)")
     p.add_argument("--time-budget", type=_nonneg, default=2.0,
@@ -127,7 +128,9 @@ def _run(args):
         _fail(msg)
     if args.save and not bpy.data.filepath:
         _fail("--save needs a saved .blend (give the .blend before --python-expr)")
-    opts = dict(method=args.method, tau=args.tau, distance=args.distance, samples=args.samples,
+    distance = (args.distance if args.distance is not None
+                else operators.world_ao_distance(bpy.context.scene))
+    opts = dict(method=args.method, tau=args.tau, distance=distance, samples=args.samples,
                 time_budget=args.time_budget,
                 attribute=args.attribute, overwrite=args.overwrite,
                 wire_material=args.wire_material, add_aov=args.aov is not None,

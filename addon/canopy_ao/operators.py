@@ -72,6 +72,18 @@ def role_of(obj, positions, triangles):
     return role, f"guessed: {why}"
 
 
+def world_ao_distance(scene):
+    """The AO distance Cycles uses for this scene (World > Ambient Occlusion > Distance, applied
+    by the AO bake even with the checkbox off; DESIGN 9); 0 (unlimited) without a world."""
+    return float(scene.world.light_settings.distance) if scene.world else 0.0
+
+
+def ao_distance(scene, settings):
+    """The panel's AO distance: the World's by default, so a bake and its Cycles check agree
+    whatever the scene's scale; the typed value when 'From World' is off."""
+    return world_ao_distance(scene) if settings.use_world_distance else settings.distance
+
+
 # Seconds per stage of the last committed bake (for bench/blender_bake_speed.py).
 LAST_TIMINGS = {}
 
@@ -83,7 +95,7 @@ def _is_candidate(obj):
 def scene_settings_opts(scene):
     """The bake options as the scene's panel has them."""
     s = scene.canopy_ao
-    return dict(method=s.method, tau=None if s.tau_auto else s.tau, distance=s.distance,
+    return dict(method=s.method, tau=None if s.tau_auto else s.tau, distance=ao_distance(scene, s),
                 samples=s.samples, attribute=s.attribute_name, overwrite=s.overwrite,
                 wire_material=s.wire_material, add_aov=s.add_aov, aov_name=s.aov_name,
                 mode=s.mode, uv_map=s.uv_map, resolution=s.resolution, image_dir=s.image_dir,

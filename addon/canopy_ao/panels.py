@@ -41,7 +41,15 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         sub = row.row(align=True)
         sub.enabled = not s.tau_auto
         sub.prop(s, "tau")
-        col.prop(s, "distance")
+        row = col.row(align=True)
+        row.prop(s, "use_world_distance", toggle=True)
+        sub = row.row(align=True)
+        sub.enabled = not s.use_world_distance
+        sub.prop(s, "distance")
+        if s.use_world_distance:
+            from .operators import world_ao_distance
+            d = world_ao_distance(context.scene)
+            col.label(text=f"World AO distance: {d:g}" if d > 0 else "No world: unlimited")
         if s.method == "raytrace":
             col.prop(s, "samples")
         col.separator()

@@ -52,6 +52,10 @@ class CanopyAOSceneSettings(bpy.types.PropertyGroup):
                            description="Calibrate the optical depth against ray-traced samples")
     tau: FloatProperty(name="τ", default=1.5, min=0.001, soft_max=20.0,
                        description="Optical depth of a canopy: AO at its centre is exp(-τ)")
+    use_world_distance: BoolProperty(
+        name="From World", default=True,
+        description="Use the World's AO distance (World > Ambient Occlusion > Distance), as "
+                    "Cycles' AO bake does, so the bake and a Cycles check agree at any scale")
     distance: FloatProperty(name="AO Distance", default=10.0, min=0.0, unit='LENGTH',
                             description="Ray length cut-off (as Cycles' world AO distance); "
                                         "0 = unlimited. Used by the ray-traced method and "

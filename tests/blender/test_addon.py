@@ -414,3 +414,26 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     bpy.context.scene.canopy_ao.tau_auto = True  # calibration traces every triangle
     assert bake(method="sphere") == {'FINISHED'}
     assert all(asked.values())
+
+
+def test_ao_distance_follows_the_world_unless_typed():
+    """The default AO distance is the World's, the one Cycles' AO bake applies (DESIGN 9), so a
+    bake and its Cycles check agree at any scene scale; typing one needs 'From World' off."""
+    from canopy_ao import operators
+    scene = bpy.context.scene
+    s = scene.canopy_ao
+    world = scene.world or bpy.data.worlds.new("DistanceTestWorld")
+    old_world, scene.world = scene.world, world
+    old = (world.light_settings.distance, s.use_world_distance, s.distance)
+    try:
+        world.light_settings.distance = 37.5
+        s.use_world_distance, s.distance = True, 4.0
+        assert operators.scene_settings_opts(scene)["distance"] == pytest.approx(37.5)
+        s.use_world_distance = False
+        assert operators.scene_settings_opts(scene)["distance"] == pytest.approx(4.0)
+        s.use_world_distance = True
+        scene.world = None
+        assert operators.scene_settings_opts(scene)["distance"] == 0.0  # unlimited
+    finally:
+        scene.world = old_world
+        world.light_settings.distance, s.use_world_distance, s.distance = old
