@@ -135,7 +135,8 @@ def main(argv):
     print("prototypes self-baked: " + ", ".join(
         f"{n} ({p['vertices']} v, {p['seconds']:.2f} s)"
         for n, p in rep["instances"]["prototypes"].items()))
-    print(f"timings: {', '.join(f'{k} {v:.2f} s' for k, v in rep['timings'].items())}")
+    stages = rep.get("stage_seconds") or rep["timings"]
+    print(f"stages: {', '.join(f'{k} {v:.2f} s' for k, v in stages.items())}")
     print(f"ground: {gr['vertices']} vertices in {gr['seconds']:.1f} s "
           f"({gr['seconds'] / max(gr['vertices'], 1) * 1e9:.0f} ns/vertex); AO mean "
           f"{ao.mean():.3f}, min {ao.min():.3f}, 5th pct {np.percentile(ao, 5):.3f}")
