@@ -603,6 +603,8 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     plan.forest = _forest.Forest(prototypes, epsilon=eps) if prototypes else None
     plan.timings["forest"] = time.perf_counter() - t0
     if plan.forest is not None:
+        # The scene's own trees may all be instances: then "no CANOPY object" is not news.
+        plan.notes = [n for n in plan.notes if not n.startswith("no CANOPY object")]
         plan.notes.append(
             f"forest: {plan.forest.instances} instance(s) of {len(plan.forest.prototypes)} "
             f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
