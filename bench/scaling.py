@@ -3,7 +3,8 @@
     /usr/bin/python3 bench/scaling.py [--max 1e7] [--quick]
 
 The round tree (examples/canopy_scenes.py) with leaves = N/4 quads, no ground, so the vertex
-count is N (+ a few thousand trunk vertices). Per method: prepare (fits; BVH build for ray
+count is N (+ a few thousand trunk vertices); leaves shrink as their count grows so the total
+leaf area (the crown's density, and so how far rays travel) stays that of the 20000-leaf tree. Per method: prepare (fits; BVH build for ray
 tracing) and evaluation over every vertex, wall-clock, best of 2 when short. τ is fixed (1.5):
 calibration costs a constant (a few hundred traced points) and is timed in bench/accuracy.py.
 Writes bench/out/scaling.csv and bench/out/scaling.png (log-log).
@@ -55,7 +56,9 @@ def main(argv=None):
     rows = []
     os.makedirs(OUT, exist_ok=True)
     for n in sizes:
-        scene = cs.round_tree(seed=0, leaves=int(n // 4), ground=False)
+        leaves = int(n // 4)
+        scene = cs.round_tree(seed=0, leaves=leaves, ground=False,
+                              leaf_size=cs.area_preserving_leaf_size(leaves))
         V, T, _ = scene.merged()
         N = np.concatenate([cs.vertex_normals(p.vertices, p.triangles) for p in scene])
         items = [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,

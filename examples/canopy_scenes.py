@@ -21,6 +21,7 @@ Usage::
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -357,10 +358,14 @@ def _ground(size, n, center=(0.0, 0.0)):
 
 # === Scenes ==================================================================================
 
-def round_tree(seed=0, leaves=20000, ground=True):
-    """A round broadleaf tree (oak/maple-like): spherical crown r ≈ 3 m on a 2.5 m trunk."""
+def round_tree(seed=0, leaves=20000, ground=True, leaf_size=(0.12, 0.07)):
+    """A round broadleaf tree (oak/maple-like): spherical crown r ≈ 3 m on a 2.5 m trunk.
+
+    leaf_size: (length, width) in metres; 20000 leaves of the default size give a leaf area
+    index of about 6 over the crown's footprint."""
     rng = np.random.default_rng(seed)
-    parts = _broadleaf(rng, "round", [((0, 0, 5.5), (3.0, 3.0, 2.8))], trunk_top=2.8, leaves=leaves)
+    parts = _broadleaf(rng, "round", [((0, 0, 5.5), (3.0, 3.0, 2.8))], trunk_top=2.8, leaves=leaves,
+                       leaf_size=tuple(leaf_size))
     if ground:
         parts.append(_ground(14.0, 64))
     return Scene("round_tree", parts, seed, {"leaves": leaves})
@@ -486,9 +491,16 @@ def ideal_ellipsoid(seed=0, n_tris=5000, radii=(1.6, 1.0, 0.6), edge=0.06):
                  seed, {"n_tris": n_tris, "radii": list(radii)})
 
 
+def area_preserving_leaf_size(leaves, base=20000, size=(0.12, 0.07)):
+    """Leaf size that keeps the round tree's total leaf area (so its density and AO) at any count."""
+    f = math.sqrt(base / max(leaves, 1))
+    return (size[0] * f, size[1] * f)
+
+
 def large_tree(seed=0, leaves=260000):
-    """The round tree with ≥ 1M vertices (260k leaf quads) for the scaling study."""
-    s = round_tree(seed, leaves=leaves)
+    """The round tree with ≥ 1M vertices (260k leaf quads): smaller leaves, same total leaf
+    area as round_tree's 20000, so the crown is as dense (a real tree's fine foliage)."""
+    s = round_tree(seed, leaves=leaves, leaf_size=area_preserving_leaf_size(leaves))
     s.name = "large_tree"
     return s
 
