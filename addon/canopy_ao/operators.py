@@ -534,7 +534,42 @@ class CANOPY_AO_OT_guess_roles(bpy.types.Operator):
         return {'FINISHED'}
 
 
-classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles)
+class CANOPY_AO_OT_remove_wiring(bpy.types.Operator):
+    """Remove exactly the nodes Canopy AO added to the materials of the selected objects (or
+    of the named ones) and restore the original links; the baked attributes stay"""
+
+    bl_idname = "canopy_ao.remove_wiring"
+    bl_label = "Remove Material Wiring"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    objects: bpy.props.StringProperty(
+        name="Objects", default="",
+        description="Comma-separated object names (default: the selected objects)")
+
+    def execute(self, context):
+        from . import materials
+        if self.objects.strip():
+            names = [n.strip() for n in self.objects.split(",") if n.strip()]
+            missing = [n for n in names if n not in bpy.data.objects]
+            if missing:
+                self.report({'ERROR'}, f"no object named {', '.join(map(repr, missing))}")
+                return {'CANCELLED'}
+            targets = [bpy.data.objects[n] for n in names]
+        else:
+            targets = [o for o in context.selected_objects if o.type == 'MESH']
+            if not targets:
+                self.report({'ERROR'}, "select the mesh objects whose wiring to remove, "
+                                       "or name them with objects=")
+                return {'CANCELLED'}
+        removed = sum(materials.unwire(o) for o in targets)
+        self.report({'INFO'}, f"removed {removed} Canopy AO node(s) from {len(targets)} object(s)")
+        return {'FINISHED'}
+
+    def invoke(self, context, event):
+        return self.execute(context)
+
+
+classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles, CANOPY_AO_OT_remove_wiring)
 
 register, unregister = bpy.utils.register_classes_factory(classes)
 

@@ -77,6 +77,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         n_sel = sum(1 for o in context.selected_objects if o.type == 'MESH')
         label = f"Bake {n_sel} Selected" if n_sel else "Bake All Visible"
         col.operator("canopy_ao.bake", text=label, icon='RENDER_STILL')
+        col.operator("canopy_ao.remove_wiring", icon='NODETREE')
         if s.last_report:
             col.label(text=f"Last: {s.last_report}", icon='INFO')
 

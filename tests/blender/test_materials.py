@@ -142,3 +142,20 @@ def test_aov_target_follows_name(scene):
     aov = next(n for n in mat.node_tree.nodes if n.get("canopy_ao") == "aov")
     assert materials._aov_target(aov) == "TreeAO"
     assert mat.node_tree.nodes.get("BakedAO") == user
+
+
+def test_remove_wiring_operator_restores_the_material(scene):
+    """The operator an artist presses: exactly what was added goes, for the named objects."""
+    obj = H.add_plane()
+    mat = H.add_material(obj, color=(0.4, 0.5, 0.6, 1.0))
+    before = H.tree_snapshot(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    assert H.tree_snapshot(mat) != before
+    assert bpy.ops.canopy_ao.remove_wiring(objects=obj.name) == {'FINISHED'}
+    assert H.tree_snapshot(mat) == before
+    with pytest.raises(RuntimeError, match="no object named 'Nope'"):
+        bpy.ops.canopy_ao.remove_wiring(objects="Nope")
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    with pytest.raises(RuntimeError, match="select the mesh objects"):
+        bpy.ops.canopy_ao.remove_wiring()
