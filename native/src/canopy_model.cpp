@@ -324,7 +324,7 @@ void fix_up(const ShellEval<Map>& s, const float* __restrict p, const float* __r
 // V of one shell for `count` ≤ kChunk points starting at p/n (AoS). One fused vectorised pass
 // over groups of 8 (the last partial group zero-padded, so every point, in any block, goes
 // through the same code and gets the same value), keeping a flag mask per group; then, only if
-// a flag is set, the fix-up of those points. stream: v is 32-byte aligned and the results go
+// a flag is set, the fix-up of those points. stream: v is 16-byte aligned and the results go
 // out with non-temporal stores (arrays far larger than the caches: saves the read-for-ownership
 // of the output lines); the caller issues the sfence.
 template <class Map>
@@ -364,8 +364,12 @@ void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float
     }
     fix_up(s, p, n, idx, m, dst);
   }
-  if (stream) {
-    for (std::size_t i = 0; i < full; i += 8) _mm256_stream_ps(v + i, _mm256_load_ps(res + i));
+  if (stream) {  // v is 16-byte aligned (malloc's and numpy's guarantee), maybe 32
+    if (reinterpret_cast<std::uintptr_t>(v) % 32 == 0) {
+      for (std::size_t i = 0; i < full; i += 8) _mm256_stream_ps(v + i, _mm256_load_ps(res + i));
+    } else {
+      for (std::size_t i = 0; i < full; i += 4) _mm_stream_ps(v + i, _mm_load_ps(res + i));
+    }
     std::copy(res + full, res + count, v + full);
   }
 }
@@ -430,7 +434,7 @@ ShellEval<Map> make_eval(const Map& map, const Ellipsoid& shell, const CanopyOpt
 
 
 // Non-temporal output stores from this many points on (input + output ≥ 56 MB, beyond the
-// last-level cache) when `out` is 32-byte aligned.
+// last-level cache) when `out` is 16-byte aligned (chunks start at multiples of 8 points).
 constexpr std::size_t kStreamFrom = std::size_t{1} << 21;
 
 template <class Map>
@@ -438,7 +442,7 @@ void run_one_shell(PointsView positions, PointsView normals, const ShellEval<Map
                    float* out) {
 #ifdef CANOPY_AO_AVX2
   const bool stream =
-      positions.size >= kStreamFrom && reinterpret_cast<std::uintptr_t>(out) % 32 == 0;
+      positions.size >= kStreamFrom && reinterpret_cast<std::uintptr_t>(out) % 16 == 0;
 #else
   const bool stream = false;
 #endif
