@@ -29,6 +29,12 @@ Receivers receivers_arg(const py::array& positions, const py::array& normals) {
   return r;
 }
 
+OccluderLaw law_arg(const std::string& s) {
+  if (s == "solid_opacity") return OccluderLaw::SolidOpacity;
+  if (s == "medium") return OccluderLaw::Medium;
+  throw py::value_error("law must be \"solid_opacity\" or \"medium\", got \"" + s + "\"");
+}
+
 ShellCombine combine_arg(const std::string& s) {
   if (s == "product") return ShellCombine::Product;
   if (s == "nearest") return ShellCombine::Nearest;
@@ -113,29 +119,35 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_occluders",
       [](const py::array& positions, const py::array& normals,
-         const std::vector<Ellipsoid>& shells, float tau, float epsilon, bool solid) {
+         const std::vector<Ellipsoid>& shells, float tau, float epsilon, bool solid,
+         const std::string& law) {
+        const OccluderOptions opt{tau, epsilon, solid, law_arg(law)};
         const Receivers r = receivers_arg(positions, normals);
-        const OccluderOptions opt{tau, epsilon, solid};
         return compute(r.positions.size, [&](float* o) {
           ao_occluders(r.positions, r.normals, shells, opt, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
-      py::arg("epsilon") = 1e-3, py::arg("solid") = false,
-      "Shells seen from outside as horizon-clipped, cosine-weighted sphere occluders scaled by "
-      "their opacity 1 - exp(-4 tau/3) (1 if solid), combined as prod(1 - occ_i); each ignored "
-      "beyond d_far = r / sin(acos(1 - epsilon/2pi)) (epsilon=0: no cut-off), found through a "
-      "uniform grid. Receivers inside a shell skip it. Returns float32 (N,) in [0, 1].");
+      py::arg("epsilon") = 1e-3, py::arg("solid") = false, py::arg("law") = "solid_opacity",
+      "Shells seen from outside as horizon-clipped, cosine-weighted occluders, combined as "
+      "prod(1 - occ_i). law=\"solid_opacity\": a solid sphere (the shell's projected-area "
+      "radius) scaled by the opacity 1 - exp(-4 tau/3); law=\"medium\": that sphere filled "
+      "with a uniform random medium of tau per radius, occ = 1 - medium table AO (exact "
+      "expectation, short chords near the rim); solid=True: opaque spheres (law ignored). Each "
+      "occluder is ignored beyond d_far = r / sin(acos(1 - epsilon/2pi)) (epsilon=0: no "
+      "cut-off), found through a uniform grid. Receivers inside a shell skip it. Returns "
+      "float32 (N,) in [0, 1].");
 
   py::class_<OccluderField>(m, "OccluderField",
                             "Occluders with their spatial grid, built once for repeated "
                             "ao() calls (same law as ao_occluders).")
       .def(py::init([](const std::vector<Ellipsoid>& shells, float tau, float epsilon,
-                       bool solid) {
-             return new OccluderField(shells, OccluderOptions{tau, epsilon, solid});
+                       bool solid, const std::string& law) {
+             return new OccluderField(shells,
+                                      OccluderOptions{tau, epsilon, solid, law_arg(law)});
            }),
            py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3,
-           py::arg("solid") = false)
+           py::arg("solid") = false, py::arg("law") = "solid_opacity")
       .def(
           "ao",
           [](const OccluderField& f, const py::array& positions, const py::array& normals) {

@@ -61,6 +61,23 @@ float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity)
   return std::clamp(1.0f - occ, 0.0f, 1.0f);
 }
 
+float occluder_visibility_medium(Vec3 x, Vec3 n, const Ellipsoid& shell,
+                                 const MediumTable::Slice& slice) {
+  // The unit frame of DESIGN 3.2, as the in-shell models: x' = diag(1/r) Qᵀ (x − C), normal by
+  // the inverse transpose (an affine map keeps the tangent half-space, so "wholly below the
+  // horizon" is exact). Measured against the same table on occluder_visibility's equivalent
+  // sphere (r = d/r_eq): that one darkened real-mesh grounds almost as much as the old law.
+  const Vec3 u = shell.to_unit(x);
+  const float uu = dot(u, u);
+  if (!(uu > 1.0f)) return 1.0f;  // inside: the canopy model's job
+  if (!(dot(n, n) > 1e-30f)) return 1.0f;  // zero normal: facing away
+  const Vec3 nu = shell.normal_to_unit(n);
+  const float ru = std::sqrt(uu);
+  const float cb = std::clamp(dot(nu, u) / ru, -1.0f, 1.0f);  // cos β in the unit frame
+  if (cb * ru >= 1.0f) return 1.0f;  // the unit sphere wholly below the horizon
+  return slice.ao(ru, cb);
+}
+
 // === OccluderField
 OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options)
     : shells_(std::move(shells)) {
@@ -71,6 +88,8 @@ OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOption
   }
   for (const Ellipsoid& s : shells_) check_ellipsoid(s);
   opacity_ = options.solid ? 1.0f : shell_opacity(options.tau);
+  medium_ = !options.solid && options.law == OccluderLaw::Medium;
+  if (medium_) slice_ = MediumTable::get().slice(options.tau);  // outside any parallel body
   const std::size_t n = shells_.size();
   if (n >= std::numeric_limits<std::uint32_t>::max()) throw std::invalid_argument("too many shells");
   far_.resize(n);
@@ -190,7 +209,8 @@ float OccluderField::visibility(Vec3 x, Vec3 n) const {
     // Bounding sphere wholly below the tangent plane (cos θ ≤ −sin σ): blocks nothing. Cheap,
     // and it removes about half the pairs before any transcendental function.
     if (dot(nu, dv) <= -rmax_[i]) continue;
-    v *= occluder_visibility(x, nu, shells_[i], opacity_);  // V = Π (1 − occ_i)
+    v *= medium_ ? occluder_visibility_medium(x, nu, shells_[i], slice_)
+                 : occluder_visibility(x, nu, shells_[i], opacity_);  // V = Π (1 − occ_i)
   }
   return v;
 }

@@ -129,6 +129,26 @@ def test_occluders_forest_and_field():
     assert solid[0] == pytest.approx(1 - 1 / 9, abs=1e-6)
 
 
+def test_occluder_laws():
+    # One sphere overhead: "solid_opacity" = opacity × (r/d)²; "medium" = the medium table's AO
+    # (ao_medium_sphere outside the ball); below the horizon both block nothing.
+    c = np.array([0, 0, 5], np.float32)
+    sph = _core.Sphere(c, 1.0)
+    e = [_core.Ellipsoid.from_sphere(sph)]
+    p = rows([0, 0, 0], [0.5, 0, 0.5], [3, 0, 5])
+    n = rows([0, 0, 1], [1, 0, 0.4], [1, 0, 0])
+    old = _core.ao_occluders(p, n, e, 0.7, epsilon=0.0, law="solid_opacity")
+    assert old[0] == pytest.approx(1 - _core.shell_opacity(0.7) / 25, abs=1e-6)
+    med = _core.ao_occluders(p, n, e, 0.7, epsilon=0.0, law="medium")
+    np.testing.assert_allclose(med, _core.ao_medium_sphere(p, n, sph, 0.7), atol=1e-5)
+    assert med[2] == 1.0 and old[2] == 1.0
+    assert med[0] > old[0]  # short rim chords: a medium ball blocks less than the mean chord says
+    field = _core.OccluderField(e, 0.7, epsilon=0.0, law="medium")
+    np.testing.assert_array_equal(field.ao(p, n), med)
+    with pytest.raises(ValueError, match="law"):
+        _core.ao_occluders(p, n, e, 0.7, law="opaque")
+
+
 def test_grass():
     p = rows([0, 0, 1.25], [0, 0, 1.0], [0, 0, 9])
     n = rows([0, 0, 1], [0, 0, 1], [1, 0, 0])
