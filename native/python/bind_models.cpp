@@ -128,7 +128,7 @@ void bind_models(py::module_& m) {
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
-      py::arg("epsilon") = 1e-3, py::arg("solid") = false, py::arg("law") = "solid_opacity",
+      py::arg("epsilon") = 1e-3, py::arg("solid") = false, py::arg("law") = "medium",
       "Shells seen from outside as horizon-clipped, cosine-weighted occluders, combined as "
       "prod(1 - occ_i). law=\"solid_opacity\": a solid sphere (the shell's projected-area "
       "radius) scaled by the opacity 1 - exp(-4 tau/3); law=\"medium\": that sphere filled "
@@ -147,7 +147,7 @@ void bind_models(py::module_& m) {
                                       OccluderOptions{tau, epsilon, solid, law_arg(law)});
            }),
            py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3,
-           py::arg("solid") = false, py::arg("law") = "solid_opacity")
+           py::arg("solid") = false, py::arg("law") = "medium")
       .def(
           "ao",
           [](const OccluderField& f, const py::array& positions, const py::array& normals) {

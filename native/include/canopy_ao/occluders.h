@@ -16,7 +16,7 @@
 //   opacity = 1 − exp(−4τ/3),   occ = opacity · sphere_occlusion(cos θ, sin²σ).
 // solid = true uses opacity 1 (opaque objects, checks against ray tracing).
 //
-// Medium law (OccluderLaw::Medium). The shell seen from outside is what the medium
+// Medium law (OccluderLaw::Medium, the default). The shell seen from outside is what the medium
 // table (medium_table.h) integrates: a ball of uniform random medium, τ per radius, so the
 // expected visibility is exactly medium_ao(r, cosβ, τ) (each direction transmits exp(−σ·chord),
 // horizon included) — chords near the rim are short, which the single mean-chord opacity above
@@ -82,7 +82,7 @@ struct OccluderOptions {
   float tau = 1.0f;         ///< shells' optical depth (canopy_model.h meaning), ≥ 0
   float epsilon = 1e-3f;    ///< cut-off, in [0, 1); 0 = no cut-off
   bool solid = false;       ///< opaque occluders (opacity 1), τ and law ignored
-  OccluderLaw law = OccluderLaw::SolidOpacity;  ///< how a (non-solid) shell occludes
+  OccluderLaw law = OccluderLaw::Medium;  ///< how a (non-solid) shell occludes
 };
 
 /// A set of occluders with their spatial grid, built once, evaluated many times.
