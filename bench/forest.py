@@ -19,7 +19,8 @@ Two tables, because "the tree count" can grow two ways:
   ns per vertex should stay flat once the forest is wider than the cut-off reach.
 Also printed: the largest AO change the cut-off makes on the subsample (against ε = 0).
 Wall-clock on a shared 2-core machine; the field build (grid) is timed apart from evaluation.
---check also compares a small forest of real tree meshes with Embree (the law, not the speed).
+--check also compares a small forest of real tree meshes with Embree (the law, not the speed;
+the previous solid_opacity occluder law is printed alongside).
 """
 from __future__ import annotations
 
@@ -140,15 +141,21 @@ def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256)
     n = np.ascontiguousarray(np.tile(np.float32([0, 0, 1]), (points, 1)))
     ref = _core.RayTracer(np.concatenate(verts), np.concatenate(tris).astype(np.int32)).ao(
         p, n, samples=samples)
-    inst = forest.Forest([forest.prototype_from_plan(proto, "T", mats)],
-                         epsilon=forest.DEFAULT_EPSILON).ao(p, n)
+    pr = forest.prototype_from_plan(proto, "T", mats)
+    inst = forest.Forest([pr], epsilon=forest.DEFAULT_EPSILON).ao(p, n)
+    # The previous occluder law (solid sphere × mean-chord opacity), same shells and trunks.
+    eps = forest.DEFAULT_EPSILON
+    old = (_core.ao_occluders(p, n, forest.instance_shells(pr.shells, mats), float(pr.tau),
+                              epsilon=eps, law="solid_opacity") *
+           _core.ao_occluders(p, n, forest.instance_shells(pr.solids, mats), 1.0, epsilon=eps,
+                              solid=True))
     ground = engine.SceneItem("ground", "GROUND", "", p, n, np.zeros((0, 3), np.int32))
     plan = engine.prepare(items + [ground], engine.BakeSettings(method=proto.method,
                                                                   tau=proto.tau, shells=4))
     real = engine.evaluate_item(plan, ground).ao
     print(f"\nAgainst Embree ({samples} rays, {points} ground points, {trees} real round trees "
           f"on {side:g} m, τ {proto.tau:.3g}, {proto.method}):")
-    for name, a in (("instances", inst), ("real objects", real)):
+    for name, a in (("instances", inst), ("real objects", real), ("solid_opacity", old)):
         print(f"  {name:12s} mean AO {a.mean():.3f} (traced {ref.mean():.3f}), MAE "
               f"{np.abs(a - ref).mean():.3f}, bias {(a - ref).mean():+.3f}, "
               f"corr {np.corrcoef(a, ref)[0, 1]:.3f}")
