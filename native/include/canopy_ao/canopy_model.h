@@ -25,12 +25,16 @@
 // itself any normal gives exp(−τ)). Never NaN. All results in [0, 1], 1 = open sky.
 //
 // Throughput (bench/bench_models.cpp): points are processed in blocks of 16k (parallel) and
-// chunks of 256: AoS → SoA transpose (AVX), a vectorised pass computing the exponent, a
-// vectorised fast_exp pass; the flagged points (outside the shell, or a zero normal) are then
-// compacted and get the in-shell law, the occluder law (fast_acos / fast_atan2_pos) and the
-// blend in one more vectorised pass. Points inside cost ~1.6 ns on one core (~600 M/s at 10^5
-// points on this shared 2-core machine); outside points ~20–30 ns per shell. Results do not
-// depend on the thread count.
+// chunks of 256. With AVX2/FMA, per chunk: one pass computing the exponent of 8 points at a
+// time (AoS → SoA transpose in registers, rsqrt/rcp + one Newton step instead of sqrt and
+// divisions, a flag mask for points outside the shell or with a zero normal) into an L1
+// buffer, one fast_exp pass (two passes: the fused loop was ~20% slower, one long dependency
+// chain per iteration); ~13 instructions per point, no branch but the loops'. Only a chunk with
+// a flag set then compacts those points and gives them the in-shell law, the occluder law
+// (fast_acos / fast_atan2_pos) and the blend in one more vectorised pass (~20–30 ns per outside
+// point per shell). Arrays beyond the caches (≥ 2M points) are written with non-temporal
+// stores. Results do not depend on the thread count (the last partial group of 8 is
+// zero-padded and goes through the same code). Figures: bench/README.md, "Model throughput".
 #pragma once
 
 #include <cstddef>
