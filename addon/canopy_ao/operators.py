@@ -207,6 +207,7 @@ class BakeJob:
         self.settings = engine.BakeSettings(
             method=opts["method"], tau=opts["tau"], distance=opts["distance"],
             samples=opts["samples"], time_budget=opts.get("time_budget", 2.0),
+            target_rmse=opts.get("target_rmse", 0.06),
             forest_epsilon=opts.get("forest_epsilon", 1e-2))
         self.plan = None
         self.index = 0
