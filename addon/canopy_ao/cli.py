@@ -161,7 +161,9 @@ def _run(args):
             line += (f", vs Cycles MAE {c.get('mae', float('nan')):.4f} "
                      f"RMSE {c.get('rmse', float('nan')):.4f}")
         print(line, flush=True)
-    print(f"canopy_ao: {rep['method']} tau {rep['tau']:.4g}, {len(job.results)} object(s), "
+    # τ means nothing to the exact rung or the density grid (physical density).
+    tau = "" if rep["method"] in ("raytrace", "grid") else f" tau {rep['tau']:.4g}"
+    print(f"canopy_ao: {rep['method']}{tau}, {len(job.results)} object(s), "
           f"{rep['seconds']:.2f} s", flush=True)
     for note in rep["notes"]:
         print(f"canopy_ao: note: {note}", flush=True)
