@@ -1,38 +1,13 @@
 """canopy_ao._core uniform-medium expectation (ao_medium_*) and leaf-density grid (DensityGrid):
 known answers through the bindings, and the error messages a user sees.
-
-CANOPY_AO_CORE=/path/to/_core*.so tests a particular build instead of addon/canopy_ao/_core.
 """
-import importlib.util
 import math
-import os
-import pathlib
 import sys
 
 import numpy as np
 import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
-
-
-def _load_core():
-    path = os.environ.get("CANOPY_AO_CORE")
-    if path:
-        spec = importlib.util.spec_from_file_location("_core", path)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod
-    sys.path.insert(0, str(ROOT / "addon"))
-    try:
-        from canopy_ao import _core
-    except ImportError:
-        return None
-    return _core
-
-
-core = _load_core()
-pytestmark = pytest.mark.skipif(
-    core is None or not hasattr(core, "DensityGrid"), reason="native module not built")
+from canopy_ao import _core as core  # conftest.py puts addon/ on sys.path
 
 
 def f32(a):
