@@ -20,7 +20,6 @@ on stderr) on failure.
 """
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -28,6 +27,7 @@ import time
 import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(REPO, "examples"))
 
 
 def leaf_mesh(name, n_vertices, seed=0):
@@ -245,16 +245,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    try:
-        rc = main(argv)
-    except SystemExit as e:
-        rc = e.code if isinstance(e.code, int) else 1
-    except Exception as e:  # background mode: a message and a non-zero exit code
-        import traceback
-        traceback.print_exc()
-        print(f"blender_bake_speed: error: {e}", file=sys.stderr)
-        rc = 1
-    sys.stdout.flush()
-    if rc:
-        os._exit(rc)
+    from blender_script import run
+    run(main, "blender_bake_speed")

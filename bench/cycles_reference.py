@@ -147,16 +147,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    try:
-        rc = main(argv)
-    except SystemExit as e:
-        rc = e.code if isinstance(e.code, int) else 1
-    except Exception as e:
-        import traceback
-        traceback.print_exc()
-        print(f"cycles_reference: error: {e}", file=sys.stderr)
-        rc = 1
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(rc or 0)
+    from blender_script import run
+    run(main, "cycles_reference")

@@ -20,7 +20,6 @@ asserts the accepted behaviours only.
 from __future__ import annotations
 
 import argparse
-import math
 import multiprocessing as mp
 import os
 import sys

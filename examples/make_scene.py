@@ -57,16 +57,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    try:
-        rc = main(argv)
-    except SystemExit as e:
-        rc = e.code if isinstance(e.code, int) else 1
-    except Exception as e:  # background mode: a message and a non-zero exit code
-        import traceback
-        traceback.print_exc()
-        print(f"make_scene: error: {e}", file=sys.stderr)
-        rc = 1
-    sys.stdout.flush()
-    if rc:
-        os._exit(rc)   # blender -b otherwise exits 0
+    from blender_script import run
+    run(main, "make_scene")

@@ -14,6 +14,7 @@ import os
 import sys
 
 import bpy
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from mathutils import Vector
 
 
@@ -115,13 +116,5 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    try:
-        rc = main(argv)
-    except SystemExit as e:
-        rc = e.code if isinstance(e.code, int) else 1
-    except Exception as e:
-        print(f"render_preview: error: {e}", file=sys.stderr)
-        rc = 1
-    sys.stdout.flush()
-    os._exit(rc)
+    from blender_script import run
+    run(main, "render_preview")
