@@ -2,7 +2,6 @@
 known answers through the bindings, and the error messages a user sees.
 """
 import math
-import sys
 
 import numpy as np
 import pytest
