@@ -473,7 +473,10 @@ def prepare(items, settings: BakeSettings) -> Plan:
             plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
     plan.timings["fit"] = time.perf_counter() - t0
 
-    needs_tracer = settings.method == "raytrace" or (
+    # Grass has no proxies to calibrate, but auto still weighs its law against rays.
+    grass_only_auto = (settings.method == "auto" and not plan.fits
+                       and any(it.role == "GRASS" for it in items))
+    needs_tracer = settings.method == "raytrace" or grass_only_auto or (
         settings.method == "auto" or settings.tau is None) and bool(plan.fits)
     if needs_tracer:
         t0 = time.perf_counter()
@@ -521,6 +524,10 @@ def prepare(items, settings: BakeSettings) -> Plan:
     elif analytic:
         plan.method = "ellipsoid" if settings.method == "auto" else settings.method
         plan.notes.append("no CANOPY object: no proxies fitted")
+        if grass_only_auto and plan.tracer is not None:
+            # The grass law (Hegeman Eq. 9) against the exact rung, on the same sample.
+            method, tau, info = calibrate(plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)
+            plan.method, plan.tau, plan.calibration = method, tau, info
     plan.proxies = {t: _own_shells(plan, t, plan.method) for t in plan.fits}
     plan.timings["prepare"] = time.perf_counter() - t_start
     return plan

@@ -53,3 +53,14 @@ def test_raytrace_rung_is_scored_on_its_own_noise():
     is not flattered to zero (same seed and sample count would give identical rays)."""
     _m, cal = auto(cs.weeping_tree(leaves=4000), time_budget=60.0)
     assert cal["candidates"]["raytrace"]["rmse"] > 0.005
+
+
+def test_auto_weighs_the_grass_law_against_rays_on_a_grass_field():
+    """No canopy, so no proxies to calibrate; auto still compares Hegeman's grass law with the
+    exact rung on a ray-traced sample and keeps the better one within the budget."""
+    method, cal = auto(cs.grass_field(), time_budget=60.0)
+    assert cal is not None and set(cal["candidates"]) == {"ellipsoid", "raytrace"}
+    c = cal["candidates"]
+    assert method == min(c, key=lambda m: c[m]["rmse"]), cal["why"]
+    _m, tight = auto(cs.grass_field(), time_budget=1e-6)
+    assert _m == "ellipsoid" and "budget" in tight["why"]
