@@ -126,6 +126,24 @@ inline py::array_t<float> new_floats(std::size_t n) {
   return py::array_t<float>(static_cast<py::ssize_t>(n));
 }
 
+/// An AO distance: > 0, inf = unlimited (Cycles' meaning: a hard cut-off on ray length).
+inline float distance_arg(double distance) {
+  if (!(distance > 0)) {
+    std::ostringstream s;
+    s << "distance must be > 0 (inf = unlimited), got " << distance;
+    throw py::value_error(s.str());
+  }
+  return static_cast<float>(distance);
+}
+
+/// A random seed: a non-negative integer below 2**32.
+inline std::uint32_t seed_arg(long long seed) {
+  if (seed < 0 || seed > 0xffffffffLL) {
+    throw py::value_error("seed must be in [0, 2**32), got " + std::to_string(seed));
+  }
+  return static_cast<std::uint32_t>(seed);
+}
+
 inline Vec3 vec3_arg(const py::object& o, const char* name) {
   py::array_t<float, py::array::c_style | py::array::forcecast> a(o);
   if (a.ndim() != 1 || a.shape(0) != 3) {

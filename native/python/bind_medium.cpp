@@ -96,14 +96,8 @@ DensityAOOptions grid_options(int directions, double distance, long long seed,
   if (directions < 1 || directions > 4096) {
     throw py::value_error("directions must be in [1, 4096], got " + std::to_string(directions));
   }
-  if (!(distance > 0)) {
-    std::ostringstream s;
-    s << "distance must be > 0 (inf = unlimited), got " << distance;
-    throw py::value_error(s.str());
-  }
-  if (seed < 0 || seed > 0xffffffffLL) {
-    throw py::value_error("seed must be in [0, 2**32), got " + std::to_string(seed));
-  }
+  distance_arg(distance);
+  seed_arg(seed);
   if (!std::isfinite(sigma_scale) || sigma_scale < 0) {
     throw py::value_error("sigma_scale must be a finite number >= 0");
   }

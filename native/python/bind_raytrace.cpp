@@ -24,14 +24,8 @@ RayTraceOptions options_arg(int samples, double distance, long long seed, double
   if (samples < 1) {
     throw py::value_error("samples must be at least 1, got " + std::to_string(samples));
   }
-  if (!(distance > 0)) {
-    std::ostringstream s;
-    s << "distance must be > 0 (inf = unlimited), got " << distance;
-    throw py::value_error(s.str());
-  }
-  if (seed < 0 || seed > 0xffffffffLL) {
-    throw py::value_error("seed must be in [0, 2**32), got " + std::to_string(seed));
-  }
+  distance_arg(distance);
+  seed_arg(seed);
   if (!std::isfinite(offset)) {
     throw py::value_error("offset must be finite (< 0 = automatic)");
   }
