@@ -84,24 +84,9 @@ void run(benchmark::State& state, Fn&& fn) {
 
 // The machine's ceiling for the one-sphere model's memory traffic (28 B per vertex): read AoS
 // positions and normals, one exponential of a dot product per point, write a float; the same
-// blocks and threads as the models. With AVX2 the AoS → SoA transpose is done in registers as
-// in the model (GCC's own stride-3 vectorisation of the plain loop is ~3x slower, so it is no
-// ceiling). Whatever the model does beyond this costs compute.
-#if defined(__AVX2__) && defined(__FMA__)
-inline void load8(const float* q, __m256& x, __m256& y, __m256& z) {
-  __m256 m03 = _mm256_castps128_ps256(_mm_loadu_ps(q));
-  __m256 m14 = _mm256_castps128_ps256(_mm_loadu_ps(q + 4));
-  __m256 m25 = _mm256_castps128_ps256(_mm_loadu_ps(q + 8));
-  m03 = _mm256_insertf128_ps(m03, _mm_loadu_ps(q + 12), 1);
-  m14 = _mm256_insertf128_ps(m14, _mm_loadu_ps(q + 16), 1);
-  m25 = _mm256_insertf128_ps(m25, _mm_loadu_ps(q + 20), 1);
-  const __m256 xy = _mm256_shuffle_ps(m14, m25, _MM_SHUFFLE(2, 1, 3, 2));
-  const __m256 yz = _mm256_shuffle_ps(m03, m14, _MM_SHUFFLE(1, 0, 2, 1));
-  x = _mm256_shuffle_ps(m03, xy, _MM_SHUFFLE(2, 0, 3, 0));
-  y = _mm256_shuffle_ps(yz, xy, _MM_SHUFFLE(3, 1, 2, 0));
-  z = _mm256_shuffle_ps(yz, m25, _MM_SHUFFLE(3, 0, 3, 1));
-}
-#endif
+// blocks and threads as the models. With AVX2 the AoS → SoA transpose is the model's own
+// (load8_aos, fast_math.h); GCC's own stride-3 vectorisation of the plain loop is ~3x slower,
+// so it is no ceiling. Whatever the model does beyond this costs compute.
 
 void bare_loop(const float* __restrict pp, const float* __restrict nn, std::size_t b,
                std::size_t e, float* __restrict oo) {
@@ -110,8 +95,8 @@ void bare_loop(const float* __restrict pp, const float* __restrict nn, std::size
   alignas(32) float d[8];
   for (; i + 8 <= e; i += 8) {
     __m256 px, py, pz, qx, qy, qz;
-    load8(pp + 3 * i, px, py, pz);
-    load8(nn + 3 * i, qx, qy, qz);
+    load8_aos(pp + 3 * i, px, py, pz);
+    load8_aos(nn + 3 * i, qx, qy, qz);
     pz = _mm256_sub_ps(pz, _mm256_set1_ps(6.0f));
     const __m256 t = _mm256_fmadd_ps(pz, qz, _mm256_fmadd_ps(py, qy, _mm256_mul_ps(px, qx)));
     _mm256_store_ps(d, _mm256_mul_ps(_mm256_mul_ps(t, t), _mm256_set1_ps(-0.1f)));

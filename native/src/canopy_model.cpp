@@ -215,22 +215,28 @@ inline float outside_law(float x, float y, float z, float nx, float ny, float nz
   return clampf(1.0f - opacity * occ, 0.0f, 1.0f);
 }
 
-#ifdef CANOPY_AO_AVX2
-// 8 AoS points (24 floats) → x, y, z registers: the transpose of deinterleave without the trip
-// through memory (6 half-loads, 5 in-lane shuffles).
-inline void load8(const float* q, __m256& x, __m256& y, __m256& z) {
-  __m256 m03 = _mm256_castps128_ps256(_mm_loadu_ps(q));
-  __m256 m14 = _mm256_castps128_ps256(_mm_loadu_ps(q + 4));
-  __m256 m25 = _mm256_castps128_ps256(_mm_loadu_ps(q + 8));
-  m03 = _mm256_insertf128_ps(m03, _mm_loadu_ps(q + 12), 1);
-  m14 = _mm256_insertf128_ps(m14, _mm_loadu_ps(q + 16), 1);
-  m25 = _mm256_insertf128_ps(m25, _mm_loadu_ps(q + 20), 1);
-  const __m256 xy = _mm256_shuffle_ps(m14, m25, _MM_SHUFFLE(2, 1, 3, 2));
-  const __m256 yz = _mm256_shuffle_ps(m03, m14, _MM_SHUFFLE(1, 0, 2, 1));
-  x = _mm256_shuffle_ps(m03, xy, _MM_SHUFFLE(2, 0, 3, 0));
-  y = _mm256_shuffle_ps(yz, xy, _MM_SHUFFLE(3, 1, 2, 0));
-  z = _mm256_shuffle_ps(yz, m25, _MM_SHUFFLE(3, 0, 3, 1));
+// In-shell law, occluder law and their blend across the band, for m points given as SoA
+// (px..qz, world space); branch-free so that it vectorises. Both fix-up paths use it.
+template <class Map>
+void blend_points(const ShellEval<Map>& s, const float* px, const float* py, const float* pz,
+                  const float* qx, const float* qy, const float* qz, std::size_t m,
+                  float* __restrict out) {
+  const float tau = s.tau;
+  const float band = s.band, inv_band = band > 0 ? 1.0f / band : 0.0f, opacity = s.opacity;
+  const Ellipsoid& shell = s.shell;
+  for (std::size_t j = 0; j < m; ++j) {
+    float ux, uy, uz, nx, ny, nz;
+    s.map(px[j], py[j], pz[j], qx[j], qy[j], qz[j], ux, uy, uz, nx, ny, nz);
+    const float s2 = ux * ux + uy * uy + uz * uz;
+    const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
+    const float v_out = outside_law(px[j], py[j], pz[j], qx[j], qy[j], qz[j], shell, opacity);
+    const float outside = s2 > 1.0f ? 1.0f : 0.0f;
+    const float w = band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) * inv_band) : outside;
+    out[j] = clampf((1.0f - w) * v_in + w * v_out, 0.0f, 1.0f);
+  }
 }
+
+#ifdef CANOPY_AO_AVX2
 
 // fast_exp (fast_math.h), 8 lanes: the same reduction and polynomial.
 inline __m256 fast_exp8(__m256 x) {
@@ -264,8 +270,8 @@ template <class Map>
 inline __m256 in_shell_fast8(const Map& map, const float* p, const float* n, __m256 half_tau,
                              int& flags) {
   __m256 px, py, pz, qx, qy, qz, ux, uy, uz, nx, ny, nz;
-  load8(p, px, py, pz);
-  load8(n, qx, qy, qz);
+  load8_aos(p, px, py, pz);
+  load8_aos(n, qx, qy, qz);
   map.v8(px, py, pz, qx, qy, qz, ux, uy, uz, nx, ny, nz);
   const __m256 uu = _mm256_fmadd_ps(uz, uz, _mm256_fmadd_ps(uy, uy, _mm256_mul_ps(ux, ux)));
   const __m256 nn = _mm256_fmadd_ps(nz, nz, _mm256_fmadd_ps(ny, ny, _mm256_mul_ps(nx, nx)));
@@ -305,19 +311,7 @@ void fix_up(const ShellEval<Map>& s, const float* __restrict p, const float* __r
     px[j] = p[3 * i], py[j] = p[3 * i + 1], pz[j] = p[3 * i + 2];
     qx[j] = n[3 * i], qy[j] = n[3 * i + 1], qz[j] = n[3 * i + 2];
   }
-  const float tau = s.tau;
-  const float band = s.band, inv_band = band > 0 ? 1.0f / band : 0.0f, opacity = s.opacity;
-  const Ellipsoid& shell = s.shell;
-  for (std::size_t j = 0; j < m; ++j) {
-    float ux, uy, uz, nx, ny, nz;
-    s.map(px[j], py[j], pz[j], qx[j], qy[j], qz[j], ux, uy, uz, nx, ny, nz);
-    const float s2 = ux * ux + uy * uy + uz * uz;
-    const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
-    const float v_out = outside_law(px[j], py[j], pz[j], qx[j], qy[j], qz[j], shell, opacity);
-    const float outside = s2 > 1.0f ? 1.0f : 0.0f;
-    const float w = band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) * inv_band) : outside;
-    out[j] = clampf((1.0f - w) * v_in + w * v_out, 0.0f, 1.0f);
-  }
+  blend_points(s, px, py, pz, qx, qy, qz, m, out);
   for (std::size_t j = 0; j < m; ++j) v[idx[j]] = out[j];
 }
 
@@ -418,18 +412,7 @@ void shell_chunk(const ShellEval<Map>& s, const float* __restrict p, const float
     ++m;
   }
   float out[kChunk];
-  const float band = s.band, inv_band = band > 0 ? 1.0f / band : 0.0f, opacity = s.opacity;
-  const Ellipsoid& shell = s.shell;
-  for (std::size_t j = 0; j < m; ++j) {
-    float ux, uy, uz, nx, ny, nz;
-    s.map(px[j], py[j], pz[j], qx[j], qy[j], qz[j], ux, uy, uz, nx, ny, nz);
-    const float s2 = ux * ux + uy * uy + uz * uz;
-    const float v_in = in_shell_unit(ux, uy, uz, nx, ny, nz, tau);
-    const float v_out = outside_law(px[j], py[j], pz[j], qx[j], qy[j], qz[j], shell, opacity);
-    const float outside = s2 > 1.0f ? 1.0f : 0.0f;
-    const float w = band > 0 ? smoothstep01((std::sqrt(s2) - 1.0f) * inv_band) : outside;
-    out[j] = clampf((1.0f - w) * v_in + w * v_out, 0.0f, 1.0f);
-  }
+  blend_points(s, px, py, pz, qx, qy, qz, m, out);
   for (std::size_t j = 0; j < m; ++j) v[idx[j]] = out[j];
 }
 
