@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import math
 import os
 import sys
@@ -75,16 +74,6 @@ def log(*a):
     print(*a, flush=True)
 
 
-def geometry_hash(scene) -> str:
-    """Same hash as bench/cycles_reference.py (names, vertex and triangle bytes)."""
-    h = hashlib.sha1()
-    for p in scene:
-        h.update(p.name.encode())
-        h.update(np.ascontiguousarray(p.vertices).tobytes())
-        h.update(np.ascontiguousarray(p.triangles).tobytes())
-    return h.hexdigest()
-
-
 # === Scene preparation ========================================================================
 
 class Prepared:
@@ -94,7 +83,7 @@ class Prepared:
         self.scene = scene
         self.quick = quick
         self.name = scene.name
-        self.hash = geometry_hash(scene)
+        self.hash = cs.geometry_hash(scene)
         self.distance = scene.ao_distance()
         self.normals = [cs.vertex_normals(p.vertices, p.triangles) for p in scene]
         self.items = [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices, n,
@@ -159,15 +148,15 @@ def cycles_runs(prep):
 
 # === Methods ==================================================================================
 
-def timed(fn, repeats):
-    """(result, best seconds): repeat only while runs are short (< 2 s)."""
+def timed(fn, repeats, stop_after=2.0):
+    """(result, best seconds): repeat only while runs are shorter than stop_after seconds."""
     best, res = math.inf, None
     for i in range(max(1, repeats)):
         t0 = time.perf_counter()
         res = fn()
         dt = time.perf_counter() - t0
         best = min(best, dt)
-        if dt > 2.0:
+        if dt > stop_after:
             break
     return res, best
 

@@ -19,7 +19,6 @@ addon/canopy_ao/cycles_check.py's bake_cycles_vertex_ao when that module exists,
 minimal implementation below. Exits non-zero with a message on failure.
 """
 import argparse
-import hashlib
 import os
 import sys
 import time
@@ -32,15 +31,6 @@ sys.path.insert(0, os.path.join(REPO, "addon"))
 import numpy as np  # noqa: E402
 
 CACHE = os.path.join(HERE, "out", "cache")
-
-
-def geometry_hash(scene) -> str:
-    h = hashlib.sha1()
-    for p in scene:
-        h.update(p.name.encode())
-        h.update(np.ascontiguousarray(p.vertices).tobytes())
-        h.update(np.ascontiguousarray(p.triangles).tobytes())
-    return h.hexdigest()
 
 
 def cache_path(scene_name: str, quick: bool, samples: int) -> str:
@@ -96,7 +86,7 @@ def bake_function():
 
 def main(argv):
     import bpy
-    from canopy_scenes import SCENES, make_scene
+    from canopy_scenes import SCENES, geometry_hash, make_scene
     from blender_scene import build_blender
 
     ap = argparse.ArgumentParser(prog="cycles_reference.py")

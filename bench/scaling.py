@@ -16,7 +16,6 @@ import csv
 import math
 import os
 import sys
-import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
@@ -28,19 +27,13 @@ import numpy as np  # noqa: E402
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core, engine  # noqa: E402
 
+import accuracy  # noqa: E402  (bench/, the script's own folder)
+
 OUT = os.path.join(HERE, "out")
 
 
 def timed(fn, repeats=2):
-    best, res = math.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        res = fn()
-        dt = time.perf_counter() - t0
-        best = min(best, dt)
-        if dt > 1.0:
-            break
-    return res, best
+    return accuracy.timed(fn, repeats, stop_after=1.0)
 
 
 def main(argv=None):

@@ -21,6 +21,7 @@ Usage::
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -111,6 +112,16 @@ class Scene(list):
 
 
 # === Geometry helpers ========================================================================
+
+def geometry_hash(scene) -> str:
+    """A key for caches of per-vertex results: the parts' names, vertex and triangle bytes."""
+    h = hashlib.sha1()
+    for p in scene:
+        h.update(p.name.encode())
+        h.update(np.ascontiguousarray(p.vertices).tobytes())
+        h.update(np.ascontiguousarray(p.triangles).tobytes())
+    return h.hexdigest()
+
 
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Per-vertex unit normals, corner-angle weighted like Blender's smooth vertex normals.
