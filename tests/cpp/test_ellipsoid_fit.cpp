@@ -9,21 +9,16 @@
 #include <stdexcept>
 #include <vector>
 
+#include "test_points.h"
 #include "canopy_ao/ellipsoid_fit.h"
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/sphere_fit.h"
 
 using namespace canopy_ao;
+using canopy_ao::test::add;
+using canopy_ao::test::view;
 
 namespace {
-
-PointsView view(const std::vector<float>& v) { return {v.data(), v.size() / 3}; }
-
-void add(std::vector<float>& v, double x, double y, double z) {
-  v.push_back(float(x));
-  v.push_back(float(y));
-  v.push_back(float(z));
-}
 
 // A rotation from Euler angles (z-y-x), columns = axes.
 void rotation(double a, double b, double c, double R[3][3]) {

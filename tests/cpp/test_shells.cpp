@@ -10,14 +10,14 @@
 #include <stdexcept>
 #include <vector>
 
+#include "test_points.h"
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/shells.h"
 
 using namespace canopy_ao;
+using canopy_ao::test::view;
 
 namespace {
-
-PointsView view(const std::vector<float>& v) { return {v.data(), v.size() / 3}; }
 
 struct Blobs {
   std::vector<float> pts;

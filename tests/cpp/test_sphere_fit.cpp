@@ -10,20 +10,15 @@
 #include <stdexcept>
 #include <vector>
 
+#include "test_points.h"
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/sphere_fit.h"
 
 using namespace canopy_ao;
+using canopy_ao::test::add;
+using canopy_ao::test::view;
 
 namespace {
-
-PointsView view(const std::vector<float>& v) { return {v.data(), v.size() / 3}; }
-
-void add(std::vector<float>& v, double x, double y, double z) {
-  v.push_back(float(x));
-  v.push_back(float(y));
-  v.push_back(float(z));
-}
 
 std::vector<float> random_cloud(std::size_t n, unsigned seed, double scale = 1.0,
                                 double offset = 0.0) {
