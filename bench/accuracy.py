@@ -51,8 +51,8 @@ import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core  # noqa: E402
-from canopy_ao import engine  # noqa: E402
-from canopy_ao.metrics import compare  # noqa: E402
+from canopy_ao.core import bake as engine  # noqa: E402
+from canopy_ao.core.metrics import compare  # noqa: E402
 
 OUT = os.path.join(HERE, "out")
 CACHE = os.path.join(OUT, "cache")

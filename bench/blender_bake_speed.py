@@ -78,7 +78,8 @@ def _best(fn, repeats):
 def primitives(ob, method, tau, repeats):
     """Each stage on its own, best of ``repeats``: {stage: seconds}."""
     import bpy
-    from canopy_ao import engine, mesh_io, roles
+    from canopy_ao.core import bake as engine, roles
+    from canopy_ao.blender import mesh_io
 
     out = {}
     dg = bpy.context.evaluated_depsgraph_get()
@@ -173,7 +174,8 @@ def main(argv):
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
         raise RuntimeError("the canopy_ao add-on did not enable")
-    from canopy_ao import engine, operators
+    from canopy_ao.core import bake as engine
+    from canopy_ao.blender import operators
 
     ok, msg = engine.core_status()
     if not ok:

@@ -78,8 +78,8 @@ def _bake_minimal(context, objects, distance, samples):
 
 def bake_function():
     try:
-        from canopy_ao.cycles_check import bake_cycles_vertex_ao
-        return bake_cycles_vertex_ao, "canopy_ao.cycles_check"
+        from canopy_ao.blender.cycles_check import bake_cycles_vertex_ao
+        return bake_cycles_vertex_ao, "canopy_ao.blender.cycles_check"
     except Exception:
         return _bake_minimal, "bench minimal"
 

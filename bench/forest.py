@@ -38,7 +38,7 @@ sys.path.insert(0, os.path.join(REPO, "addon"))
 import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
-from canopy_ao import engine, forest  # noqa: E402
+from canopy_ao.core import bake as engine, forest  # noqa: E402
 
 
 def prototype_plan():

@@ -258,7 +258,7 @@ def m_medium_shells(c):
 
 def _engine_method(method):
     def run(c):
-        from canopy_ao import engine
+        from canopy_ao.core import bake as engine
         items = [engine.SceneItem("leaves", "CANOPY", "t", c["vertices"],
                                   cs.vertex_normals(np.nan_to_num(c["vertices"]), c["triangles"])
                                   if len(c["vertices"]) else np.zeros((0, 3), np.float32),

@@ -96,7 +96,7 @@ def main(argv):
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True) is None:
         raise SystemExit("the canopy_ao add-on could not be enabled")
-    from canopy_ao import mesh_io, operators
+    from canopy_ao.blender import mesh_io, operators
 
     t0 = time.perf_counter()
     for ob in list(bpy.data.objects):

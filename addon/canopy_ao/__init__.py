@@ -15,7 +15,7 @@ bl_info = {
     "category": "Render",
 }
 
-_MODULES = ("properties", "operators", "panels")
+_MODULES = ("blender.properties", "blender.operators", "blender.panels")
 
 
 def _modules():

@@ -40,7 +40,7 @@ def _positive_int(text):
 
 
 def build_parser():
-    from . import engine
+    from .core import bake as engine
 
     p = argparse.ArgumentParser(
         prog="blender -b scene.blend --python-expr 'import canopy_ao.cli; canopy_ao.cli.main()' --",
@@ -124,7 +124,8 @@ def _run(args):
         addon_utils.enable(__package__, default_set=False, handle_error=None)
         if not hasattr(bpy.types.Scene, "canopy_ao"):
             _fail("the canopy_ao add-on could not be enabled (see the messages above)")
-    from . import engine, operators
+    from .core import bake as engine
+    from .blender import operators
 
     ok, msg = engine.core_status()
     if not ok:

@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 import pytest
 
-from canopy_ao import mesh_io
+from canopy_ao.blender import mesh_io
 
 ATTR = "CanopyAO"
 
@@ -45,7 +45,7 @@ def test_bl_info_and_manifest():
 
 
 def test_roles_guessed_and_tree_by_parent(tree_scene_objects):
-    from canopy_ao import operators
+    from canopy_ao.blender import operators
     obs = tree_scene_objects
     dg = bpy.context.evaluated_depsgraph_get()
     got = {}
@@ -92,7 +92,7 @@ def test_bake_values(tree_scene_objects):
 
 
 def test_auto_method_reports_choice(tree_scene_objects):
-    from canopy_ao import operators
+    from canopy_ao.blender import operators
     opts = operators.scene_settings_opts(bpy.context.scene)
     opts.update(method="auto", tau=None, distance=0.0)
     job, rep = operators.run_bake(bpy.context, ["Leaves", "Ground"], opts)
@@ -187,7 +187,7 @@ def test_undo_is_declared():
     # bpy.ops.ed.undo needs a window: its poll fails in background mode (checked on 3.4.1), so
     # here we check the operator asks for an undo step; test_modal_bake_escape_and_undo undoes
     # a bake for real in a window when xvfb-run exists.
-    from canopy_ao.operators import CANOPY_AO_OT_bake
+    from canopy_ao.blender.operators import CANOPY_AO_OT_bake
     assert {'REGISTER', 'UNDO'} <= set(CANOPY_AO_OT_bake.bl_options)
     assert not bpy.ops.ed.undo.poll()
 
@@ -196,7 +196,7 @@ def test_texel_mode_without_uvs_errors_clearly(tree_scene_objects):
     import importlib.util
     bpy.context.scene.canopy_ao.mode = 'TEXEL'
     try:
-        if importlib.util.find_spec("canopy_ao.texel") is None:
+        if importlib.util.find_spec("canopy_ao.blender.texel_io") is None:
             with pytest.raises(RuntimeError, match="texel"):
                 bake(objects="Ground")
         else:  # the generated meshes have no UV map
@@ -209,8 +209,8 @@ def test_texel_mode_without_uvs_errors_clearly(tree_scene_objects):
 
 def test_check_against_cycles(tree_scene_objects):
     """The operator's Cycles check: a per-object error in the report (16 samples: ~2 s)."""
-    from canopy_ao import operators
-    pytest.importorskip("canopy_ao.cycles_check")
+    from canopy_ao.blender import operators
+    pytest.importorskip("canopy_ao.blender.cycles_check")
     opts = operators.scene_settings_opts(bpy.context.scene)
     opts.update(method="ellipsoid", tau=2.0, distance=0.0, check_cycles=True,
                 cycles_samples=16, show_proxies=False)
@@ -249,7 +249,7 @@ class FakeLayout:
 def draw_panels():
     from types import SimpleNamespace
 
-    from canopy_ao import panels
+    from canopy_ao.blender import panels
     log = []
     panels.CANOPY_AO_PT_main.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
     if panels.CANOPY_AO_PT_object.poll(bpy.context):
@@ -282,7 +282,7 @@ def test_module_missing_path(monkeypatch):
         sys.modules["canopy_ao._core"] = None  # makes `from . import _core` raise ImportError
         addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
         assert hasattr(bpy.types.Scene, "canopy_ao")
-        from canopy_ao import engine
+        from canopy_ao.core import bake as engine
         ok, msg = engine.core_status()
         assert not ok and "cmake" in msg and "build-addon" in msg
         assert not bpy.ops.canopy_ao.bake.poll()
@@ -299,7 +299,7 @@ def test_module_missing_path(monkeypatch):
             if v is not None:
                 setattr(canopy_ao, k.split(".", 1)[1], v)
         addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
-    from canopy_ao import engine
+    from canopy_ao.core import bake as engine
     assert engine.core_status()[0]
 
 
@@ -353,7 +353,7 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
 def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     """With nothing changing the geometry the mesh is read in place (no to_mesh copy): same
     positions, normals and triangles as the evaluated copy, in world space, unit normals."""
-    from canopy_ao import mesh_io as mio
+    from canopy_ao.blender import mesh_io as mio
     ob = bpy.data.objects["Leaves"]
     ob.location = (1.0, -2.0, 0.5)
     ob.rotation_euler = (0.3, 0.0, 1.1)
@@ -391,7 +391,7 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     """Set roles and a given τ with an analytic model: no object's triangles are fetched, and
     the bake equals the one that fetched them (grass keeps its blades)."""
-    from canopy_ao import mesh_io as mio, operators
+    from canopy_ao.blender import mesh_io as mio, operators
     roles = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
     for name, role in roles.items():
         bpy.data.objects[name].canopy_ao.role = role
@@ -419,7 +419,7 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
 def test_ao_distance_follows_the_world_unless_typed():
     """The default AO distance is the World's, the one Cycles' AO bake applies (DESIGN 9), so a
     bake and its Cycles check agree at any scene scale; typing one needs 'From World' off."""
-    from canopy_ao import operators
+    from canopy_ao.blender import operators
     scene = bpy.context.scene
     s = scene.canopy_ao
     world = scene.world or bpy.data.worlds.new("DistanceTestWorld")

@@ -10,7 +10,7 @@ import pytest
 
 import tree_scene
 from conftest import _clear_scene, add_mesh
-from canopy_ao import mesh_io, operators
+from canopy_ao.blender import mesh_io, operators
 
 ATTR = "CanopyAO"
 PLACES = [((-5.0, -5.0, 0.0), 0.0, 1.0), ((5.0, -4.0, 0.0), 0.8, 1.2), ((0.0, 5.0, 0.0), 2.0, 0.9)]

@@ -5,7 +5,7 @@ import canopy_scenes as cs
 import numpy as np
 import pytest
 
-from canopy_ao import engine
+from canopy_ao.core import bake as engine
 
 
 def items(scene):

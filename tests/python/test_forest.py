@@ -16,7 +16,7 @@ HERE = os.path.dirname(__file__)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, HERE)
 
-from canopy_ao import engine, forest  # noqa: E402
+from canopy_ao.core import bake as engine, forest  # noqa: E402
 import tree_scene as ts  # noqa: E402
 
 if not engine.core_status()[0]:

@@ -18,7 +18,8 @@ instance).
 
 import numpy as np
 
-from . import engine, forest, mesh_io
+from . import mesh_io
+from ..core import bake as engine, forest
 
 
 def instance_matrices(depsgraph):

@@ -4,7 +4,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from . import engine
+from ..core import bake as engine
 
 METHOD_LABELS = {
     "auto": ("Auto", "Calibrate tau and pick sphere / ellipsoid / shells against a few hundred "

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import engine
+from ..core import bake as engine
 
 
 class _Sidebar:

@@ -31,7 +31,7 @@ def image_name(obj):
 
 def _core():
     try:
-        from . import _core as c
+        from .. import _core as c
     except ImportError:
         return None
     return c
@@ -386,7 +386,7 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
 def bake_objects(context, plan, targets, opts):
     """The bake operator's per-texel step: one image per target item (engine SceneItems),
     AO from the plan's model. Returns {object name: stats}."""
-    from . import engine
+    from ..core import bake as engine
 
     # Refuse before the first image is written: every target needs the UV map.
     for it in targets:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 try:
-    from . import _core
+    from .. import _core
 except Exception:  # the caller reports a missing core (engine.core_status)
     _core = None
 

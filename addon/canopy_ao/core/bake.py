@@ -29,7 +29,7 @@ import numpy as np
 from . import roles as _roles
 
 try:  # the add-on must load without it; the caller reports why (see core_status()).
-    from . import _core
+    from .. import _core
     _CORE_ERROR = None
 except Exception as exc:  # ImportError, or an undefined symbol from a stale build
     _core = None

@@ -6,7 +6,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from . import engine, instances, mesh_io, roles
+from . import instances, mesh_io
+from ..core import bake as engine, roles
 from .properties import method_items
 
 
@@ -120,7 +121,7 @@ class BakeJob:
             raise BakeError(msg)
         if opts["mode"] == 'TEXEL':
             import importlib.util
-            if importlib.util.find_spec(f"{__package__}.texel") is None:
+            if importlib.util.find_spec(f"{__package__}.texel_io") is None:
                 raise BakeError("per-texel output is not available in this build (no "
                                 "canopy_ao.texel); bake per vertex")
         if opts["wire_material"] or opts["add_aov"]:
@@ -268,7 +269,7 @@ class BakeJob:
         texel_stats = {}
         t0 = time.perf_counter()
         if o["mode"] == 'TEXEL':
-            from . import texel
+            from . import texel_io as texel
             try:
                 texel_stats = texel.bake_objects(context, self.plan, self.targets, o)
             except ValueError as exc:  # no UV map, bad resolution: said before any change
@@ -337,7 +338,8 @@ class BakeJob:
 
     def _check_cycles(self, context, rep):
         try:
-            from . import cycles_check, metrics
+            from . import cycles_check
+            from ..core import metrics
         except ImportError:
             raise BakeError("the Cycles check is not available in this build") from None
         objs = [self.objects[r.name] for r in self.results]
