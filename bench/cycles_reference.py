@@ -15,7 +15,7 @@ diagonal: DESIGN 9), and saves bench/out/cache/cycles_<scene>[_quick]_<samples>.
     samples, distance, geometry (sha1 of the scene's vertex and triangle bytes), blender version
 
 Existing cache files with the same geometry hash are kept unless --force. Uses
-addon/canopy_ao/cycles_check.py's bake_cycles_vertex_ao when that module exists, else the
+addon/canopy_ao/blender/cycles_check.py's bake_cycles_vertex_ao when that module exists, else the
 minimal implementation below. Exits non-zero with a message on failure.
 """
 import argparse
