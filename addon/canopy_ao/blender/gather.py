@@ -73,12 +73,6 @@ def world_ao_distance(scene):
     return float(scene.world.light_settings.distance) if scene.world else 0.0
 
 
-def ao_distance(scene, settings):
-    """The panel's AO distance: the World's by default, so a bake and its Cycles check agree
-    whatever the scene's scale; the typed value when 'From World' is off."""
-    return world_ao_distance(scene) if settings.use_world_distance else settings.distance
-
-
 def is_candidate(obj):
     """A mesh that may take part in a bake (not one of our proxy displays)."""
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
@@ -144,14 +138,3 @@ def scene_items(context, depsgraph, targets, opts, timings):
         objects[name] = obj
         how[name] = why
     return items, objects, how
-
-
-def scene_settings_opts(scene):
-    """The bake options as the scene's panel has them."""
-    s = scene.canopy_ao
-    return dict(method=s.method, tau=None if s.tau_auto else s.tau, distance=ao_distance(scene, s),
-                samples=s.samples, attribute=s.attribute_name, overwrite=s.overwrite,
-                wire_material=s.wire_material, add_aov=s.add_aov, aov_name=s.aov_name,
-                mode=s.mode, uv_map=s.uv_map, resolution=s.resolution, image_dir=s.image_dir,
-                show_proxies=s.show_proxies, check_cycles=s.check_cycles,
-                cycles_samples=s.cycles_samples)

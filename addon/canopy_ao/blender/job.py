@@ -8,7 +8,7 @@ import numpy as np
 
 from . import cycles_check, gather, instances, materials, mesh_io
 from .. import core
-from ..core import metrics
+from ..core import metrics, settings
 from ..core.native import CanopyAOError
 
 # Seconds per stage of the last committed bake (for bench/blender_bake_speed.py).
@@ -20,7 +20,13 @@ class BakeJob:
     a time, then commit every write at once, so a cancelled or failed bake changes nothing."""
 
     def __init__(self, context, object_names, opts):
-        self.opts = opts
+        """opts: option name -> value (properties.scene_options, cli.options_from_args);
+        options left out take their defaults. Raises CanopyAOError before changing anything."""
+        opts = self.opts = dict(settings.defaults(), **opts)
+        for o in settings.OPTIONS:  # every value in range before anything is read or written
+            opts[o.name] = o.check(opts[o.name])
+        self.settings = settings.BakeSettings(**{o.name: opts[o.name] for o in settings.OPTIONS
+                                                 if o.group == "bake"})
         self.scene = context.scene
         self.results = []
         # Seconds per stage of this bake (bench/blender_bake_speed.py prints them).
@@ -35,9 +41,6 @@ class BakeJob:
                 materials.check_aov_name(opts["aov_name"])
             except ValueError as exc:
                 raise CanopyAOError(str(exc)) from None
-        if opts["method"] not in core.METHODS:
-            raise CanopyAOError(f"unknown method '{opts['method']}'; one of "
-                                f"{', '.join(core.METHODS)}")
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -61,11 +64,6 @@ class BakeJob:
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
-        self.settings = core.BakeSettings(
-            method=opts["method"], tau=opts["tau"], distance=opts["distance"],
-            samples=opts["samples"], time_budget=opts.get("time_budget", 2.0),
-            target_rmse=opts.get("target_rmse", 0.06),
-            forest_epsilon=opts.get("forest_epsilon", 1e-2))
         self.plan = None
         self.index = 0
         self._lap("instances", t0)

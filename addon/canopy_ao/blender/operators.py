@@ -2,13 +2,13 @@
 the material wiring. The bake itself is a BakeJob (job.py), shared with the command line."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import StringProperty
 
 from . import mesh_io
-from .gather import scene_settings_opts
 from .job import BakeJob
-from .properties import method_items
+from .properties import option_properties, raw_values, resolve
 from ..core import roles
+from ..core.settings import OPTIONS
 from ..core.native import CanopyAOError, core_status
 
 
@@ -22,28 +22,11 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
     bl_label = "Bake Canopy AO"
     bl_options = {'REGISTER', 'UNDO'}
 
-    # Every setting can be given as an argument; one left unset takes the scene's panel value.
+    # Every option of core/settings.py is an argument (option_properties, added below); one
+    # left unset takes the scene's panel value.
     objects: StringProperty(name="Objects", default="",
                             description="Comma-separated object names; empty = the selection, "
                                         "or every visible mesh")
-    method: EnumProperty(name="Method", items=method_items)
-    tau: FloatProperty(name="τ", default=0.0, min=0.0,
-                       description="Optical depth; 0 = calibrate automatically")
-    distance: FloatProperty(name="AO Distance", default=10.0, min=0.0)
-    samples: IntProperty(name="Samples", default=64, min=1)
-    attribute: StringProperty(name="Attribute", default="CanopyAO")
-    overwrite: BoolProperty(name="Overwrite", default=False)
-    show_proxies: BoolProperty(name="Show Proxies", default=True)
-    wire_material: BoolProperty(name="Wire Material", default=False)
-    add_aov: BoolProperty(name="Add AOV", default=False)
-    aov_name: StringProperty(name="AOV Name", default="BakedAO")
-    mode: EnumProperty(name="Output", items=[("VERTEX", "Per Vertex", ""),
-                                             ("TEXEL", "Per Texel", "")], default="VERTEX")
-    uv_map: StringProperty(name="UV Map", default="")
-    resolution: IntProperty(name="Resolution", default=1024, min=16, max=16384)
-    image_dir: StringProperty(name="Image Folder", default="//canopy_ao", subtype='DIR_PATH')
-    check_cycles: BoolProperty(name="Check with Cycles", default=False)
-    cycles_samples: IntProperty(name="Cycles Samples", default=64, min=1)
 
     _timer = None
     _job = None
@@ -61,19 +44,19 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         return True
 
     def _opts(self, context):
-        opts = scene_settings_opts(context.scene)
-        keymap = {"attribute": "attribute", "method": "method", "distance": "distance",
-                  "samples": "samples", "overwrite": "overwrite", "show_proxies": "show_proxies",
-                  "wire_material": "wire_material", "add_aov": "add_aov",
-                  "aov_name": "aov_name", "check_cycles": "check_cycles",
-                  "cycles_samples": "cycles_samples", "mode": "mode", "uv_map": "uv_map",
-                  "resolution": "resolution", "image_dir": "image_dir"}
-        for prop, key in keymap.items():
-            if self.properties.is_property_set(prop):
-                opts[key] = getattr(self, prop)
-        if self.properties.is_property_set("tau"):
-            opts["tau"] = self.tau if self.tau > 0 else None
-        return opts
+        is_set = self.properties.is_property_set
+        values = raw_values(context.scene.canopy_ao)
+        for name in values:
+            if is_set(name):
+                values[name] = getattr(self, name)
+        # A number given without its switch means that number: tau=2 bakes with τ 2, whatever
+        # the panel's Calibrate τ; distance=10 is used even when the panel follows the World.
+        for o in OPTIONS:
+            if o.none_prop and is_set(o.name) and not is_set(o.none_prop):
+                values[o.none_prop] = False
+        if is_set("distance") and not is_set("use_world_distance"):
+            values["use_world_distance"] = False
+        return resolve(values, context.scene)
 
     def _names(self):
         return [s.strip() for s in self.objects.split(",") if s.strip()]
@@ -228,6 +211,8 @@ class CANOPY_AO_OT_remove_wiring(bpy.types.Operator):
     def invoke(self, context, event):
         return self.execute(context)
 
+
+CANOPY_AO_OT_bake.__annotations__.update(option_properties())
 
 classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles, CANOPY_AO_OT_remove_wiring)
 

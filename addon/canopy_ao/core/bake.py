@@ -10,7 +10,6 @@ and calibrates; evaluate_item() bakes one item; bake() does both.
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -18,17 +17,14 @@ import numpy as np
 from . import ladder, lighting, native, proxies
 from .native import CanopyAOError
 from .scene import ItemResult, Plan, SceneItem
-from .settings import DEFAULT_TAU, BakeSettings
+from .ladder import DEFAULT_TAU
+from .settings import BakeSettings, validate
 
 
 def prepare(items, settings: BakeSettings) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError."""
     native.require()
-    if settings.method not in ladder.METHODS:
-        raise CanopyAOError(f"unknown method {settings.method!r}; one of "
-                            f"{', '.join(ladder.METHODS)}")
-    if settings.tau is not None and not (settings.tau > 0 and math.isfinite(settings.tau)):
-        raise CanopyAOError(f"tau must be a finite number > 0, got {settings.tau}")
+    validate(settings)
     items = list(items)
     t_start = time.perf_counter()
     plan = Plan(settings=settings, method=settings.method,
