@@ -415,6 +415,36 @@ def test_operator_number_without_its_switch_is_used(tree_scene_objects):
         bpy.ops.canopy_ao.bake(objects="Ground,Leaves", method="sphere", tau=0.0)
 
 
+
+def _break_evaluation(monkeypatch):
+    from canopy_ao.core import lighting
+
+    def broken(*a, **k):
+        raise RuntimeError("boom: a bug in the evaluation")
+
+    monkeypatch.setattr(lighting, "evaluate_points", broken)
+
+
+def test_a_bug_is_reported_as_one_and_changes_nothing(tree_scene_objects, monkeypatch, capfd):
+    """A bug is not dressed up as 'bake failed': the operator says it is an internal error,
+    prints the traceback, and nothing is written."""
+    _break_evaluation(monkeypatch)
+    with pytest.raises(RuntimeError, match="internal error.*boom"):
+        bake(objects="Ground,Leaves", method="sphere", tau=2.0)
+    assert "Traceback" in capfd.readouterr().err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
+def test_cli_shows_a_bug_with_its_traceback(tree_scene_objects, monkeypatch, capsys):
+    from canopy_ao import cli
+    _break_evaluation(monkeypatch)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere", "--tau", "2"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 1 and "Traceback" in err and "RuntimeError: boom" in err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
 def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     """With nothing changing the geometry the mesh is read in place (no to_mesh copy): same
     positions, normals and triangles as the evaluated copy, in world space, unit normals."""

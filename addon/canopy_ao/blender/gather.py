@@ -121,12 +121,9 @@ def scene_items(context, depsgraph, targets, opts, timings):
             opts["method"], opts["tau"], declared[0])
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
-        try:
-            pos, nor, tris = mesh_io.evaluated_arrays(
-                obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
-                triangles=tris_needed, timings=timings)
-        except mesh_io.MeshIOError as exc:
-            raise CanopyAOError(str(exc)) from None
+        pos, nor, tris = mesh_io.evaluated_arrays(
+            obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
+            triangles=tris_needed, timings=timings)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
         if declared is None and not ladder.triangles_needed(opts["method"], opts["tau"], role):

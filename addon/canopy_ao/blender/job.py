@@ -57,10 +57,7 @@ class BakeJob:
         t0 = time.perf_counter()
         # Instanced trees (particles, collection instances, geometry nodes): each prototype is
         # baked once (its instances share its mesh) and every instance occludes (instances.py).
-        try:
-            self.prototypes = instances.Prototypes(depsgraph, vertex_mode=opts["mode"] == 'VERTEX')
-        except mesh_io.MeshIOError as exc:
-            raise CanopyAOError(str(exc)) from None
+        self.prototypes = instances.Prototypes(depsgraph, vertex_mode=opts["mode"] == 'VERTEX')
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
@@ -81,16 +78,15 @@ class BakeJob:
 
     def prepare(self):
         t0 = time.perf_counter()
-        try:
-            self.plan = core.prepare(self.items, self.settings)
-            t0 = self._lap("prepare (fit, calibrate)", t0)
-            if self.prototypes:
-                skip = {it.name for it in self.targets}
-                core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
-                self.lines.extend(self.prototypes.lines())
-                self._lap("instances", t0)
-        except (CanopyAOError, ValueError, RuntimeError) as exc:
-            raise CanopyAOError(f"bake failed: {exc}") from exc
+        # CanopyAOError (bad input, with its reason) passes to the caller as it is; anything
+        # else is a bug and keeps its traceback.
+        self.plan = core.prepare(self.items, self.settings)
+        t0 = self._lap("prepare (fit, calibrate)", t0)
+        if self.prototypes:
+            skip = {it.name for it in self.targets}
+            core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
+            self.lines.extend(self.prototypes.lines())
+            self._lap("instances", t0)
 
     def step(self):
         """Bake the next target; returns the line to report, or None when all are done."""
@@ -101,8 +97,8 @@ class BakeJob:
         t0 = time.perf_counter()
         try:
             r = core.evaluate_item(self.plan, it)
-        except (CanopyAOError, ValueError, RuntimeError) as exc:
-            raise CanopyAOError(f"{it.name}: bake failed: {exc}") from exc
+        except CanopyAOError as exc:
+            raise CanopyAOError(f"{it.name}: {exc}") from exc
         self._lap("evaluate", t0)
         self.results.append(r)
         line = (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method {r.method}, "

@@ -1,6 +1,8 @@
 """The operators: bake (modal in a window, blocking in the background), guess roles, remove
 the material wiring. The bake itself is a BakeJob (job.py), shared with the command line."""
 
+import traceback
+
 import bpy
 from bpy.props import StringProperty
 
@@ -62,13 +64,20 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         return [s.strip() for s in self.objects.split(",") if s.strip()]
 
     def _report_error(self, exc):
-        self.report({'ERROR'}, str(exc))
+        """CanopyAOError: its message. Anything else is a bug: the traceback goes to the
+        console and the report says it is one."""
+        if isinstance(exc, CanopyAOError):
+            self.report({'ERROR'}, str(exc))
+        else:
+            traceback.print_exception(type(exc), exc, exc.__traceback__)
+            self.report({'ERROR'}, f"Canopy AO internal error ({type(exc).__name__}: {exc}); "
+                                   "the traceback is in the system console, please report it")
         return {'CANCELLED'}
 
     def _finish(self, context, job, lines_reported=False):
         try:
             job.commit(context)
-        except (CanopyAOError, mesh_io.MeshIOError, RuntimeError) as exc:
+        except Exception as exc:  # reported, never left to Blender half-handled
             return self._report_error(exc)
         rep = job.report_dict
         for line in job.lines if not lines_reported else ():
@@ -95,7 +104,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                     job.lines.append(line)
             finally:
                 wm.progress_end()
-        except CanopyAOError as exc:
+        except Exception as exc:
             return self._report_error(exc)
         return self._finish(context, job)
 
@@ -104,7 +113,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
             return self.execute(context)
         try:
             self._job = BakeJob(context, self._names(), self._opts(context))
-        except CanopyAOError as exc:
+        except Exception as exc:
             return self._report_error(exc)
         wm = context.window_manager
         wm.progress_begin(0, self._job.steps)
@@ -140,7 +149,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                 job.lines.append(line)
                 self.report({'INFO'}, line)
             context.window_manager.progress_update(job.index + 1)
-        except CanopyAOError as exc:
+        except Exception as exc:  # whatever it is, the timer and the status text go
             self._stop(context)
             return self._report_error(exc)
         return {'RUNNING_MODAL'}

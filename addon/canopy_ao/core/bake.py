@@ -15,12 +15,13 @@ import time
 import numpy as np
 
 from . import ladder, lighting, native, proxies
-from .native import CanopyAOError
+from .native import CanopyAOError, refusals_are_user_errors
 from .scene import ItemResult, Plan, SceneItem
 from .ladder import DEFAULT_TAU
 from .settings import BakeSettings, validate
 
 
+@refusals_are_user_errors
 def prepare(items, settings: BakeSettings) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError."""
     native.require()
@@ -66,6 +67,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
     return plan
 
 
+@refusals_are_user_errors
 def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
     """Bake one item with the plan's method and τ."""
     t0 = time.perf_counter()
@@ -80,6 +82,7 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
                       time.perf_counter() - t0)
 
 
+@refusals_are_user_errors
 def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     """Make instanced trees occlude every item evaluate_item() bakes with this plan.
 
