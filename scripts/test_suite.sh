@@ -29,3 +29,5 @@ mkdir -p "$scripts_dir/addons"
 ln -s "$repo/addon/canopy_ao" "$scripts_dir/addons/canopy_ao"
 BLENDER_USER_SCRIPTS="$scripts_dir" blender -b --factory-startup \
   --python tests/blender/run_pytest.py -- tests/blender -q -p no:cacheprovider
+
+scripts/test_extension.sh

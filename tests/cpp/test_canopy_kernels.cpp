@@ -73,7 +73,7 @@ TEST(CanopyKernels, HegemanExponentIsEq6) {
   EXPECT_FLOAT_EQ(hegeman_exponent(2.0f, 0.0f, 1.0f), 2.0f);
   EXPECT_FLOAT_EQ(hegeman_exponent(0.0f, 0.0f, 1.0f), 0.0f);
   // f = h²/(h² + d²) halves the exponent where d² = h².
-  EXPECT_FLOAT_EQ(hegeman_exponent(0.5f, 0.25f, 1.0f), 0.5f * 0.5f * 0.5f * 0.25f * 2.5f);
+  EXPECT_FLOAT_EQ(hegeman_exponent(0.5f, 0.25f, 1.0f), 0.5f * (0.25f * 2.5f / 2.0f));
 }
 
 TEST(CanopyKernels, PortableAlwaysAvailableAvx2AsTheCpuSays) {

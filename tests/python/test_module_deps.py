@@ -87,25 +87,6 @@ def test_module_glibc_no_newer_than_blender_needs(module_path):
     assert newest <= max(blender), "the module needs a newer glibc than Blender itself"
 
 
-def test_module_has_no_avx_outside_its_avx2_kernels(module_path):
-    """Baseline code everywhere (x86-64-v2): 256-bit registers appear only in functions of the
-    AVX2 kernels, which run only where the CPU has AVX2 (canopy_model.h, 'Kernels')."""
-    if os.uname().machine != "x86_64":
-        pytest.skip("x86-64 only")
-    fn, offenders, avx2_fns = None, set(), set()
-    for line in _run("objdump", "-d", "-C", "--no-show-raw-insn", module_path).splitlines():
-        m = re.match(r"^[0-9a-f]+ <(.*)>:$", line)
-        if m:
-            fn = m.group(1)
-        elif "%ymm" in line or "%zmm" in line:
-            if "::avx2::" in fn or "load8_aos" in fn:
-                avx2_fns.add(fn)
-            else:
-                offenders.add(fn)
-    assert avx2_fns, "no AVX2 kernel found in the module (dispatch lost?)"
-    assert not offenders, f"AVX code outside the AVX2 kernels: {sorted(offenders)[:5]}"
-
-
 def test_portable_kernel_can_be_forced_and_agrees():
     import numpy as np
 
