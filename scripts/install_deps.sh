@@ -9,6 +9,11 @@ pkgs=(
   pybind11-dev libembree-dev libopenimageio-dev libtbb-dev
   libgtest-dev libbenchmark-dev
   blender xvfb xauth
+  # Blender 5.x's own extensions add-on (bl_pkg: `blender --command extension ...`) imports
+  # these, which Debian's blender package does not pull in.
+  python3-cattr python3-requests
+  # readelf, objdump, ldd: the module's load-time dependencies are checked in the tests.
+  binutils libc-bin
 )
 if [[ "${1:-}" == "--with-bench" ]]; then
   pkgs+=(python3-matplotlib)

@@ -1,25 +1,49 @@
 #!/usr/bin/env bash
-# Runs every test: installs what is missing, builds, then C++ (CTest), Python (pytest on the
-# native module and the bpy-free add-on modules) and Blender (pytest inside blender -b).
+# Runs every test on every supported Debian stack: the legs of the test matrix.
+#   host    this machine (Debian 12: Blender 3.4, Embree 3, OIIO 2.4, Python 3.11)
+#   trixie  a cached Debian 13 chroot (Blender 4.3, Embree 4, OIIO 2.5, Python 3.13)
+#   sid     a cached Debian unstable chroot (Blender 5.x, Embree 4, OIIO 3.1, Python 3.14)
+# Each leg builds and runs the whole suite (scripts/test_suite.sh) in its own build folder.
+# Chroots are made once by scripts/chroot.sh (needs root and the Debian archive this machine's
+# apt uses) and reused; a leg that cannot be set up fails.
+#   CANOPY_AO_LEGS="host trixie"   run only these legs (default: all of them)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-repo=$PWD
 
-scripts/install_deps.sh
-scripts/build.sh
+all_legs=(host trixie sid)
+read -r -a legs <<<"${CANOPY_AO_LEGS:-${all_legs[*]}}"
+for leg in "${legs[@]}"; do
+  [[ " ${all_legs[*]} " == *" $leg "* ]] || { echo "test.sh: unknown leg '$leg' (${all_legs[*]})" >&2; exit 2; }
+done
+as_root=()
+[[ $(id -u) -eq 0 ]] || as_root=(sudo --preserve-env=CANOPY_AO_BUILD_DIR,CI)
 
-echo "== C++ tests (CTest)"
-(cd build && ctest --output-on-failure -j"$(nproc)")
+run_leg() {
+  local leg=$1
+  if [[ $leg == host ]]; then
+    CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh
+  else
+    "${as_root[@]}" scripts/chroot.sh "$leg" setup &&
+      CANOPY_AO_BUILD_DIR="build-$leg" "${as_root[@]}" \
+        scripts/chroot.sh "$leg" run /canopy-ao/scripts/test_suite.sh
+  fi
+}
 
-echo "== Python tests (pytest, /usr/bin/python3 = Blender's Python)"
-/usr/bin/python3 -m pytest tests/python -q -p no:cacheprovider
-
-echo "== Blender tests (pytest inside blender -b --factory-startup)"
-# A throw-away user-scripts folder: the add-on is found there, the user's own Blender
-# configuration is never touched.
-scripts_dir=$(mktemp -d)
-trap 'rm -rf "$scripts_dir"' EXIT
-mkdir -p "$scripts_dir/addons"
-ln -s "$repo/addon/canopy_ao" "$scripts_dir/addons/canopy_ao"
-BLENDER_USER_SCRIPTS="$scripts_dir" blender -b --factory-startup \
-  --python tests/blender/run_pytest.py -- tests/blender -q -p no:cacheprovider
+passed=0 failed=0 summary=()
+for leg in "${legs[@]}"; do
+  echo "=== leg $leg"
+  start=$SECONDS
+  if run_leg "$leg"; then
+    result=passed
+    passed=$((passed + 1))
+  else
+    result=FAILED
+    failed=$((failed + 1))
+  fi
+  summary+=("$(printf '%-7s %-6s %4d s' "$leg" "$result" $((SECONDS - start)))")
+  echo "=== leg $leg: $result in $((SECONDS - start)) s"
+done
+echo "=== test matrix"
+printf '  %s\n' "${summary[@]}"
+echo "legs: $passed passed, $failed failed"
+((failed == 0))

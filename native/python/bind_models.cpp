@@ -165,6 +165,21 @@ void bind_models(py::module_& m) {
         "angle theta from the normal and whose angular radius is sigma (sin^2 sigma = "
         "(r/d)^2), clipped at the horizon (Snyder's sphere form factor). In [0, 1]; "
         "sin2_sigma >= 1 (receiver on the sphere) gives (1 + cos theta)/2.");
+  m.def(
+      "canopy_kernel",
+      []() { return canopy_kernel() == CanopyKernel::Avx2 ? "avx2" : "portable"; },
+      "Kernel the canopy-shell models use: \"avx2\" (AVX2/FMA, where the CPU has them) or "
+      "\"portable\" (the build's baseline; forced by CANOPY_AO_KERNEL=portable).");
+  m.def(
+      "set_canopy_kernel",
+      [](const std::string& name) {
+        if (name == "portable") return set_canopy_kernel(CanopyKernel::Portable);
+        if (name == "avx2") return set_canopy_kernel(CanopyKernel::Avx2);
+        throw py::value_error("kernel must be \"portable\" or \"avx2\", got \"" + name + "\"");
+      },
+      py::arg("name"),
+      "Use this canopy-shell kernel from now on (process-wide). ValueError if this CPU cannot "
+      "run it.");
   m.def("shell_opacity", &shell_opacity, py::arg("tau"),
         "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3).");
 

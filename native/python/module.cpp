@@ -23,14 +23,9 @@ PYBIND11_MODULE(_core, m) {
       "int32 (M, 3) triangles; results float32 (N,) in [0, 1], 1 = open sky.";
   m.attr("__version__") = CANOPY_AO_VERSION;
 
-  static py::exception<Error> error(m, "CanopyAOError", PyExc_RuntimeError);
-  py::register_exception_translator([](std::exception_ptr p) {
-    try {
-      if (p) std::rethrow_exception(p);
-    } catch (const Error& e) {
-      error(e.what());
-    }
-  });
+  // register_exception: translation and the Python type in one call, the same in pybind11 2.10
+  // and 3.x (a static py::exception called as error(msg) is deprecated in 3.x).
+  py::register_exception<Error>(m, "CanopyAOError", PyExc_RuntimeError);
 
   m.def("set_max_threads", &set_max_threads, py::arg("n"),
         "Caps worker threads for later calls (0 = all cores). Returns the previous cap. "

@@ -20,6 +20,17 @@ def scene():
     return H.empty_scene()
 
 
+def _compositor_tree(scene):
+    """The scene's compositor node tree: Blender 5.x keeps it in a node group
+    (scene.compositing_node_group), earlier versions in scene.node_tree (after use_nodes)."""
+    if hasattr(scene, "compositing_node_group"):
+        tree = bpy.data.node_groups.new("CanopyAOTestCompositor", "CompositorNodeTree")
+        scene.compositing_node_group = tree
+        return tree
+    scene.use_nodes = True
+    return scene.node_tree
+
+
 def _render_aov(scene, aov_name, tmp_path):
     scene.render.engine = "CYCLES"
     scene.cycles.samples = 4
@@ -30,19 +41,26 @@ def _render_aov(scene, aov_name, tmp_path):
     scene.render.resolution_y = 16
     scene.render.resolution_percentage = 100
     scene.render.filter_size = 0.01  # no pixel filter blur across the object's edge
-    scene.use_nodes = True
-    tree = scene.node_tree
+    tree = _compositor_tree(scene)
     tree.nodes.clear()
     rl = tree.nodes.new("CompositorNodeRLayers")
     out = tree.nodes.new("CompositorNodeOutputFile")
-    out.base_path = str(tmp_path)
+    if hasattr(out.format, "media_type"):  # Blender 5.x: single-layer EXR is an IMAGE
+        out.format.media_type = "IMAGE"
     out.format.file_format = "OPEN_EXR"
     out.format.color_depth = "32"
-    out.file_slots[0].path = "aov_"
+    if hasattr(out, "file_output_items"):  # Blender 5.x: directory, file name, items
+        out.directory = str(tmp_path)
+        out.file_name = "aov_"
+        out.file_output_items.new("RGBA", "ao")
+    else:  # up to 4.x: base path and file slots
+        out.base_path = str(tmp_path)
+        out.file_slots[0].path = "aov_"
     tree.links.new(rl.outputs[aov_name], out.inputs[0])
     bpy.ops.render.render(write_still=False)
-    path = tmp_path / f"aov_{scene.frame_current:04d}.exr"
-    assert path.exists(), f"File Output wrote nothing at {path}"
+    written = sorted(tmp_path.glob("aov_*.exr"))
+    assert len(written) == 1, f"File Output wrote {written} in {tmp_path}"
+    path = written[0]
     img = bpy.data.images.load(str(path))
     px = np.empty(16 * 16 * 4, dtype=np.float32)
     img.pixels.foreach_get(px)

@@ -118,8 +118,11 @@ def test_geometry_nodes_instances(proto):
     """Instance on Points of a Collection Info (the scatter object's own mesh is empty)."""
     scatter = add_mesh("Scatter", np.float32([[0, 0, 0]]), np.zeros((0, 3), np.int32))
     ng = bpy.data.node_groups.new("Forest", 'GeometryNodeTree')
-    ng.inputs.new('NodeSocketGeometry', "Geometry")
-    ng.outputs.new('NodeSocketGeometry', "Geometry")
+    for in_out in ("INPUT", "OUTPUT"):
+        if hasattr(ng, "interface"):  # Blender 4.0+: the group interface
+            ng.interface.new_socket("Geometry", in_out=in_out, socket_type='NodeSocketGeometry')
+        else:
+            (ng.inputs if in_out == "INPUT" else ng.outputs).new('NodeSocketGeometry', "Geometry")
     out = ng.nodes.new('NodeGroupOutput')
     line = ng.nodes.new('GeometryNodeMeshLine')
     line.inputs["Count"].default_value = 3

@@ -19,6 +19,7 @@ import bpy
 import numpy as np
 
 from ..core import metrics
+from . import materials
 
 __all__ = ["bake_cycles_vertex_ao", "bake_cycles_texel_ao", "write_error_attribute",
            "check_objects", "check_texel", "render_settings_snapshot"]
@@ -187,14 +188,14 @@ def bake_cycles_texel_ao(context, obj, uv_map, resolution, distance, samples,
         if not mats or len(mats) < len(obj.material_slots):
             if not obj.material_slots:
                 tmp_material = bpy.data.materials.new(_TMP_MATERIAL)
-                tmp_material.use_nodes = True
+                materials.enable_nodes(tmp_material)
                 obj.data.materials.append(tmp_material)
                 mats = [tmp_material]
             else:
                 raise ValueError(f"Object '{obj.name}' has an empty material slot; assign a "
                                  "material or remove the slot before a per-texel check")
         for mat in dict.fromkeys(mats):
-            if not mat.use_nodes:
+            if not materials.uses_nodes(mat):
                 raise ValueError(f"Material '{mat.name}' does not use nodes; enable "
                                  "'Use Nodes' before a per-texel Cycles check")
             nt = mat.node_tree

@@ -30,6 +30,20 @@ RESERVED_PASS_NAMES = frozenset({
     "BloomCol", "CryptoObject", "CryptoMaterial", "CryptoAsset",
 })
 
+# Blender 5.x: every material has a node tree and Material.use_nodes is deprecated (always
+# True); before, a material could be without nodes and we turned them on (and off again).
+NODES_OPTIONAL = bpy.app.version < (5, 0, 0)
+
+
+def uses_nodes(mat):
+    return not NODES_OPTIONAL or mat.use_nodes
+
+
+def enable_nodes(mat):
+    if NODES_OPTIONAL:
+        mat.use_nodes = True
+
+
 _BASE_COLOR_INPUTS = ("Base Color", "Color")  # Principled (3.x and 4.x) / Diffuse-like shaders
 
 
@@ -145,7 +159,7 @@ def _object_materials(obj):
     if not mats:
         mat = bpy.data.materials.new(f"{obj.name}_CanopyAO")
         mat[OWN_MATERIAL_TAG] = True
-        mat.use_nodes = True
+        enable_nodes(mat)
         if len(obj.material_slots) == 0:
             obj.data.materials.append(mat)
             obj[OBJ_MATERIAL_KEY] = "append"
@@ -155,10 +169,10 @@ def _object_materials(obj):
             obj[OBJ_MATERIAL_KEY] = "fill"
         mats = [mat]
     for mat in mats:
-        if not mat.use_nodes:
+        if not uses_nodes(mat):
             # Turning nodes on replaces the material's simple colour by a default Principled
             # tree; remember so unwire can turn them off again.
-            mat.use_nodes = True
+            enable_nodes(mat)
             mat[TAG + "_enabled_nodes"] = True
     return mats
 
@@ -284,7 +298,8 @@ def _unwire_material(mat):
         nt.nodes.remove(node)
         removed += 1
     if mat.get(TAG + "_enabled_nodes"):
-        mat.use_nodes = False
+        if NODES_OPTIONAL:
+            mat.use_nodes = False
         del mat[TAG + "_enabled_nodes"]
     return removed
 

@@ -37,6 +37,7 @@
 // zero-padded and goes through the same code). Figures: bench/README.md, "Model throughput".
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <vector>
 
@@ -57,6 +58,29 @@ enum class ShellCombine {
   Product,  ///< V = Π over all shells of that shell's V (in-shell inside, occluder outside).
   Nearest,  ///< Hegeman §5: the shell whose centre is closest to x alone (gives seams).
 };
+
+// === The law
+/// Hegeman Eq. 5–6 in the unit frame (R = 1): the exponent τ f Vcap/Vhemi = (τ/2) h⁴(3 − h) /
+/// (h² + d²) of a receiver with cap height h ∈ [0, 2] (Eq. 4) and off-centre distance² d² ≥ 0;
+/// V = exp(−exponent). The one scalar definition of the law: the portable kernel evaluates it
+/// as written, the AVX2 kernel in 8 lanes with rsqrt/rcp and a Newton step, and the tests check
+/// both against it (CanopyKernels.*).
+inline float hegeman_exponent(float h, float d2, float tau) {
+  const float h2 = h * h;
+  return (0.5f * tau) * h2 * h2 * (3.0f - h) / std::max(h2 + d2, 1e-30f);
+}
+
+// === Kernels: chosen at run time
+/// Portable: baseline x86-64-v2 (or the target's own) code. Avx2: AVX2 + FMA code, used where
+/// the CPU has both. The results agree to ~1e-6 (tests: CanopyKernels.*).
+enum class CanopyKernel { Portable, Avx2 };
+/// The kernel the model functions use now: the best this CPU runs, unless CANOPY_AO_KERNEL=
+/// portable is set in the environment (read once) or set_canopy_kernel chose another.
+CanopyKernel canopy_kernel();
+/// Whether this CPU (and this build) can run `k`.
+bool canopy_kernel_available(CanopyKernel k);
+/// Use `k` from now on (process-wide). std::invalid_argument if this CPU cannot run it.
+void set_canopy_kernel(CanopyKernel k);
 
 // === One point (reference path; the array functions give the same values)
 /// Visibility of one receiver x (world), normal n (any length), for one shell.

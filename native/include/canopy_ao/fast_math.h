@@ -2,7 +2,8 @@
 //
 // libm's expf is a call GCC cannot vectorise (without -ffast-math and libmvec), which costs the
 // one-sphere model a factor ~8 (DESIGN 9: 170 M vs 1.3 G vertices/s per core). These versions
-// are branch-free straight-line code: inlined into a simple loop they become AVX2/FMA code.
+// are branch-free straight-line code: inlined into a simple loop they become vector code, AVX2/FMA
+// where the loop is in an AVX2 function (CANOPY_AO_TARGET_AVX2, canopy_model.cpp's kernels).
 //
 // GCC 12 caveat: with the default -ftrapping-math a clamp against a constant followed by
 // arithmetic is turned into a conditional multiply that "could trap", and the loop is not
@@ -22,8 +23,12 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#if defined(__AVX2__) && defined(__FMA__)
+#if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
+/// x86: AVX2/FMA kernels are compiled besides the baseline ones and chosen at run time.
+#define CANOPY_AO_X86 1
+/// Marks a function as AVX2/FMA code: call it only where cpu_has_avx2_fma() is true.
+#define CANOPY_AO_TARGET_AVX2 __attribute__((target("avx2,fma")))
 #endif
 
 namespace canopy_ao {
@@ -100,11 +105,16 @@ inline float smoothstep01(float t) {
   return u * u * (3.0f - 2.0f * u);
 }
 
-#if defined(__AVX2__) && defined(__FMA__)
+#ifdef CANOPY_AO_X86
+/// Whether this CPU runs AVX2 and FMA instructions (the OS saving the YMM state included).
+inline bool cpu_has_avx2_fma() {
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+}
+
 /// 8 AoS xyz points (24 floats at q, unaligned) → x, y, z registers: the transpose of an N×3
 /// array done in registers (6 half-loads, 5 in-lane shuffles), without a trip through memory.
 /// Used by the canopy models and by the benchmark's bare-loop ceiling (same loads in both).
-inline void load8_aos(const float* q, __m256& x, __m256& y, __m256& z) {
+CANOPY_AO_TARGET_AVX2 inline void load8_aos(const float* q, __m256& x, __m256& y, __m256& z) {
   __m256 m03 = _mm256_castps128_ps256(_mm_loadu_ps(q));
   __m256 m14 = _mm256_castps128_ps256(_mm_loadu_ps(q + 4));
   __m256 m25 = _mm256_castps128_ps256(_mm_loadu_ps(q + 8));

@@ -1,4 +1,4 @@
-// Canopy AO — ray-traced ambient occlusion with Embree 3: the exact answer (up to sampling
+// Canopy AO — ray-traced ambient occlusion with Embree (3 or 4): the exact answer (up to sampling
 // noise), the reference every approximate model is checked against, and the source of
 // calibration samples (DESIGN 3.7, 5).
 //

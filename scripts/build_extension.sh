@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Builds the Blender 4.2+ extension zip of Canopy AO, carrying the native module built for the
+# Python and platform of the Blender installed here, and validates its manifest.
+#   scripts/build_extension.sh [--out DIR]      (default DIR: out/)
+# Prints the zip's path on its last line. Install it with
+#   blender --command extension install-file -r user_default -e ZIP
+# or in Blender: Edit > Preferences > Get Extensions > Install from Disk.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=out
+while (($#)); do
+  case "$1" in
+    --out) out=$2; shift 2 ;;
+    *) echo "build_extension.sh: unknown argument '$1' (use --out DIR)" >&2; exit 2 ;;
+  esac
+done
+mkdir -p "$out"
+out=$(cd "$out" && pwd)
+
+scripts/install_deps.sh
+scripts/build.sh >/dev/null
+build=${CANOPY_AO_BUILD_DIR:-build}
+python=$(cat "$build/python_executable")
+suffix=$("$python" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
+tag=$("$python" -c 'import sys; print("cp%d%d" % sys.version_info[:2])')
+module=addon/canopy_ao/_core$suffix
+[[ -f $module ]] || { echo "build_extension.sh: $module was not built" >&2; exit 1; }
+
+# Stage the package with exactly one native module: the one for this Blender's Python.
+stage=$(mktemp -d)
+trap 'rm -rf "$stage"' EXIT
+mkdir "$stage/canopy_ao"
+tar -C addon/canopy_ao --exclude=__pycache__ --exclude='_core*.so' --exclude='*.pyc' -cf - . |
+  tar -C "$stage/canopy_ao" -xf -
+cp "$module" "$stage/canopy_ao/"
+
+blender_cmd() {  # Blender's command-line tools, with the factory settings
+  local log
+  log=$(mktemp)
+  if ! blender --factory-startup --command extension "$@" >"$log" 2>&1; then
+    cat "$log" >&2
+    rm -f "$log"
+    echo "build_extension.sh: 'blender --command extension $1' failed" >&2
+    exit 1
+  fi
+  grep -vE '^(Blender [0-9]|Read prefs|$)' "$log" >&2 || true
+  rm -f "$log"
+}
+blender_cmd validate "$stage/canopy_ao"
+rm -f "$stage"/*.zip
+blender_cmd build --source-dir "$stage/canopy_ao" --output-dir "$stage"
+zips=("$stage"/*.zip)
+[[ -f ${zips[0]} ]] || { echo "build_extension.sh: Blender made no zip" >&2; exit 1; }
+blender_cmd validate "${zips[0]}"
+name=$(basename "${zips[0]}" .zip)
+dest="$out/$name-$tag.zip"
+mv "${zips[0]}" "$dest"
+echo "$dest"
