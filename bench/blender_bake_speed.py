@@ -1,4 +1,4 @@
-"""Whole-bake wall time in Blender for a large leaf mesh (issue 3's speed target).
+"""Whole-bake wall time in Blender for a large leaf mesh (bench/README.md).
 
     blender -b --factory-startup --python bench/blender_bake_speed.py -- \
         [--vertices 1000000] [--method sphere] [--tau 1.5|auto] [--repeats 3] \
