@@ -280,8 +280,8 @@ def _fit_proxies(prep, kind, k):
 
 
 def _calibration_sample(prep, n=256, rays=128, seed=0):
-    """The engine's recipe (docs/DESIGN.md, 'Auto: the cheapest rung that is good enough'): trace a
-    few hundred random receivers; (idx, ao, seconds)."""
+    """The engine's recipe (docs/DESIGN.md, 'Auto mode'): trace a few hundred random receivers;
+    (idx, ao, seconds)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     idx = np.sort(rng.choice(len(prep.V), size=min(n, len(prep.V)), replace=False))
