@@ -5,6 +5,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -17,17 +19,6 @@
 namespace canopy_ao::py_bind {
 
 namespace {
-
-struct Receivers {
-  PointsView positions, normals;
-};
-
-Receivers receivers_arg(const py::array& positions, const py::array& normals) {
-  Receivers r{points_arg(positions, "positions", /*allow_empty=*/true),
-              points_arg(normals, "normals", /*allow_empty=*/true)};
-  check_same_rows(r.positions, "positions", r.normals, "normals");
-  return r;
-}
 
 OccluderLaw law_arg(const std::string& s) {
   if (s == "solid_opacity") return OccluderLaw::SolidOpacity;
@@ -160,23 +151,44 @@ void bind_models(py::module_& m) {
                              "Largest number of occluders one receiver can test.")
       .def("__len__", &OccluderField::size);
 
-  m.def("sphere_occlusion", &sphere_occlusion, py::arg("cos_theta"), py::arg("sin2_sigma"),
+  m.def(
+      "sphere_occlusion",
+      [](double cos_theta, double sin2_sigma) {
+        if (!std::isfinite(cos_theta)) throw py::value_error("cos_theta must be finite");
+        if (!(sin2_sigma >= 0) || !std::isfinite(sin2_sigma)) {
+          throw py::value_error("sin2_sigma must be a finite number >= 0, got " +
+                                num_str(sin2_sigma));
+        }
+        return sphere_occlusion(static_cast<float>(std::clamp(cos_theta, -1.0, 1.0)),
+                                static_cast<float>(sin2_sigma));
+      },
+      py::arg("cos_theta"), py::arg("sin2_sigma"),
         "Exact fraction of cosine-weighted AO blocked by a solid sphere whose centre is at "
         "angle theta from the normal and whose angular radius is sigma (sin^2 sigma = "
         "(r/d)^2), clipped at the horizon (Snyder's sphere form factor). In [0, 1]; "
-        "sin2_sigma >= 1 (receiver on the sphere) gives (1 + cos theta)/2.");
-  m.def("shell_opacity", &shell_opacity, py::arg("tau"),
-        "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3).");
+        "sin2_sigma >= 1 (receiver on the sphere) gives (1 + cos theta)/2. cos_theta finite "
+        "(clamped to [-1, 1]), sin2_sigma finite >= 0, else ValueError.");
+  m.def(
+      "shell_opacity",
+      [](double tau) {
+        if (!std::isfinite(tau) || tau < 0) {
+          throw py::value_error("tau must be a finite number >= 0, got " + num_str(tau));
+        }
+        return shell_opacity(static_cast<float>(tau));
+      },
+      py::arg("tau"),
+        "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3), in "
+        "[0, 1]; tau finite >= 0.");
 
   m.def(
       "ao_grass",
-      [](const py::array& positions, const py::array& normals, float ground_height,
-         float blade_height, const py::object& up, float floor) {
+      [](const py::array& positions, const py::array& normals, double ground_height,
+         double blade_height, const py::object& up, float floor) {
         const Receivers r = receivers_arg(positions, normals);
         GrassOptions o;
-        o.ground_height = ground_height;
-        o.blade_height = blade_height;
-        o.up = vec3_arg(up, "up");
+        o.ground_height = coordinate_arg(ground_height, "ground_height");
+        o.blade_height = length_arg(blade_height, "blade_height");
+        o.up = direction_arg(up, "up");
         o.floor = floor;
         return compute(r.positions.size,
                        [&](float* out) { ao_grass(r.positions, r.normals, o, out); });

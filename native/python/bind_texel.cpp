@@ -73,8 +73,25 @@ std::pair<int, int> resolution_arg(const py::object& o) {
   return {int(w), int(h)};
 }
 
+// A path reaches the file system byte for byte as Python would pass it to open(): str through
+// os.fsencode (the file-system encoding, surrogateescape: non-UTF-8 names round-trip), bytes and
+// os.PathLike as they are. Refused (ValueError): other types, an empty path, an embedded NUL
+// (C strings would cut the name there).
 std::string path_arg(const py::object& p) {
-  return py::module_::import("os").attr("fspath")(p).cast<std::string>();
+  py::object b;
+  try {
+    b = py::module_::import("os").attr("fsencode")(p);
+  } catch (const py::error_already_set& e) {
+    throw py::value_error("path must be a str, bytes or os.PathLike, got " +
+                          std::string(py::repr(p)));
+  }
+  const std::string s = b.cast<std::string>();
+  if (s.empty()) throw py::value_error("path must not be empty");
+  if (s.find('\0') != std::string::npos) {
+    throw py::value_error("path must not contain a NUL character, got " +
+                          std::string(py::repr(p)));
+  }
+  return s;
 }
 
 // A read-only numpy view of a vector owned by `owner` (a Python object kept alive as its base).
@@ -106,6 +123,7 @@ py::object splat_to_numpy(TexelImage&& r, bool grey, bool return_mask) {
 
 // values (T,) or (T, C); returns C, with grey = values were 1-D.
 int values_arg(const py::array& a, std::size_t count, bool* grey) {
+  // (checked below: dtype, shape, then every value finite)
   require_dtype(a, "values", py::dtype::of<float>(), "float32");
   const bool ok = (a.ndim() == 1 || (a.ndim() == 2 && a.shape(1) >= 1 && a.shape(1) <= 4)) &&
                   std::size_t(a.shape(0)) == count;
@@ -116,11 +134,24 @@ int values_arg(const py::array& a, std::size_t count, bool* grey) {
     throw py::value_error(s.str());
   }
   *grey = a.ndim() == 1;
-  return a.ndim() == 1 ? 1 : int(a.shape(1));
+  const int channels = a.ndim() == 1 ? 1 : int(a.shape(1));
+  const float* v = static_cast<const float*>(a.data());
+  for (std::size_t i = 0; i < count * std::size_t(channels); ++i) {
+    if (!std::isfinite(v[i])) {
+      throw py::value_error("values has a non-finite value (NaN or inf) at texel " +
+                            std::to_string(i / channels));
+    }
+  }
+  return channels;
+}
+
+int margin_arg(const py::object& margin) {
+  return static_cast<int>(int_arg(margin, "margin", 0, 1 << 15));
 }
 
 py::object splat(const std::int32_t* pixels, std::size_t count, const py::array& values, int w,
-                 int h, int margin, float background, bool return_mask) {
+                 int h, int margin, double background, bool return_mask) {
+  if (!std::isfinite(background)) throw py::value_error("background must be finite");
   bool grey = true;
   const int channels = values_arg(values, count, &grey);
   const float* v = static_cast<const float*>(values.data());
@@ -202,7 +233,8 @@ void bind_texel(py::module_& m) {
             const auto& t = self.cast<const TexelSet&>();
             return view_of(t.normals, {py::ssize_t(t.size()), 3}, self);
           },
-          "float32 (T, 3): normalised interpolated corner normal (face normal if it vanishes)")
+          "float32 (T, 3): unit interpolated corner normal (the face normal if it vanishes, "
+          "(0, 0, 1) if the face has no area either)")
       .def_property_readonly(
           "barycentrics",
           [](py::object self) {
@@ -247,9 +279,9 @@ void bind_texel(py::module_& m) {
           "overlapping_texels")
       .def(
           "splat",
-          [](const TexelSet& t, const py::array& values, int margin, float background,
-             bool return_mask) {
-            return splat(t.pixels.data(), t.size(), values, t.width, t.height, margin,
+          [](const TexelSet& t, const py::array& values, const py::object& margin,
+             double background, bool return_mask) {
+            return splat(t.pixels.data(), t.size(), values, t.width, t.height, margin_arg(margin),
                          background, return_mask);
           },
           py::arg("values"), py::arg("margin") = 16, py::arg("background") = 1.0f,
@@ -306,14 +338,14 @@ void bind_texel(py::module_& m) {
   m.def(
       "splat_texels",
       [](const py::array& pixels, const py::array& values, const py::object& resolution,
-         int margin, float background, bool return_mask) {
+         const py::object& margin, double background, bool return_mask) {
         require_dtype(pixels, "pixels", py::dtype::of<std::int32_t>(), "int32");
         if (pixels.ndim() != 1) {
           throw py::value_error("pixels must have shape (T,), got " + shape_str(pixels));
         }
         const auto [w, h] = resolution_arg(resolution);
         return splat(static_cast<const std::int32_t*>(pixels.data()),
-                     std::size_t(pixels.shape(0)), values, w, h, margin, background,
+                     std::size_t(pixels.shape(0)), values, w, h, margin_arg(margin), background,
                      return_mask);
       },
       py::arg("pixels"), py::arg("values"), py::arg("resolution"), py::arg("margin") = 16,
@@ -321,7 +353,8 @@ void bind_texel(py::module_& m) {
 
   m.def(
       "dilate_margin",
-      [](py::array image, py::array mask, int margin) {
+      [](py::array image, py::array mask, const py::object& margin_value) {
+        const int margin = margin_arg(margin_value);
         require_dtype(image, "image", py::dtype::of<float>(), "float32");
         require_dtype(mask, "mask", py::dtype::of<std::uint8_t>(), "uint8");
         if (!image.writeable() || !mask.writeable()) {

@@ -32,8 +32,14 @@ PYBIND11_MODULE(_core, m) {
     }
   });
 
-  m.def("set_max_threads", &set_max_threads, py::arg("n"),
-        "Caps worker threads for later calls (0 = all cores). Returns the previous cap. "
+  m.def(
+      "set_max_threads",
+      [](const py::object& n) {
+        return set_max_threads(static_cast<int>(py_bind::int_arg(n, "n", 0, 1 << 16)));
+      },
+      py::arg("n"),
+      "Caps worker threads for later calls (0 = all cores; n in [0, 65536], else ValueError). "
+      "Returns the previous cap. "
         "Results do not depend on the thread count.");
   m.def("max_threads", &max_threads, "Worker threads calls use now.");
 

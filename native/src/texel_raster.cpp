@@ -377,8 +377,11 @@ TexelSet rasterize_uv(const CornerTriangles& in, const RasterOptions& options) {
         const PointsView N{in.normals + 3 * c0, 3};
         nrm = N[0] * bc[0] + N[1] * bc[1] + N[2] * bc[2];
       }
-      const float l2 = dot(nrm, nrm);
-      nrm = l2 > 1e-12f ? nrm / std::sqrt(l2) : normalize(cross(P[1] - P[0], P[2] - P[0]));
+      // Interpolated corner normal, else the face normal, else +z: always unit length (a
+      // triangle with no area in 3D and vanishing normals has no direction of its own).
+      nrm = normalize(nrm);
+      if (dot(nrm, nrm) == 0) nrm = normalize(cross(P[1] - P[0], P[2] - P[0]));
+      if (dot(nrm, nrm) == 0) nrm = Vec3{0, 0, 1};
       for (int k = 0; k < 3; ++k) {
         out.barycentrics[3 * n + k] = bc[k];
         out.positions[3 * n + k] = pos[k];
