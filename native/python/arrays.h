@@ -67,6 +67,19 @@ inline float length_arg(double v, const char* name, bool zero_ok = false) {
   return static_cast<float>(v);
 }
 
+/// Largest τ: AO at a shell's centre exp(−1e4) is 0 in any float, and beyond it the models'
+/// products (τ · cap volume, τ · chord) would leave float32's range.
+constexpr double kMaxTau = 1e4;
+
+/// An optical depth τ in [0, kMaxTau].
+inline float tau_arg(double tau) {
+  if (!(tau >= 0 && tau <= kMaxTau)) {
+    throw py::value_error("tau must be a finite number in [0, " + num_str(kMaxTau) + "], got " +
+                          num_str(tau));
+  }
+  return static_cast<float>(tau);
+}
+
 /// An integer (a Python int, or anything with __index__: numpy integers) in [lo, hi]. Anything
 /// else, or out of range (also beyond 64 bits), is a ValueError with the range, not pybind's
 /// TypeError.

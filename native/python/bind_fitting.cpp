@@ -227,8 +227,15 @@ void bind_fitting(py::module_& m) {
            "Ellipsoid(center, axes, radii): axes (3, 3), columns = unit axes, orthonormal "
            "within 1e-3 (re-orthonormalised; a left-handed set has its third axis flipped, "
            "which leaves the shape unchanged); radii 3 numbers > 0.")
-      .def_static("from_sphere", &Ellipsoid::from_sphere, py::arg("sphere"),
-                  "The ellipsoid equal to a sphere (identity axes, equal radii).")
+      .def_static(
+          "from_sphere",
+          [](const Sphere& s) {
+            length_arg(s.radius, "sphere radius");  // an Ellipsoid's radii are > 0
+            return Ellipsoid::from_sphere(s);
+          },
+          py::arg("sphere"),
+          "The ellipsoid equal to a sphere (identity axes, equal radii); a radius-0 sphere is a "
+          "ValueError.")
       .def_property(
           "center", [](const Ellipsoid& e) { return vec3_array(e.center); },
           [](Ellipsoid& e, const py::object& c) { e.center = point3_arg(c, "center"); },

@@ -24,15 +24,6 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-float tau_arg(double tau) {
-  if (!std::isfinite(tau) || tau < 0) {
-    std::ostringstream s;
-    s << "tau must be a finite number >= 0, got " << tau;
-    throw py::value_error(s.str());
-  }
-  return static_cast<float>(tau);
-}
-
 // tau: one number for every shell, or a sequence with one per shell.
 std::vector<float> taus_arg(const py::object& o, std::size_t shells) {
   std::vector<float> t;
@@ -95,8 +86,8 @@ DensityAOOptions grid_options(const py::object& directions_arg, double distance,
   const int directions = static_cast<int>(int_arg(directions_arg, "directions", 1, 4096));
   distance_arg(distance);
   const std::uint32_t seed = seed_arg(seed_value);
-  if (!std::isfinite(sigma_scale) || sigma_scale < 0) {
-    throw py::value_error("sigma_scale must be a finite number >= 0");
+  if (!(sigma_scale >= 0 && sigma_scale <= 3.4e38)) {
+    throw py::value_error("sigma_scale must be a finite float32 number >= 0");
   }
   if (!std::isfinite(self_skip) || self_skip < 0 || self_skip > 1e6) {
     throw py::value_error("self_skip must be a finite number in [0, 1e6] (voxels)");

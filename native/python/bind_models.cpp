@@ -49,11 +49,12 @@ py::array_t<float> compute(std::size_t n, Fn&& fn) {
 void bind_models(py::module_& m) {
   m.def(
       "ao_canopy_sphere",
-      [](const py::array& positions, const py::array& normals, const Sphere& sphere, float tau,
+      [](const py::array& positions, const py::array& normals, const Sphere& sphere, double tau,
          float band) {
+        const CanopyOptions opt{tau_arg(tau), band};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
-          ao_canopy_sphere(r.positions, r.normals, sphere, CanopyOptions{tau, band}, o);
+          ao_canopy_sphere(r.positions, r.normals, sphere, opt, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("sphere"), py::arg("tau"),
@@ -67,10 +68,11 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_canopy_ellipsoid",
       [](const py::array& positions, const py::array& normals, const Ellipsoid& ellipsoid,
-         float tau, float band) {
+         double tau, float band) {
+        const CanopyOptions opt{tau_arg(tau), band};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
-          ao_canopy_ellipsoid(r.positions, r.normals, ellipsoid, CanopyOptions{tau, band}, o);
+          ao_canopy_ellipsoid(r.positions, r.normals, ellipsoid, opt, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
@@ -81,12 +83,13 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_canopy_shells",
       [](const py::array& positions, const py::array& normals,
-         const std::vector<Ellipsoid>& shells, float tau, const std::string& combine,
+         const std::vector<Ellipsoid>& shells, double tau, const std::string& combine,
          float band) {
+        const CanopyOptions opt{tau_arg(tau), band};
         const Receivers r = receivers_arg(positions, normals);
         const ShellCombine c = combine_arg(combine);
         return compute(r.positions.size, [&](float* o) {
-          ao_canopy_shells(r.positions, r.normals, shells, CanopyOptions{tau, band}, c, o);
+          ao_canopy_shells(r.positions, r.normals, shells, opt, c, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
@@ -98,10 +101,11 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_reeves_blau",
       [](const py::array& positions, const py::array& normals, const Ellipsoid& ellipsoid,
-         float tau) {
+         double tau) {
+        const float t = tau_arg(tau);
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size,
-                       [&](float* o) { ao_reeves_blau(r.positions, ellipsoid, tau, o); });
+                       [&](float* o) { ao_reeves_blau(r.positions, ellipsoid, t, o); });
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
       "Reeves-Blau baseline: exp(-tau * depth / R), depth = max(R - |x - C|, 0) in the "
@@ -110,9 +114,9 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_occluders",
       [](const py::array& positions, const py::array& normals,
-         const std::vector<Ellipsoid>& shells, float tau, float epsilon, bool solid,
+         const std::vector<Ellipsoid>& shells, double tau, float epsilon, bool solid,
          const std::string& law) {
-        const OccluderOptions opt{tau, epsilon, solid, law_arg(law)};
+        const OccluderOptions opt{tau_arg(tau), epsilon, solid, law_arg(law)};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
           ao_occluders(r.positions, r.normals, shells, opt, o);
@@ -132,10 +136,10 @@ void bind_models(py::module_& m) {
   py::class_<OccluderField>(m, "OccluderField",
                             "Occluders with their spatial grid, built once for repeated "
                             "ao() calls (same law as ao_occluders).")
-      .def(py::init([](const std::vector<Ellipsoid>& shells, float tau, float epsilon,
+      .def(py::init([](const std::vector<Ellipsoid>& shells, double tau, float epsilon,
                        bool solid, const std::string& law) {
              return new OccluderField(shells,
-                                      OccluderOptions{tau, epsilon, solid, law_arg(law)});
+                                      OccluderOptions{tau_arg(tau), epsilon, solid, law_arg(law)});
            }),
            py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3,
            py::arg("solid") = false, py::arg("law") = "medium")
@@ -170,15 +174,10 @@ void bind_models(py::module_& m) {
         "(clamped to [-1, 1]), sin2_sigma finite >= 0, else ValueError.");
   m.def(
       "shell_opacity",
-      [](double tau) {
-        if (!std::isfinite(tau) || tau < 0) {
-          throw py::value_error("tau must be a finite number >= 0, got " + num_str(tau));
-        }
-        return shell_opacity(static_cast<float>(tau));
-      },
+      [](double tau) { return shell_opacity(tau_arg(tau)); },
       py::arg("tau"),
         "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3), in "
-        "[0, 1]; tau finite >= 0.");
+        "[0, 1]; tau in [0, 1e4].");
 
   m.def(
       "ao_grass",

@@ -151,7 +151,10 @@ int margin_arg(const py::object& margin) {
 
 py::object splat(const std::int32_t* pixels, std::size_t count, const py::array& values, int w,
                  int h, int margin, double background, bool return_mask) {
-  if (!std::isfinite(background)) throw py::value_error("background must be finite");
+  if (!(std::fabs(background) <= 3.4e38)) {
+    throw py::value_error("background must be a finite float32 number, got " +
+                          num_str(background));
+  }
   bool grey = true;
   const int channels = values_arg(values, count, &grey);
   const float* v = static_cast<const float*>(values.data());
@@ -403,6 +406,18 @@ void bind_texel(py::module_& m) {
         const int h = int(pixels.shape(0)), w = int(pixels.shape(1));
         const int c = pixels.ndim() == 3 ? int(pixels.shape(2)) : 1;
         const float* data = static_cast<const float*>(pixels.data());
+        // Every value must survive the file's type: finite, and within half's range for "half"
+        // (beyond ±65504 it would be stored as inf).
+        const float limit = o.type == PixelType::Half ? 65504.0f : 3.4028235e38f;
+        for (std::size_t i = 0; i < std::size_t(h) * w * c; ++i) {
+          if (!(std::fabs(data[i]) <= limit)) {
+            throw py::value_error("pixels has the value " + num_str(data[i]) + " at index " +
+                                  std::to_string(i) +
+                                  (o.type == PixelType::Half
+                                       ? ", outside half's range +-65504"
+                                       : " (NaN or inf): images must be finite"));
+          }
+        }
         py::gil_scoped_release release;
         write_image(p, data, w, h, c, o);
       },
@@ -413,7 +428,9 @@ OpenImageIO; the format follows the extension. dtype "auto": .exr → 32-bit flo
 (values in [0, 1], clamped), others → float; or "float", "half" (EXR), "uint16", "uint8".
 bottom_up=True: row 0 is the bottom (Blender's order), flipped on write so the file shows v = 1
 at the top. Raises CanopyAOError naming the path and OpenImageIO's message if the file cannot be
-written, ValueError for bad shapes or a dtype the format cannot hold. Releases the GIL.
+written, ValueError for bad shapes, non-finite pixels (or beyond +-65504 for "half") or a dtype
+the format cannot hold. The path (str, bytes or os.PathLike) reaches the file system byte for
+byte (os.fsencode); an empty path or one with a NUL is a ValueError. Releases the GIL.
 )doc");
 
   m.def(

@@ -2,6 +2,9 @@
 // this file only creates the module, the error type, and the thread controls.
 #include <pybind11/pybind11.h>
 
+#include <cstring>
+#include <stdexcept>
+
 #include "arrays.h"
 #include "canopy_ao/parallel.h"
 
@@ -24,11 +27,26 @@ PYBIND11_MODULE(_core, m) {
   m.attr("__version__") = CANOPY_AO_VERSION;
 
   static py::exception<Error> error(m, "CanopyAOError", PyExc_RuntimeError);
+  // Messages may quote a path, which need not be UTF-8 (paths pass byte for byte): decode
+  // with backslashreplace, so the message is never lost (pybind's strict decode left an empty
+  // ValueError).
   py::register_exception_translator([](std::exception_ptr p) {
+    auto raise = [](PyObject* type, const char* what) {
+      PyObject* msg = PyUnicode_DecodeUTF8(what, static_cast<Py_ssize_t>(std::strlen(what)),
+                                           "backslashreplace");
+      PyErr_SetObject(type, msg);
+      Py_XDECREF(msg);
+    };
     try {
       if (p) std::rethrow_exception(p);
     } catch (const Error& e) {
-      error(e.what());
+      raise(error.ptr(), e.what());
+    } catch (const std::invalid_argument& e) {
+      raise(PyExc_ValueError, e.what());
+    } catch (const std::domain_error& e) {
+      raise(PyExc_ValueError, e.what());
+    } catch (const std::length_error& e) {
+      raise(PyExc_ValueError, e.what());
     }
   });
 

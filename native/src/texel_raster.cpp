@@ -495,14 +495,14 @@ void dilate_margin(float* pixels, std::uint8_t* mask, int W, int H, int C, int m
     values.assign(frontier.size() * C, 0.0f);
     parallel_for_blocks(frontier.size(), 1024, [&](std::size_t b, std::size_t e) {
       for (std::size_t n = b; n < e; ++n) {
-        float sum[4] = {0, 0, 0, 0};
+        double sum[4] = {0, 0, 0, 0};  // double: 8 values near float's max cannot overflow
         int k = 0;
         for_neighbours(frontier[n], [&](std::size_t q) {
           if (!filled(q)) return;
           for (int c = 0; c < C; ++c) sum[c] += pixels[q * C + c];
           ++k;
         });
-        for (int c = 0; c < C; ++c) values[n * C + c] = sum[c] / float(k);
+        for (int c = 0; c < C; ++c) values[n * C + c] = static_cast<float>(sum[c] / k);
       }
     });
     for (std::size_t n = 0; n < frontier.size(); ++n) {

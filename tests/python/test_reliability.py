@@ -92,6 +92,15 @@ def test_out_of_range_magnitudes_are_a_value_error_naming_the_range(call):
         call(p, n)
 
 
+def test_tau_beyond_the_accepted_range_is_refused_not_garbage():
+    p, n = f32([[0.5, 0, 0], [0.2, 0.1, 0]]), f32([[0, 0, 1], [-1, 0, 0]])
+    e = core.Ellipsoid((0, 0, 0), np.eye(3), (1.0, 0.8, 0.6))
+    for call in (core.ao_canopy_ellipsoid, core.ao_medium_ellipsoid, core.ao_reeves_blau):
+        with pytest.raises(ValueError, match="tau"):
+            call(p, n, e, 3e38)
+        assert np.all(call(p, n, e, 1e4) <= 1e-30)  # deep inside: black, not garbage
+
+
 def test_ao_near_far_refuses_a_denormal_near_and_far_coordinates():
     v, t = leaf_cloud()
     tracer, grid = core.RayTracer(v, t), core.DensityGrid(v, t, 16)
@@ -178,13 +187,14 @@ def test_texel_normals_are_unit_even_for_a_triangle_without_3d_area():
 
 # === Scalars and integers
 def test_scalar_laws_refuse_what_they_cannot_answer():
-    with pytest.raises(ValueError, match="tau"):
-        core.shell_opacity(-10)
+    for tau in (-10, 1e5, float("inf")):
+        with pytest.raises(ValueError, match="tau"):
+            core.shell_opacity(tau)
     with pytest.raises(ValueError, match="cos_theta"):
         core.sphere_occlusion(float("nan"), 0.5)
     with pytest.raises(ValueError, match="sin2_sigma"):
         core.sphere_occlusion(0.5, float("nan"))
-    for tau in (0.0, 0.5, 1e30):
+    for tau in (0.0, 0.5, 1e4):
         assert 0.0 <= core.shell_opacity(tau) <= 1.0
     assert 0.0 <= core.sphere_occlusion(2.0, 0.5) <= 1.0  # cos clamped, as documented
 
