@@ -31,22 +31,12 @@ py::array_t<float> vec3_array(Vec3 v) {
   return a;
 }
 
-float radius_arg(double r, const char* name) {
-  if (!std::isfinite(r) || r < 0) {
-    std::ostringstream s;
-    s << name << " must be a finite number >= 0, got " << r;
-    throw py::value_error(s.str());
-  }
-  return static_cast<float>(r);
-}
+// A sphere's radius: 0 (a point; the models refuse it) or a length in the accepted range.
+float radius_arg(double r, const char* name) { return length_arg(r, name, /*zero_ok=*/true); }
 
 Vec3 radii_arg(const py::object& o) {
   const Vec3 r = vec3_arg(o, "radii");
-  if (!(r.x > 0 && r.y > 0 && r.z > 0)) {
-    std::ostringstream s;
-    s << "radii must be > 0, got (" << r.x << ", " << r.y << ", " << r.z << ")";
-    throw py::value_error(s.str());
-  }
+  for (int k = 0; k < 3; ++k) length_arg(r[k], "radii");
   return r;
 }
 
@@ -105,7 +95,7 @@ py::array_t<float> axes_array(const Ellipsoid& e) {
 Ellipsoid make_ellipsoid(const py::object& center, const py::object& axes,
                          const py::object& radii) {
   Ellipsoid e;
-  e.center = vec3_arg(center, "center");
+  e.center = point3_arg(center, "center");
   axes_arg(axes, e.axes);
   e.radii = radii_arg(radii);
   return e;
@@ -170,10 +160,9 @@ ShellKind kind_arg(const std::string& k) {
 }
 
 EllipsoidFitOptions ellipsoid_options(double trim, const std::string& method, double tolerance,
-                                      py::ssize_t max_points, double min_radius_ratio) {
-  if (max_points < 4) {
-    throw py::value_error("max_points must be >= 4, got " + std::to_string(max_points));
-  }
+                                      const py::object& max_points_arg,
+                                      double min_radius_ratio) {
+  const long long max_points = int_arg(max_points_arg, "max_points", 4, 1LL << 40);
   EllipsoidFitOptions o;
   o.trim = trim;
   o.method = method_arg(method);
@@ -191,15 +180,16 @@ void bind_fitting(py::module_& m) {
                      "A sphere proxy: .center (3,) float32, .radius float (>= 0).")
       .def(py::init([](const py::object& center, double radius) {
              Sphere s;
-             s.center = vec3_arg(center, "center");
+             s.center = point3_arg(center, "center");
              s.radius = radius_arg(radius, "radius");
              return s;
            }),
            py::arg("center"), py::arg("radius"),
-           "Sphere(center, radius): center 3 finite numbers, radius finite >= 0.")
+           "Sphere(center, radius): center 3 coordinates within +-1e9, radius 0 or in [1e-9, "
+           "1e10] (native/python/README.md, 'Accepted range').")
       .def_property(
           "center", [](const Sphere& s) { return vec3_array(s.center); },
-          [](Sphere& s, const py::object& c) { s.center = vec3_arg(c, "center"); },
+          [](Sphere& s, const py::object& c) { s.center = point3_arg(c, "center"); },
           "Centre, a new (3,) float32 array (assign 3 numbers to change it).")
       .def_property(
           "radius", [](const Sphere& s) { return double(s.radius); },
@@ -223,7 +213,7 @@ void bind_fitting(py::module_& m) {
           [](const py::tuple& t) {
             if (t.size() != 2) throw py::value_error("bad Sphere pickle state");
             Sphere s;
-            s.center = vec3_arg(t[0], "center");
+            s.center = point3_arg(t[0], "center");
             s.radius = radius_arg(t[1].cast<double>(), "radius");
             return s;
           }));
@@ -237,11 +227,18 @@ void bind_fitting(py::module_& m) {
            "Ellipsoid(center, axes, radii): axes (3, 3), columns = unit axes, orthonormal "
            "within 1e-3 (re-orthonormalised; a left-handed set has its third axis flipped, "
            "which leaves the shape unchanged); radii 3 numbers > 0.")
-      .def_static("from_sphere", &Ellipsoid::from_sphere, py::arg("sphere"),
-                  "The ellipsoid equal to a sphere (identity axes, equal radii).")
+      .def_static(
+          "from_sphere",
+          [](const Sphere& s) {
+            length_arg(s.radius, "sphere radius");  // an Ellipsoid's radii are > 0
+            return Ellipsoid::from_sphere(s);
+          },
+          py::arg("sphere"),
+          "The ellipsoid equal to a sphere (identity axes, equal radii); a radius-0 sphere is a "
+          "ValueError.")
       .def_property(
           "center", [](const Ellipsoid& e) { return vec3_array(e.center); },
-          [](Ellipsoid& e, const py::object& c) { e.center = vec3_arg(c, "center"); },
+          [](Ellipsoid& e, const py::object& c) { e.center = point3_arg(c, "center"); },
           "Centre, a new (3,) float32 array.")
       .def_property(
           "axes", [](const Ellipsoid& e) { return axes_array(e); },
@@ -296,7 +293,7 @@ void bind_fitting(py::module_& m) {
   m.def(
       "fit_ellipsoid",
       [](const py::array& points, double trim, const std::string& method, double tolerance,
-         py::ssize_t max_points, double min_radius_ratio) {
+         const py::object& max_points, double min_radius_ratio) {
         const PointsView p = points_arg(points, "points");
         const EllipsoidFitOptions o =
             ellipsoid_options(trim, method, tolerance, max_points, min_radius_ratio);
@@ -322,16 +319,15 @@ void bind_fitting(py::module_& m) {
 
   m.def(
       "fit_shells",
-      [](const py::array& points, int k, const std::string& kind, double trim,
-         std::int64_t seed, int max_iterations) {
+      [](const py::array& points, const py::object& k, const std::string& kind, double trim,
+         const py::object& seed, const py::object& max_iterations) {
         const PointsView p = points_arg(points, "points");
-        if (seed < 0) throw py::value_error("seed must be >= 0, got " + std::to_string(seed));
         ShellFitOptions o;
-        o.k = k;
+        o.k = static_cast<int>(int_arg(k, "k", 1, 1 << 30));
         o.kind = kind_arg(kind);
         o.trim = trim;
-        o.seed = static_cast<std::uint64_t>(seed);
-        o.max_iterations = max_iterations;
+        o.seed = static_cast<std::uint64_t>(int_arg(seed, "seed", 0, INT64_MAX));
+        o.max_iterations = static_cast<int>(int_arg(max_iterations, "max_iterations", 1, 1 << 20));
         ShellFit f;
         {
           py::gil_scoped_release release;

@@ -24,15 +24,6 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-float tau_arg(double tau) {
-  if (!std::isfinite(tau) || tau < 0) {
-    std::ostringstream s;
-    s << "tau must be a finite number >= 0, got " << tau;
-    throw py::value_error(s.str());
-  }
-  return static_cast<float>(tau);
-}
-
 // tau: one number for every shell, or a sequence with one per shell.
 std::vector<float> taus_arg(const py::object& o, std::size_t shells) {
   std::vector<float> t;
@@ -61,24 +52,21 @@ MediumCombine combine_arg(const std::string& s) {
 
 // Receivers → result array, computed by `f(p, n, out)` with the GIL released.
 template <class F>
-py::array_t<float> per_point(const py::array& positions, const py::array& normals, F&& f) {
-  const PointsView p = points_arg(positions, "positions", /*allow_empty=*/true);
-  const PointsView n = points_arg(normals, "normals", /*allow_empty=*/true);
-  check_same_rows(p, "positions", n, "normals");
-  py::array_t<float> out = new_floats(p.size);
+py::array_t<float> per_point(const py::array& positions, const py::array& normals, F&& f,
+                             const char* positions_name = "positions") {
+  const Receivers r = receivers_arg(positions, normals, positions_name);
+  py::array_t<float> out = new_floats(r.positions.size);
   float* dst = out.mutable_data();
   {
     py::gil_scoped_release release;
-    f(p, n, dst);
+    f(r.positions, r.normals, dst);
   }
   return out;
 }
 
 std::unique_ptr<DensityGrid> make_grid(const py::array& vertices, const py::array& triangles,
-                                       int resolution) {
-  if (resolution < 1 || resolution > 1024) {
-    throw py::value_error("resolution must be in [1, 1024], got " + std::to_string(resolution));
-  }
+                                       const py::object& resolution_arg) {
+  const int resolution = static_cast<int>(int_arg(resolution_arg, "resolution", 1, 1024));
   const PointsView v = points_arg(vertices, "vertices", /*allow_empty=*/true);
   std::size_t m = 0;
   const std::int32_t* t = triangles_arg(triangles, "triangles", v.size, &m);
@@ -88,21 +76,21 @@ std::unique_ptr<DensityGrid> make_grid(const py::array& vertices, const py::arra
   return std::make_unique<DensityGrid>(v, t, m, o);
 }
 
-DensityAOOptions grid_options(int directions, double distance, long long seed,
-                              double sigma_scale, double self_skip, double start = 0.0) {
-  if (!std::isfinite(start) || start < 0) {
-    throw py::value_error("start must be a finite number >= 0 (scene units)");
+DensityAOOptions grid_options(const py::object& directions_arg, double distance,
+                              const py::object& seed_value, double sigma_scale, double self_skip,
+                              double start = 0.0) {
+  if (!std::isfinite(start) || start < 0 || start > kMaxLength) {
+    throw py::value_error("start must be a finite number in [0, " + num_str(kMaxLength) +
+                          "] (scene units)");
   }
-  if (directions < 1 || directions > 4096) {
-    throw py::value_error("directions must be in [1, 4096], got " + std::to_string(directions));
-  }
+  const int directions = static_cast<int>(int_arg(directions_arg, "directions", 1, 4096));
   distance_arg(distance);
-  seed_arg(seed);
-  if (!std::isfinite(sigma_scale) || sigma_scale < 0) {
-    throw py::value_error("sigma_scale must be a finite number >= 0");
+  const std::uint32_t seed = seed_arg(seed_value);
+  if (!(sigma_scale >= 0 && sigma_scale <= 3.4e38)) {
+    throw py::value_error("sigma_scale must be a finite float32 number >= 0");
   }
-  if (!std::isfinite(self_skip) || self_skip < 0) {
-    throw py::value_error("self_skip must be a finite number >= 0 (voxels)");
+  if (!std::isfinite(self_skip) || self_skip < 0 || self_skip > 1e6) {
+    throw py::value_error("self_skip must be a finite number in [0, 1e6] (voxels)");
   }
   DensityAOOptions o;
   o.directions = directions;
@@ -185,8 +173,11 @@ void bind_medium(py::module_& m) {
 
   m.def(
       "medium_ao_quadrature",
-      [](double r, double cos_beta, double tau, int samples) {
-        return medium_ao_quadrature(r, cos_beta, tau, samples);
+      [](double r, double cos_beta, double tau, const py::object& samples) {
+        if (!std::isfinite(r) || r < 0) throw py::value_error("r must be a finite number >= 0");
+        if (!std::isfinite(cos_beta)) throw py::value_error("cos_beta must be finite");
+        return medium_ao_quadrature(r, cos_beta, tau_arg(tau),
+                                    static_cast<int>(int_arg(samples, "samples", 1, 1 << 16)));
       },
       py::arg("r"), py::arg("cos_beta"), py::arg("tau"), py::arg("samples") = 2048,
       "medium_ao_quadrature(r, cos_beta, tau, samples=2048) -> float\n\n"
@@ -208,13 +199,14 @@ void bind_medium(py::module_& m) {
       .def(
           "ao",
           [](const DensityGrid& self, const py::array& points, const py::array& normals,
-             int directions, double distance, long long seed, double sigma_scale,
+             const py::object& directions, double distance, const py::object& seed,
+             double sigma_scale,
              double self_skip, double start) {
             const DensityAOOptions o =
                 grid_options(directions, distance, seed, sigma_scale, self_skip, start);
             return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
               self.ao(p, n, o, out);
-            });
+            }, "points");
           },
           py::arg("points"), py::arg("normals"), py::arg("directions") = 32,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("sigma_scale") = 1.0,
@@ -232,16 +224,19 @@ void bind_medium(py::module_& m) {
           "optical_depth",
           [](const DensityGrid& self, const py::object& origin, const py::object& direction,
              double distance, double self_skip) {
-            if (!(distance > 0)) throw py::value_error("distance must be > 0");
-            const Vec3 o = vec3_arg(origin, "origin"), d = vec3_arg(direction, "direction");
-            if (length(d) == 0) throw py::value_error("direction must not be zero");
+            distance_arg(distance);
+            if (!std::isfinite(self_skip) || self_skip < 0 || self_skip > 1e6) {
+              throw py::value_error("self_skip must be a finite number in [0, 1e6] (voxels)");
+            }
+            const Vec3 o = point3_arg(origin, "origin"), d = direction_arg(direction, "direction");
             return self.optical_depth(o, d, static_cast<float>(distance),
                                       static_cast<float>(self_skip), 0.0f);
           },
           py::arg("origin"), py::arg("direction"), py::arg("distance") = kInf,
           py::arg("self_skip") = 0.0,
           "optical_depth(origin, direction, distance=inf, self_skip=0.0) -> float\n\n"
-          "Integral of sigma along one ray on the finest level (no cone widening).")
+          "Integral of sigma along one ray on the finest level (no cone widening). direction: any "
+          "non-zero length.")
       .def_property_readonly(
           "shape", [](const DensityGrid& g) { return py::make_tuple(g.nx(), g.ny(), g.nz()); },
           "(nx, ny, nz) voxels of the finest level.")
@@ -258,10 +253,8 @@ void bind_medium(py::module_& m) {
       .def_property_readonly("levels", &DensityGrid::levels, "Mip levels (1 = finest only).")
       .def(
           "sigma",
-          [](const DensityGrid& g, int level) {
-            if (level < 0 || level >= g.levels()) {
-              throw py::value_error("level must be in [0, " + std::to_string(g.levels()) + ")");
-            }
+          [](const DensityGrid& g, const py::object& level_arg) {
+            const int level = static_cast<int>(int_arg(level_arg, "level", 0, g.levels() - 1));
             const std::vector<float>& s = g.sigma_level(level);
             int d[3] = {g.nx(), g.ny(), g.nz()};
             for (int l = 0; l < level; ++l)
@@ -283,20 +276,18 @@ void bind_medium(py::module_& m) {
   m.def(
       "ao_near_far",
       [](const RayTracer& tracer, const DensityGrid& grid, const py::array& points,
-         const py::array& normals, double near, int samples, int directions, double distance,
-         long long seed, double sigma_scale) {
-        if (!(near > 0) || !std::isfinite(near)) {
-          throw py::value_error("near must be a finite number > 0 (scene units)");
-        }
-        if (samples < 1) throw py::value_error("samples must be at least 1");
+         const py::array& normals, double near, const py::object& samples,
+         const py::object& directions, double distance, const py::object& seed,
+         double sigma_scale) {
+        length_arg(near, "near");
         const DensityAOOptions far = grid_options(directions, distance, seed, sigma_scale, 0.0);
         RayTraceOptions rt;
-        rt.samples = samples;
+        rt.samples = static_cast<int>(int_arg(samples, "samples", 1, kMaxSamples));
         rt.distance = static_cast<float>(distance);
         rt.seed = far.seed;
         return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
           ao_near_far(tracer, grid, p, n, static_cast<float>(near), rt, far, out);
-        });
+        }, "points");
       },
       py::arg("tracer"), py::arg("grid"), py::arg("points"), py::arg("normals"),
       py::arg("near"), py::arg("samples") = 64, py::arg("directions") = 32,

@@ -5,6 +5,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -17,17 +19,6 @@
 namespace canopy_ao::py_bind {
 
 namespace {
-
-struct Receivers {
-  PointsView positions, normals;
-};
-
-Receivers receivers_arg(const py::array& positions, const py::array& normals) {
-  Receivers r{points_arg(positions, "positions", /*allow_empty=*/true),
-              points_arg(normals, "normals", /*allow_empty=*/true)};
-  check_same_rows(r.positions, "positions", r.normals, "normals");
-  return r;
-}
 
 OccluderLaw law_arg(const std::string& s) {
   if (s == "solid_opacity") return OccluderLaw::SolidOpacity;
@@ -58,11 +49,12 @@ py::array_t<float> compute(std::size_t n, Fn&& fn) {
 void bind_models(py::module_& m) {
   m.def(
       "ao_canopy_sphere",
-      [](const py::array& positions, const py::array& normals, const Sphere& sphere, float tau,
+      [](const py::array& positions, const py::array& normals, const Sphere& sphere, double tau,
          float band) {
+        const CanopyOptions opt{tau_arg(tau), band};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
-          ao_canopy_sphere(r.positions, r.normals, sphere, CanopyOptions{tau, band}, o);
+          ao_canopy_sphere(r.positions, r.normals, sphere, opt, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("sphere"), py::arg("tau"),
@@ -76,10 +68,11 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_canopy_ellipsoid",
       [](const py::array& positions, const py::array& normals, const Ellipsoid& ellipsoid,
-         float tau, float band) {
+         double tau, float band) {
+        const CanopyOptions opt{tau_arg(tau), band};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
-          ao_canopy_ellipsoid(r.positions, r.normals, ellipsoid, CanopyOptions{tau, band}, o);
+          ao_canopy_ellipsoid(r.positions, r.normals, ellipsoid, opt, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
@@ -90,12 +83,13 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_canopy_shells",
       [](const py::array& positions, const py::array& normals,
-         const std::vector<Ellipsoid>& shells, float tau, const std::string& combine,
+         const std::vector<Ellipsoid>& shells, double tau, const std::string& combine,
          float band) {
+        const CanopyOptions opt{tau_arg(tau), band};
         const Receivers r = receivers_arg(positions, normals);
         const ShellCombine c = combine_arg(combine);
         return compute(r.positions.size, [&](float* o) {
-          ao_canopy_shells(r.positions, r.normals, shells, CanopyOptions{tau, band}, c, o);
+          ao_canopy_shells(r.positions, r.normals, shells, opt, c, o);
         });
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
@@ -107,10 +101,11 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_reeves_blau",
       [](const py::array& positions, const py::array& normals, const Ellipsoid& ellipsoid,
-         float tau) {
+         double tau) {
+        const float t = tau_arg(tau);
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size,
-                       [&](float* o) { ao_reeves_blau(r.positions, ellipsoid, tau, o); });
+                       [&](float* o) { ao_reeves_blau(r.positions, ellipsoid, t, o); });
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
       "Reeves-Blau baseline: exp(-tau * depth / R), depth = max(R - |x - C|, 0) in the "
@@ -119,9 +114,9 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_occluders",
       [](const py::array& positions, const py::array& normals,
-         const std::vector<Ellipsoid>& shells, float tau, float epsilon, bool solid,
+         const std::vector<Ellipsoid>& shells, double tau, float epsilon, bool solid,
          const std::string& law) {
-        const OccluderOptions opt{tau, epsilon, solid, law_arg(law)};
+        const OccluderOptions opt{tau_arg(tau), epsilon, solid, law_arg(law)};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
           ao_occluders(r.positions, r.normals, shells, opt, o);
@@ -141,10 +136,10 @@ void bind_models(py::module_& m) {
   py::class_<OccluderField>(m, "OccluderField",
                             "Occluders with their spatial grid, built once for repeated "
                             "ao() calls (same law as ao_occluders).")
-      .def(py::init([](const std::vector<Ellipsoid>& shells, float tau, float epsilon,
+      .def(py::init([](const std::vector<Ellipsoid>& shells, double tau, float epsilon,
                        bool solid, const std::string& law) {
              return new OccluderField(shells,
-                                      OccluderOptions{tau, epsilon, solid, law_arg(law)});
+                                      OccluderOptions{tau_arg(tau), epsilon, solid, law_arg(law)});
            }),
            py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3,
            py::arg("solid") = false, py::arg("law") = "medium")
@@ -160,11 +155,23 @@ void bind_models(py::module_& m) {
                              "Largest number of occluders one receiver can test.")
       .def("__len__", &OccluderField::size);
 
-  m.def("sphere_occlusion", &sphere_occlusion, py::arg("cos_theta"), py::arg("sin2_sigma"),
+  m.def(
+      "sphere_occlusion",
+      [](double cos_theta, double sin2_sigma) {
+        if (!std::isfinite(cos_theta)) throw py::value_error("cos_theta must be finite");
+        if (!(sin2_sigma >= 0) || !std::isfinite(sin2_sigma)) {
+          throw py::value_error("sin2_sigma must be a finite number >= 0, got " +
+                                num_str(sin2_sigma));
+        }
+        return sphere_occlusion(static_cast<float>(std::clamp(cos_theta, -1.0, 1.0)),
+                                static_cast<float>(sin2_sigma));
+      },
+      py::arg("cos_theta"), py::arg("sin2_sigma"),
         "Exact fraction of cosine-weighted AO blocked by a solid sphere whose centre is at "
         "angle theta from the normal and whose angular radius is sigma (sin^2 sigma = "
         "(r/d)^2), clipped at the horizon (Snyder's sphere form factor). In [0, 1]; "
-        "sin2_sigma >= 1 (receiver on the sphere) gives (1 + cos theta)/2.");
+        "sin2_sigma >= 1 (receiver on the sphere) gives (1 + cos theta)/2. cos_theta finite "
+        "(clamped to [-1, 1]), sin2_sigma finite >= 0, else ValueError.");
   m.def(
       "canopy_kernel",
       []() { return canopy_kernel() == CanopyKernel::Avx2 ? "avx2" : "portable"; },
@@ -180,18 +187,22 @@ void bind_models(py::module_& m) {
       py::arg("name"),
       "Use this canopy-shell kernel from now on (process-wide). ValueError if this CPU cannot "
       "run it.");
-  m.def("shell_opacity", &shell_opacity, py::arg("tau"),
-        "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3).");
+  m.def(
+      "shell_opacity",
+      [](double tau) { return shell_opacity(tau_arg(tau)); },
+      py::arg("tau"),
+      "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3), in "
+      "[0, 1]; tau in [0, 1e4].");
 
   m.def(
       "ao_grass",
-      [](const py::array& positions, const py::array& normals, float ground_height,
-         float blade_height, const py::object& up, float floor) {
+      [](const py::array& positions, const py::array& normals, double ground_height,
+         double blade_height, const py::object& up, float floor) {
         const Receivers r = receivers_arg(positions, normals);
         GrassOptions o;
-        o.ground_height = ground_height;
-        o.blade_height = blade_height;
-        o.up = vec3_arg(up, "up");
+        o.ground_height = coordinate_arg(ground_height, "ground_height");
+        o.blade_height = length_arg(blade_height, "blade_height");
+        o.up = direction_arg(up, "up");
         o.floor = floor;
         return compute(r.positions.size,
                        [&](float* out) { ao_grass(r.positions, r.normals, o, out); });

@@ -20,19 +20,17 @@ namespace canopy_ao::py_bind {
 
 namespace {
 
-RayTraceOptions options_arg(int samples, double distance, long long seed, double offset) {
-  if (samples < 1) {
-    throw py::value_error("samples must be at least 1, got " + std::to_string(samples));
-  }
-  distance_arg(distance);
-  seed_arg(seed);
-  if (!std::isfinite(offset)) {
-    throw py::value_error("offset must be finite (< 0 = automatic)");
-  }
+RayTraceOptions options_arg(const py::object& samples, double distance, const py::object& seed,
+                            double offset) {
   RayTraceOptions o;
-  o.samples = samples;
+  o.samples = static_cast<int>(int_arg(samples, "samples", 1, kMaxSamples));
+  distance_arg(distance);
+  if (!std::isfinite(offset) || offset > kMaxLength) {
+    throw py::value_error("offset must be finite and <= " + num_str(kMaxLength) +
+                          " (< 0 = automatic)");
+  }
   o.distance = static_cast<float>(distance);
-  o.seed = static_cast<std::uint32_t>(seed);
+  o.seed = seed_arg(seed);
   o.offset = static_cast<float>(offset);
   return o;
 }
@@ -47,14 +45,12 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
 
 py::array_t<float> trace(const RayTracer& tracer, const py::array& points,
                          const py::array& normals, const RayTraceOptions& o) {
-  const PointsView p = points_arg(points, "points", /*allow_empty=*/true);
-  const PointsView n = points_arg(normals, "normals", /*allow_empty=*/true);
-  check_same_rows(p, "points", n, "normals");
-  py::array_t<float> out = new_floats(p.size);
+  const Receivers r = receivers_arg(points, normals, "points");
+  py::array_t<float> out = new_floats(r.positions.size);
   float* dst = out.mutable_data();
   {
     py::gil_scoped_release release;
-    tracer.ao(p, n, o, dst);
+    tracer.ao(r.positions, r.normals, o, dst);
   }
   return out;
 }
@@ -75,7 +71,7 @@ void bind_raytrace(py::module_& m) {
       .def(
           "ao",
           [](const RayTracer& self, const py::array& points, const py::array& normals,
-             int samples, double distance, long long seed, double offset) {
+             const py::object& samples, double distance, const py::object& seed, double offset) {
             return trace(self, points, normals, options_arg(samples, distance, seed, offset));
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
@@ -101,12 +97,11 @@ void bind_raytrace(py::module_& m) {
   m.def(
       "ao_raytrace",
       [](const py::array& vertices, const py::array& triangles, const py::array& points,
-         const py::array& normals, int samples, double distance, long long seed) {
+         const py::array& normals, const py::object& samples, double distance,
+         const py::object& seed) {
         // Cheap settings first: no BVH build for a call that must fail.
         const RayTraceOptions o = options_arg(samples, distance, seed, -1.0);
-        const PointsView p = points_arg(points, "points", /*allow_empty=*/true);
-        const PointsView n = points_arg(normals, "normals", /*allow_empty=*/true);
-        check_same_rows(p, "points", n, "normals");
+        receivers_arg(points, normals, "points");
         const std::unique_ptr<RayTracer> tracer = make_tracer(vertices, triangles);
         return trace(*tracer, points, normals, o);
       },

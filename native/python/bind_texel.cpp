@@ -73,8 +73,25 @@ std::pair<int, int> resolution_arg(const py::object& o) {
   return {int(w), int(h)};
 }
 
+// A path reaches the file system byte for byte as Python would pass it to open(): str through
+// os.fsencode (the file-system encoding, surrogateescape: non-UTF-8 names round-trip), bytes and
+// os.PathLike as they are. Refused (ValueError): other types, an empty path, an embedded NUL
+// (C strings would cut the name there).
 std::string path_arg(const py::object& p) {
-  return py::module_::import("os").attr("fspath")(p).cast<std::string>();
+  py::object b;
+  try {
+    b = py::module_::import("os").attr("fsencode")(p);
+  } catch (const py::error_already_set& e) {
+    throw py::value_error("path must be a str, bytes or os.PathLike, got " +
+                          std::string(py::repr(p)));
+  }
+  const std::string s = b.cast<std::string>();
+  if (s.empty()) throw py::value_error("path must not be empty");
+  if (s.find('\0') != std::string::npos) {
+    throw py::value_error("path must not contain a NUL character, got " +
+                          std::string(py::repr(p)));
+  }
+  return s;
 }
 
 // A read-only numpy view of a vector owned by `owner` (a Python object kept alive as its base).
@@ -106,6 +123,7 @@ py::object splat_to_numpy(TexelImage&& r, bool grey, bool return_mask) {
 
 // values (T,) or (T, C); returns C, with grey = values were 1-D.
 int values_arg(const py::array& a, std::size_t count, bool* grey) {
+  // (checked below: dtype, shape, then every value finite)
   require_dtype(a, "values", py::dtype::of<float>(), "float32");
   const bool ok = (a.ndim() == 1 || (a.ndim() == 2 && a.shape(1) >= 1 && a.shape(1) <= 4)) &&
                   std::size_t(a.shape(0)) == count;
@@ -116,11 +134,27 @@ int values_arg(const py::array& a, std::size_t count, bool* grey) {
     throw py::value_error(s.str());
   }
   *grey = a.ndim() == 1;
-  return a.ndim() == 1 ? 1 : int(a.shape(1));
+  const int channels = a.ndim() == 1 ? 1 : int(a.shape(1));
+  const float* v = static_cast<const float*>(a.data());
+  for (std::size_t i = 0; i < count * std::size_t(channels); ++i) {
+    if (!std::isfinite(v[i])) {
+      throw py::value_error("values has a non-finite value (NaN or inf) at texel " +
+                            std::to_string(i / channels));
+    }
+  }
+  return channels;
+}
+
+int margin_arg(const py::object& margin) {
+  return static_cast<int>(int_arg(margin, "margin", 0, 1 << 15));
 }
 
 py::object splat(const std::int32_t* pixels, std::size_t count, const py::array& values, int w,
-                 int h, int margin, float background, bool return_mask) {
+                 int h, int margin, double background, bool return_mask) {
+  if (!(std::fabs(background) <= 3.4e38)) {
+    throw py::value_error("background must be a finite float32 number, got " +
+                          num_str(background));
+  }
   bool grey = true;
   const int channels = values_arg(values, count, &grey);
   const float* v = static_cast<const float*>(values.data());
@@ -202,7 +236,8 @@ void bind_texel(py::module_& m) {
             const auto& t = self.cast<const TexelSet&>();
             return view_of(t.normals, {py::ssize_t(t.size()), 3}, self);
           },
-          "float32 (T, 3): normalised interpolated corner normal (face normal if it vanishes)")
+          "float32 (T, 3): unit interpolated corner normal (the face normal if it vanishes, "
+          "(0, 0, 1) if the face has no area either)")
       .def_property_readonly(
           "barycentrics",
           [](py::object self) {
@@ -247,9 +282,9 @@ void bind_texel(py::module_& m) {
           "overlapping_texels")
       .def(
           "splat",
-          [](const TexelSet& t, const py::array& values, int margin, float background,
-             bool return_mask) {
-            return splat(t.pixels.data(), t.size(), values, t.width, t.height, margin,
+          [](const TexelSet& t, const py::array& values, const py::object& margin,
+             double background, bool return_mask) {
+            return splat(t.pixels.data(), t.size(), values, t.width, t.height, margin_arg(margin),
                          background, return_mask);
           },
           py::arg("values"), py::arg("margin") = 16, py::arg("background") = 1.0f,
@@ -306,14 +341,14 @@ void bind_texel(py::module_& m) {
   m.def(
       "splat_texels",
       [](const py::array& pixels, const py::array& values, const py::object& resolution,
-         int margin, float background, bool return_mask) {
+         const py::object& margin, double background, bool return_mask) {
         require_dtype(pixels, "pixels", py::dtype::of<std::int32_t>(), "int32");
         if (pixels.ndim() != 1) {
           throw py::value_error("pixels must have shape (T,), got " + shape_str(pixels));
         }
         const auto [w, h] = resolution_arg(resolution);
         return splat(static_cast<const std::int32_t*>(pixels.data()),
-                     std::size_t(pixels.shape(0)), values, w, h, margin, background,
+                     std::size_t(pixels.shape(0)), values, w, h, margin_arg(margin), background,
                      return_mask);
       },
       py::arg("pixels"), py::arg("values"), py::arg("resolution"), py::arg("margin") = 16,
@@ -321,7 +356,8 @@ void bind_texel(py::module_& m) {
 
   m.def(
       "dilate_margin",
-      [](py::array image, py::array mask, int margin) {
+      [](py::array image, py::array mask, const py::object& margin_value) {
+        const int margin = margin_arg(margin_value);
         require_dtype(image, "image", py::dtype::of<float>(), "float32");
         require_dtype(mask, "mask", py::dtype::of<std::uint8_t>(), "uint8");
         if (!image.writeable() || !mask.writeable()) {
@@ -370,6 +406,18 @@ void bind_texel(py::module_& m) {
         const int h = int(pixels.shape(0)), w = int(pixels.shape(1));
         const int c = pixels.ndim() == 3 ? int(pixels.shape(2)) : 1;
         const float* data = static_cast<const float*>(pixels.data());
+        // Every value must survive the file's type: finite, and within half's range for "half"
+        // (beyond ±65504 it would be stored as inf).
+        const float limit = o.type == PixelType::Half ? 65504.0f : 3.4028235e38f;
+        for (std::size_t i = 0; i < std::size_t(h) * w * c; ++i) {
+          if (!(std::fabs(data[i]) <= limit)) {
+            throw py::value_error("pixels has the value " + num_str(data[i]) + " at index " +
+                                  std::to_string(i) +
+                                  (o.type == PixelType::Half
+                                       ? ", outside half's range +-65504"
+                                       : " (NaN or inf): images must be finite"));
+          }
+        }
         py::gil_scoped_release release;
         write_image(p, data, w, h, c, o);
       },
@@ -380,7 +428,9 @@ OpenImageIO; the format follows the extension. dtype "auto": .exr → 32-bit flo
 (values in [0, 1], clamped), others → float; or "float", "half" (EXR), "uint16", "uint8".
 bottom_up=True: row 0 is the bottom (Blender's order), flipped on write so the file shows v = 1
 at the top. Raises CanopyAOError naming the path and OpenImageIO's message if the file cannot be
-written, ValueError for bad shapes or a dtype the format cannot hold. Releases the GIL.
+written, ValueError for bad shapes, non-finite pixels (or beyond +-65504 for "half") or a dtype
+the format cannot hold. The path (str, bytes or os.PathLike) reaches the file system byte for
+byte (os.fsencode); an empty path or one with a NUL is a ValueError. Releases the GIL.
 )doc");
 
   m.def(

@@ -2,6 +2,9 @@
 // this file only creates the module, the error type, and the thread controls.
 #include <pybind11/pybind11.h>
 
+#include <cstring>
+#include <stdexcept>
+
 #include "arrays.h"
 #include "canopy_ao/parallel.h"
 
@@ -24,11 +27,45 @@ PYBIND11_MODULE(_core, m) {
   m.attr("__version__") = CANOPY_AO_VERSION;
 
   // register_exception: translation and the Python type in one call, the same in pybind11 2.10
-  // and 3.x (a static py::exception called as error(msg) is deprecated in 3.x).
+  // and 3.x (a static py::exception called as error(msg) is deprecated in 3.x). The translator
+  // below is registered later, so it runs first and decodes messages safely.
   py::register_exception<Error>(m, "CanopyAOError", PyExc_RuntimeError);
+  static PyObject* const error_type = [&m] {
+    PyObject* t = m.attr("CanopyAOError").ptr();
+    Py_INCREF(t);  // lives as long as the process, as the module's own type does
+    return t;
+  }();
+  // Messages may quote a path, which need not be UTF-8 (paths pass byte for byte): decode
+  // with backslashreplace, so the message is never lost (pybind's strict decode left an empty
+  // ValueError).
+  py::register_exception_translator([](std::exception_ptr p) {
+    auto raise = [](PyObject* type, const char* what) {
+      PyObject* msg = PyUnicode_DecodeUTF8(what, static_cast<Py_ssize_t>(std::strlen(what)),
+                                           "backslashreplace");
+      PyErr_SetObject(type, msg);
+      Py_XDECREF(msg);
+    };
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const Error& e) {
+      raise(error_type, e.what());
+    } catch (const std::invalid_argument& e) {
+      raise(PyExc_ValueError, e.what());
+    } catch (const std::domain_error& e) {
+      raise(PyExc_ValueError, e.what());
+    } catch (const std::length_error& e) {
+      raise(PyExc_ValueError, e.what());
+    }
+  });
 
-  m.def("set_max_threads", &set_max_threads, py::arg("n"),
-        "Caps worker threads for later calls (0 = all cores). Returns the previous cap. "
+  m.def(
+      "set_max_threads",
+      [](const py::object& n) {
+        return set_max_threads(static_cast<int>(py_bind::int_arg(n, "n", 0, 1 << 16)));
+      },
+      py::arg("n"),
+      "Caps worker threads for later calls (0 = all cores; n in [0, 65536], else ValueError). "
+      "Returns the previous cap. "
         "Results do not depend on the thread count.");
   m.def("max_threads", &max_threads, "Worker threads calls use now.");
 

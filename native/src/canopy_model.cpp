@@ -10,6 +10,7 @@
 #pragma GCC optimize("no-trapping-math", "finite-math-only", "no-signed-zeros")
 
 #include "canopy_ao/canopy_model.h"
+#include "canopy_ao/model_checks.h"
 
 #include <algorithm>
 #include <atomic>

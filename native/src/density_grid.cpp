@@ -27,6 +27,16 @@ void require_finite_points(PointsView p, const char* name) {
   }
 }
 
+// Area of triangle abc in double, the cross product's length scaled by its largest component:
+// finite for any finite float vertices (float32 squares overflow from edges of ~1e10).
+double triangle_area(Vec3 a, Vec3 b, Vec3 c) {
+  double e1[3], e2[3];
+  for (int k = 0; k < 3; ++k) e1[k] = double(b[k]) - a[k], e2[k] = double(c[k]) - a[k];
+  const double x = e1[1] * e2[2] - e1[2] * e2[1], y = e1[2] * e2[0] - e1[0] * e2[2],
+               z = e1[0] * e2[1] - e1[1] * e2[0];
+  return 0.5 * std::sqrt(x * x + y * y + z * z);
+}
+
 // splitmix64: a per-point random number from (index, seed), independent of threads.
 inline std::uint64_t mix(std::uint64_t z) {
   z += 0x9E3779B97F4A7C15ull;
@@ -82,7 +92,7 @@ DensityGrid::DensityGrid(PointsView vertices, const std::int32_t* triangles,
   for (std::size_t t = 0; t < triangle_count; ++t) {
     const Vec3 a = vertices[triangles[3 * t]], b = vertices[triangles[3 * t + 1]],
                c = vertices[triangles[3 * t + 2]];
-    const float at = 0.5f * length(cross(b - a, c - a));
+    const double at = triangle_area(a, b, c);
     if (!(at > 0)) continue;
     area += at;
     for (const Vec3& p : {a, b, c}) {
@@ -100,6 +110,12 @@ DensityGrid::DensityGrid(PointsView vertices, const std::int32_t* triangles,
 
   const Vec3 ext = hi - lo;
   h_ = std::max({ext.x, ext.y, ext.z}) / res;
+  if (!(h_ >= kMinVoxel)) {  // 1/h and h³ would leave float's normal range
+    std::ostringstream s;
+    s << "the mesh's extent (" << h_ * res << ") is too small for a density grid at resolution "
+      << res << " (voxel " << h_ << " < " << kMinVoxel << ")";
+    throw std::invalid_argument(s.str());
+  }
   std::array<int, 3> dims;
   for (int k = 0; k < 3; ++k) {
     dims[k] = std::clamp(static_cast<int>(std::ceil(ext[k] / h_ - 1e-4f)), 1, res);
@@ -126,10 +142,10 @@ DensityGrid::DensityGrid(PointsView vertices, const std::int32_t* triangles,
     const Vec3 a = vertices[triangles[3 * t]], b = vertices[triangles[3 * t + 1]],
                c = vertices[triangles[3 * t + 2]];
     const Vec3 e1 = b - a, e2 = c - a;
-    const double at = 0.5 * length(cross(e1, e2));
+    const double at = triangle_area(a, b, c);
     if (!(at > 0)) continue;
     const float edge = std::max({length(e1), length(e2), length(c - b)});
-    const int m = std::clamp(static_cast<int>(std::ceil(2.0f * edge / h_)), 1, 32);
+    const int m = static_cast<int>(std::clamp(std::ceil(2.0f * edge / h_), 1.0f, 32.0f));
     const double sub = at / (static_cast<double>(m) * m);
     const float inv = 1.0f / m;
     for (int i = 0; i < m; ++i) {
@@ -231,11 +247,14 @@ float DensityGrid::dda(Vec3 o, Vec3 d, float t0, float t1) const {
   for (int k = 0; k < 3; ++k) {
     const float g = (o[k] + d[k] * t0 - origin_[k]) / h_;
     idx[k] = std::clamp(static_cast<int>(std::floor(g)), 0, dims[k] - 1);
-    if (d[k] > 0) {
+    // A component so small that h/d overflows never crosses a face: no steps along it (else
+    // 0·inf = NaN below).
+    const bool moves = d[k] != 0 && std::isfinite(h_ / d[k]);
+    if (moves && d[k] > 0) {
       step[k] = 1;
       tdelta[k] = h_ / d[k];
       tmax[k] = t0 + (idx[k] + 1 - g) * tdelta[k];
-    } else if (d[k] < 0) {
+    } else if (moves) {
       step[k] = -1;
       tdelta[k] = -h_ / d[k];
       tmax[k] = t0 + (g - idx[k]) * tdelta[k];
@@ -279,13 +298,19 @@ float DensityGrid::march(Vec3 o, Vec3 d, float t_min, float t_max, float skip_le
   // 3. Cone steps on coarser levels as the footprint grows.
   float t0 = te, t1 = t_max;
   if (!clip(o, d, &t0, &t1)) return acc;
-  float t = t0;
-  while (t < t1 && acc < limit) {
-    const float fp = 2.0f * cone_tan * t / h_;  // footprint in finest voxels
+  // March in u = t − t0, from the box entry: a receiver far outside the box (t0 ≫ h) would
+  // otherwise stall once t + dt rounds to t. Every step but the last is ≥ h, so crossing the box
+  // takes at most nx + ny + nz + 1 steps; the cap (twice that) only guards against round-off.
+  const Vec3 entry = o + d * t0;
+  const float span = t1 - t0;
+  const int max_steps = 2 * (nx() + ny() + nz()) + 8;
+  float u = 0;
+  for (int step = 0; u < span && acc < limit && step < max_steps; ++step) {
+    const float fp = 2.0f * cone_tan * (t0 + u) / h_;  // footprint in finest voxels
     const int l = fp >= 2.0f ? std::min(std::ilogb(fp), last) : 0;  // ⌊log2 fp⌋
-    const float dt = std::min(h_ * static_cast<float>(1 << l), t1 - t);
-    acc += sample(l, o + d * (t + 0.5f * dt)) * dt;
-    t += dt;
+    const float dt = std::min(h_ * static_cast<float>(1 << l), span - u);
+    acc += sample(l, entry + d * (u + 0.5f * dt)) * dt;
+    u += dt;
   }
   return acc;
 }

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <string>
 
-#include "canopy_ao/canopy_model.h"
+#include "canopy_ao/model_checks.h"
 #include "canopy_ao/fast_math.h"
 #include "canopy_ao/parallel.h"
 

@@ -1,6 +1,8 @@
-// Argument checks shared by the analytic models (declared in canopy_model.h). Kept apart from
+// Argument checks shared by the analytic models (declared in model_checks.h). Kept apart from
 // canopy_model.cpp, whose hot loops are compiled with finite-math-only: std::isfinite must not
 // be folded away here.
+#include "canopy_ao/model_checks.h"
+
 #include <cmath>
 #include <stdexcept>
 #include <string>

@@ -5,7 +5,7 @@
 #include <limits>
 #include <string>
 
-#include "canopy_ao/canopy_model.h"
+#include "canopy_ao/model_checks.h"
 #include "canopy_ao/parallel.h"
 
 namespace canopy_ao {

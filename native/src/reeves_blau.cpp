@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "canopy_ao/canopy_model.h"
+#include "canopy_ao/model_checks.h"
 #include "canopy_ao/fast_math.h"
 #include "canopy_ao/parallel.h"
 

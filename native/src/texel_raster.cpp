@@ -377,8 +377,11 @@ TexelSet rasterize_uv(const CornerTriangles& in, const RasterOptions& options) {
         const PointsView N{in.normals + 3 * c0, 3};
         nrm = N[0] * bc[0] + N[1] * bc[1] + N[2] * bc[2];
       }
-      const float l2 = dot(nrm, nrm);
-      nrm = l2 > 1e-12f ? nrm / std::sqrt(l2) : normalize(cross(P[1] - P[0], P[2] - P[0]));
+      // Interpolated corner normal, else the face normal, else +z: always unit length (a
+      // triangle with no area in 3D and vanishing normals has no direction of its own).
+      nrm = normalize(nrm);
+      if (dot(nrm, nrm) == 0) nrm = normalize(cross(P[1] - P[0], P[2] - P[0]));
+      if (dot(nrm, nrm) == 0) nrm = Vec3{0, 0, 1};
       for (int k = 0; k < 3; ++k) {
         out.barycentrics[3 * n + k] = bc[k];
         out.positions[3 * n + k] = pos[k];
@@ -492,14 +495,14 @@ void dilate_margin(float* pixels, std::uint8_t* mask, int W, int H, int C, int m
     values.assign(frontier.size() * C, 0.0f);
     parallel_for_blocks(frontier.size(), 1024, [&](std::size_t b, std::size_t e) {
       for (std::size_t n = b; n < e; ++n) {
-        float sum[4] = {0, 0, 0, 0};
+        double sum[4] = {0, 0, 0, 0};  // double: 8 values near float's max cannot overflow
         int k = 0;
         for_neighbours(frontier[n], [&](std::size_t q) {
           if (!filled(q)) return;
           for (int c = 0; c < C; ++c) sum[c] += pixels[q * C + c];
           ++k;
         });
-        for (int c = 0; c < C; ++c) values[n * C + c] = sum[c] / float(k);
+        for (int c = 0; c < C; ++c) values[n * C + c] = static_cast<float>(sum[c] / k);
       }
     });
     for (std::size_t n = 0; n < frontier.size(); ++n) {

@@ -100,11 +100,4 @@ void ao_canopy_shells(PointsView positions, PointsView normals,
                       const std::vector<Ellipsoid>& shells, const CanopyOptions& options,
                       ShellCombine combine, float* out);
 
-// === Checks shared by the models (throw std::invalid_argument naming the problem)
-void check_tau(float tau);
-void check_canopy_options(const CanopyOptions& o);
-void check_sphere(const Sphere& s);
-void check_ellipsoid(const Ellipsoid& e);
-void check_receivers(PointsView positions, PointsView normals);
-
 }  // namespace canopy_ao

@@ -62,22 +62,28 @@ struct DensityAOOptions {
 class DensityGrid {
  public:
   static constexpr int kExactVoxels = 4;  ///< exact DDA out to this many finest voxels
+  /// Smallest voxel edge: a mesh whose extent / resolution is below it is refused (1/h and h³
+  /// would leave float's normal range).
+  static constexpr float kMinVoxel = 1e-30f;
 
   // === Constructor
   /// vertices: V×3 world positions; triangles: M×3 indices into vertices (0-based, two-sided).
-  /// Throws std::invalid_argument on non-finite vertices, indices outside [0, V) or a bad
-  /// resolution. An empty mesh (or only zero-area triangles) gives an empty grid: AO = 1.
+  /// Throws std::invalid_argument on non-finite vertices, indices outside [0, V), a bad
+  /// resolution or a voxel edge below kMinVoxel. An empty mesh (or only zero-area triangles) gives an empty grid: AO = 1.
   DensityGrid(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
               const DensityGridOptions& options = {});
 
   // === Methods
   /// AO for N receivers (positions, normals N×3) into out (N floats in [0, 1], 1 = open sky).
   /// Parallel over points (parallel_for_blocks), independent of the thread count. A zero normal
-  /// gives 1 (no hemisphere; as the ray-traced reference). Throws std::invalid_argument on non-finite input or bad options.
+  /// gives 1 (no hemisphere; as the ray-traced reference). Throws std::invalid_argument on
+  /// non-finite input or bad options.
   void ao(PointsView positions, PointsView normals, const DensityAOOptions& options,
           float* out) const;
 
-  /// ∫ σ dt along origin + t·dir (dir unit) for t ∈ [0, t_max], with the schedule above
+  /// ∫ σ dt along origin + t·dir (dir any non-zero length, normalised safely) for
+  /// t ∈ [0, t_max], with the schedule above. Every loop is bounded by the grid's size, whatever
+  /// the magnitudes of origin and dir (a far receiver marches from where it enters the box);
   /// (self_skip in voxels, cone_tan the footprint half-angle's tangent). For tests/tools.
   float optical_depth(Vec3 origin, Vec3 dir, float t_max, float self_skip,
                       float cone_tan) const;

@@ -40,9 +40,14 @@ inline Vec3 cross(Vec3 a, Vec3 b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 inline float length(Vec3 a) { return std::sqrt(dot(a, a)); }
+/// Unit vector along a, or 0 for a zero (or non-finite) vector. Scaled by the largest
+/// component before squaring, so lengths from the smallest denormal to float's max normalise
+/// exactly (squaring first overflows above ~1.8e19 and vanishes below ~1e-19).
 inline Vec3 normalize(Vec3 a) {
-  const float l = length(a);
-  return l > 0 ? a / l : Vec3{0, 0, 0};
+  const float m = std::fmax(std::fabs(a.x), std::fmax(std::fabs(a.y), std::fabs(a.z)));
+  if (!(m > 0) || !std::isfinite(m)) return Vec3{0, 0, 0};
+  const Vec3 b{a.x / m, a.y / m, a.z / m};
+  return b / length(b);
 }
 inline bool is_finite(Vec3 a) {
   return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);

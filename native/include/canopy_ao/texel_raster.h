@@ -95,8 +95,9 @@ struct TexelImage {
 /// Rasterises every triangle's UVs into a width × height grid and interpolates position and
 /// normal at each covered texel. The normal is the normalised barycentric mix of the corner
 /// normals; where that mix vanishes (opposite corner normals) or no normals are given, the
-/// face normal of the positions (corner order 0, 1, 2, right-handed) — (0, 0, 0) if the face
-/// has no area either.
+/// face normal of the positions (corner order 0, 1, 2, right-handed) — (0, 0, 1) if the face
+/// has no area either, so every normal is unit length (normalised without overflow or
+/// underflow, geometry.h normalize).
 /// PRE: arrays hold 3 * count rows; positions/normals finite (checked at the Python boundary).
 /// Throws std::invalid_argument for a resolution outside 1..16384 or null arrays with count > 0.
 TexelSet rasterize_uv(const CornerTriangles& triangles, const RasterOptions& options);
