@@ -96,7 +96,8 @@ def main(argv):
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True) is None:
         raise SystemExit("the canopy_ao add-on could not be enabled")
-    from canopy_ao import mesh_io, operators
+    from canopy_ao.blender import gather, mesh_io
+    from canopy_ao.blender.job import run_bake
 
     t0 = time.perf_counter()
     for ob in list(bpy.data.objects):
@@ -120,11 +121,11 @@ def main(argv):
           f"({args.trees - half} round, {half} conifer) on {args.side:g} m, built in "
           f"{t_build:.1f} s", flush=True)
 
-    opts = operators.scene_settings_opts(bpy.context.scene)
+    opts = gather.scene_settings_opts(bpy.context.scene)
     opts.update(method=args.method, tau=args.tau if args.tau > 0 else None, distance=0.0,
                 show_proxies=False, forest_epsilon=args.epsilon, overwrite=True)
     t0 = time.perf_counter()
-    job, rep = operators.run_bake(bpy.context, ["Ground"], opts)
+    job, rep = run_bake(bpy.context, ["Ground"], opts)
     total = time.perf_counter() - t0
     for line in job.lines:
         print(line)

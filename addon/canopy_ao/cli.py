@@ -40,7 +40,7 @@ def _positive_int(text):
 
 
 def build_parser():
-    from . import engine
+    from .core.ladder import METHODS
 
     p = argparse.ArgumentParser(
         prog="blender -b scene.blend --python-expr 'import canopy_ao.cli; canopy_ao.cli.main()' --",
@@ -49,7 +49,7 @@ def build_parser():
     which.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake")
     which.add_argument("--all", action="store_true",
                        help="bake every visible mesh (the default when --objects is not given)")
-    p.add_argument("--method", default="auto", choices=engine.METHODS,
+    p.add_argument("--method", default="auto", choices=METHODS,
                    help="model to use (default: auto)")
     p.add_argument("--tau", type=_tau, default=None,
                    help="optical depth, or 'auto' to calibrate (default: auto)")
@@ -124,15 +124,16 @@ def _run(args):
         addon_utils.enable(__package__, default_set=False, handle_error=None)
         if not hasattr(bpy.types.Scene, "canopy_ao"):
             _fail("the canopy_ao add-on could not be enabled (see the messages above)")
-    from . import engine, operators
+    from .blender import gather, job
+    from .core.native import CanopyAOError, core_status
 
-    ok, msg = engine.core_status()
+    ok, msg = core_status()
     if not ok:
         _fail(msg)
     if args.save and not bpy.data.filepath:
         _fail("--save needs a saved .blend (give the .blend before --python-expr)")
     distance = (args.distance if args.distance is not None
-                else operators.world_ao_distance(bpy.context.scene))
+                else gather.world_ao_distance(bpy.context.scene))
     opts = dict(method=args.method, tau=args.tau, distance=distance, samples=args.samples,
                 time_budget=args.time_budget, target_rmse=args.target_error,
                 attribute=args.attribute, overwrite=args.overwrite,
@@ -147,10 +148,10 @@ def _run(args):
         for ob in context.view_layer.objects:
             ob.select_set(False)
     try:
-        job, rep = operators.run_bake(context, args.objects or [], opts)
-    except operators.BakeError as exc:
+        bake_job, rep = job.run_bake(context, args.objects or [], opts)
+    except CanopyAOError as exc:
         _fail(str(exc))
-    for r in job.results:
+    for r in bake_job.results:
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
                 f"{e['seconds']:.3f} s, mean AO {e['ao_mean']:.3f}")
@@ -163,7 +164,7 @@ def _run(args):
         print(line, flush=True)
     # τ means nothing to the exact rung or the density grid (physical density).
     tau = "" if rep["method"] in ("raytrace", "grid") else f" tau {rep['tau']:.4g}"
-    print(f"canopy_ao: {rep['method']}{tau}, {len(job.results)} object(s), "
+    print(f"canopy_ao: {rep['method']}{tau}, {len(bake_job.results)} object(s), "
           f"{rep['seconds']:.2f} s", flush=True)
     for note in rep["notes"]:
         print(f"canopy_ao: note: {note}", flush=True)

@@ -36,7 +36,7 @@ def ground():
 
 def steps():
     import addon_utils
-    from canopy_ao import mesh_io
+    from canopy_ao.blender import mesh_io
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
     for ob in list(bpy.data.objects):
         bpy.data.objects.remove(ob)

@@ -4,7 +4,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from . import engine
+from ..core import ladder
 
 METHOD_LABELS = {
     "auto": ("Auto", "Calibrate tau and pick sphere / ellipsoid / shells against a few hundred "
@@ -28,8 +28,8 @@ def method_items(self, context):
     # Offer only what the loaded native module can run ("grid" needs DensityGrid); the numbers
     # stay fixed so a saved choice keeps its meaning.
     if not _METHOD_ITEMS:
-        avail = engine.available_methods()
-        _METHOD_ITEMS.extend((m, *METHOD_LABELS[m], i) for i, m in enumerate(engine.METHODS)
+        avail = ladder.available_methods()
+        _METHOD_ITEMS.extend((m, *METHOD_LABELS[m], i) for i, m in enumerate(ladder.METHODS)
                              if m in avail or m == "auto")
     return _METHOD_ITEMS
 

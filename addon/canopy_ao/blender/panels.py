@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import engine
+from ..core.native import core_status
 
 
 class _Sidebar:
@@ -17,7 +17,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        ok, msg = engine.core_status()
+        ok, msg = core_status()
         if not ok:
             box = layout.box()
             box.alert = True
@@ -47,7 +47,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         sub.enabled = not s.use_world_distance
         sub.prop(s, "distance")
         if s.use_world_distance:
-            from .operators import world_ao_distance
+            from .gather import world_ao_distance
             d = world_ao_distance(context.scene)
             col.label(text=f"World AO distance: {d:g}" if d > 0 else "No world: unlimited")
         if s.method == "raytrace":
