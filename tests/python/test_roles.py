@@ -10,8 +10,9 @@ sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, os.path.join(HERE, "..", "..", "examples"))
 sys.path.insert(0, HERE)
 
-from canopy_ao.core import roles  # noqa: E402
+from canopy_ao.core import roles, trees  # noqa: E402
 import tree_scene as ts  # noqa: E402
+from real_shapes import bent_tubes, join, leaves, stem  # noqa: E402
 
 
 def _same_partition(a, b):
@@ -73,59 +74,11 @@ def test_blade_heights():
 
 # === Real-asset shapes: bent branch tubes, thick leaves, trees sharing one collection =========
 
-def _bent_tubes(rng, n=60, sides=8, rings=12, base=(0.0, 0.0), height=6.0):
-    """n disconnected branch tubes (open ends), each bent through up to 120° as Sapling's
-    branch curves are, radius tapering: the shape of a Sapling branch curve made a mesh."""
-    verts, tris, off = [], [], 0
-    ang = 2 * np.pi * np.arange(sides) / sides
-    for _ in range(n):
-        start = np.array([base[0], base[1], 0.0]) + rng.uniform([-.3, -.3, 1.0],
-                                                                [.3, .3, height])
-        length, bend = rng.uniform(1.0, 3.0), rng.uniform(1.2, 2.1)  # radians
-        az = rng.uniform(0, 2 * np.pi)
-        s = np.linspace(0, 1, rings)
-        # an arc in the vertical plane of azimuth az
-        rad = length / bend
-        th = s * bend
-        d = np.array([np.cos(az), np.sin(az), 0.0])
-        centre = start[None, :] + rad * (np.sin(th)[:, None] * d[None, :]
-                                         + (1 - np.cos(th))[:, None] * np.array([0, 0, 1.0]))
-        tang = np.cos(th)[:, None] * d[None, :] + np.sin(th)[:, None] * np.array([0, 0, 1.0])
-        side = np.cross(tang, np.array([-d[1], d[0], 0.0]))
-        other = np.cross(tang, side)
-        r = np.linspace(0.08, 0.02, rings) * length
-        ring = (np.cos(ang)[None, :, None] * side[:, None, :]
-                + np.sin(ang)[None, :, None] * other[:, None, :]) * r[:, None, None]
-        verts.append((centre[:, None, :] + ring).reshape(-1, 3))
-        i, j = np.meshgrid(np.arange(rings - 1), np.arange(sides), indexing="ij")
-        a = i * sides + j
-        b = i * sides + (j + 1) % sides
-        tris.append(off + np.concatenate([np.stack([a, b, b + sides], -1).reshape(-1, 3),
-                                          np.stack([a, b + sides, a + sides], -1).reshape(-1, 3)]))
-        off += rings * sides
-    return np.concatenate(verts).astype(np.float32), np.concatenate(tris).astype(np.int32)
-
-
-def _leaves(rng, n=800, centre=(0.0, 0.0, 5.0), radius=2.5, size=0.15, thick=0.0):
-    """n flat quads in a ball (a crown); thick > 0 gives each a thickness (a closed box)."""
-    c = np.asarray(centre) + rng.normal(0, radius / 2, (n, 3))
-    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float) * size
-    rot = np.linalg.qr(rng.normal(size=(n, 3, 3)))[0]
-    faces = [[0, 1, 2], [0, 2, 3]]
-    if thick > 0:
-        quad = np.concatenate([quad, quad + [0, 0, thick]])
-        faces = [[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
-                 [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]]
-    v = c[:, None, :] + np.einsum("nij,kj->nki", rot, quad)
-    t = (np.arange(n)[:, None, None] * len(quad) + np.array(faces)[None]).reshape(-1, 3)
-    return v.reshape(-1, 3).astype(np.float32), t.astype(np.int32)
-
-
 def test_bent_branch_tubes_are_a_trunk():
     """A Sapling trunk is many disconnected, bent, tapering tubes: their points' covariance is
     as flat as a leaf's (the old guess said CANOPY), but each tube's cross-section is closed
     (its mean normal is ~0)."""
-    p, t = _bent_tubes(np.random.default_rng(1))
+    p, t = bent_tubes(np.random.default_rng(1))
     role, why = roles.guess_role(p, t)
     assert role == "TRUNK", why
     lab = roles.connected_components(len(p), t)
@@ -136,26 +89,9 @@ def test_bent_branch_tubes_are_a_trunk():
 def test_flat_and_thick_leaves_are_a_canopy():
     rng = np.random.default_rng(2)
     for thick in (0.0, 0.004):  # cards, and cards given a thickness (closed, but plates)
-        p, t = _leaves(rng, thick=thick)
+        p, t = leaves(rng, thick=thick)
         role, why = roles.guess_role(p, t)
         assert role == "CANOPY", (thick, why)
-
-
-def _join(*meshes):
-    v, t, base = [], [], 0
-    for p, tt in meshes:
-        v.append(p)
-        t.append(tt + base)
-        base += len(p)
-    return np.concatenate(v), np.concatenate(t)
-
-
-def _stem(base, height=3.0):
-    """A tube from the ground up to the crown (a bole)."""
-    import canopy_scenes as cs
-    v, t, _uv = cs.tapered_cylinders([[base[0], base[1], 0.0]], [[base[0], base[1], height]],
-                                     0.2, 0.12, sides=8)
-    return v.astype(np.float32), t.astype(np.int32)
 
 
 def test_two_trees_in_one_collection_are_told_apart():
@@ -163,20 +99,20 @@ def test_two_trees_in_one_collection_are_told_apart():
     are split by where they stand, both as separate objects and joined into one mesh each."""
     pytest.importorskip("canopy_scenes")
     rng = np.random.default_rng(3)
-    la, lb = _leaves(rng, centre=(0, 0, 5)), _leaves(rng, centre=(9, 1, 5))
-    ba = _join(_stem((0, 0)), _bent_tubes(rng, 20, base=(0, 0)))
-    bb = _join(_stem((9, 1)), _bent_tubes(rng, 20, base=(9, 1)))
+    la, lb = leaves(rng, centre=(0, 0, 5)), leaves(rng, centre=(9, 1, 5))
+    ba = join(stem((0, 0)), bent_tubes(rng, 20, base=(0, 0)))
+    bb = join(stem((9, 1)), bent_tubes(rng, 20, base=(9, 1)))
     objs = [("leaves_a", "CANOPY", *la), ("leaves_b", "CANOPY", *lb),
             ("wood_a", "TRUNK", *ba), ("wood_b", "TRUNK", *bb), ]
-    got = roles.assign_trees(objs, "Collection")
+    got = trees.assign_trees(objs, "Collection")
     for name in ("leaves_a", "leaves_b", "wood_a", "wood_b"):
         assert len(got[name].trees) == 1, (name, got[name])
     assert got["leaves_a"].trees == got["wood_a"].trees
     assert got["leaves_b"].trees == got["wood_b"].trees
     assert got["leaves_a"].trees != got["leaves_b"].trees
     # Joined: one leaf mesh and one wood mesh holding both trees.
-    leaves, wood = _join(la, lb), _join(ba, bb)
-    got = roles.assign_trees([("L", "CANOPY", *leaves), ("W", "TRUNK", *wood)])
+    lv, wd = join(la, lb), join(ba, bb)
+    got = trees.assign_trees([("L", "CANOPY", *lv), ("W", "TRUNK", *wd)])
     truth_l = np.r_[np.zeros(len(la[0])), np.ones(len(lb[0]))]
     truth_w = np.r_[np.zeros(len(ba[0])), np.ones(len(bb[0]))]
     assert len(got["L"].trees) == 2 and got["L"].trees == got["W"].trees
@@ -185,18 +121,18 @@ def test_two_trees_in_one_collection_are_told_apart():
     assert got["L"].labels[0] == got["W"].labels[0]  # the same tree for a's leaves and wood
 
 
-def test_touching_crowns_split_by_their_stems_and_a_fork_is_no_stem():
+def test_touching_crowns_split_by_their_stems_and_a_fork_is_nostem():
     pytest.importorskip("canopy_scenes")
     rng = np.random.default_rng(4)
-    la, lb = _leaves(rng, centre=(0, 0, 5)), _leaves(rng, centre=(4, 0, 5))  # crowns overlap
-    got = roles.assign_trees([("L", "CANOPY", *_join(la, lb)),
-                              ("W", "TRUNK", *_join(_stem((0, 0)), _stem((4, 0))))])
+    la, lb = leaves(rng, centre=(0, 0, 5)), leaves(rng, centre=(4, 0, 5))  # crowns overlap
+    got = trees.assign_trees([("L", "CANOPY", *join(la, lb)),
+                              ("W", "TRUNK", *join(stem((0, 0)), stem((4, 0))))])
     assert len(got["L"].trees) == 2
     lab = got["L"].labels
-    side = _join(la, lb)[0][:, 0] > 2.0
+    side = join(la, lb)[0][:, 0] > 2.0
     assert np.mean(lab[side] == lab[side][0]) > 0.9 and lab[side][0] != lab[~side][0]
     # A fork: a second tube starting 1 m up, 0.3 m beside the bole, stands on it.
-    fork = _stem((0.3, 0))
+    fork = stem((0.3, 0))
     fork = (fork[0] + np.float32([0, 0, 1.0]), fork[1])
-    got = roles.assign_trees([("L", "CANOPY", *la), ("W", "TRUNK", *_join(_stem((0, 0)), fork))])
+    got = trees.assign_trees([("L", "CANOPY", *la), ("W", "TRUNK", *join(stem((0, 0)), fork))])
     assert len(got["L"].trees) == 1 and len(got["W"].trees) == 1, got

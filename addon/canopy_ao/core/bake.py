@@ -15,9 +15,9 @@ import time
 
 import numpy as np
 
-from . import ladder, lighting, native, proxies
+from . import ladder, lighting, native, proxies, trees
 from .native import CanopyAOError
-from .scene import ItemResult, Plan, SceneItem
+from .scene import ItemResult, Plan, SceneItem, parts, split_trees
 from .settings import DEFAULT_TAU, BakeSettings
 
 
@@ -34,6 +34,10 @@ def prepare(items, settings: BakeSettings) -> Plan:
     plan = Plan(settings=settings, method=settings.method,
                 tau=settings.tau if settings.tau is not None else DEFAULT_TAU)
     t0 = time.perf_counter()
+    trees.resolve(items)  # trees only a collection groups: told apart by where they stand
+    plan.timings["trees"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
 
@@ -45,7 +49,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
     if needs_tracer:
         t0 = time.perf_counter()
         try:
-            plan.tracer = lighting.build_tracer(items)
+            plan.tracer = lighting.build_tracer(whole)
         except CanopyAOError as exc:
             if settings.method == "raytrace":
                 raise
@@ -54,12 +58,12 @@ def prepare(items, settings: BakeSettings) -> Plan:
 
     if settings.method == "grid":
         t0 = time.perf_counter()
-        plan.grid = lighting.build_grid(items)
+        plan.grid = lighting.build_grid(whole)
         plan.timings["grid"] = time.perf_counter() - t0
     elif settings.method == "auto" and plan.fits and plan.tracer is not None:
         t0 = time.perf_counter()
         try:  # the top rung of the ladder: only worth it if it beats the shells (calibrate)
-            plan.grid = lighting.build_grid(items)
+            plan.grid = lighting.build_grid(whole)
         except CanopyAOError as exc:
             plan.notes.append(f"density grid not considered: {exc}")
         plan.timings["grid"] = time.perf_counter() - t0
@@ -76,12 +80,18 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
     if item.role == "IGNORE":
         ao = np.ones(len(item.positions), np.float32)
     else:
-        ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, item.positions,
-                                      item.normals, plan.method, plan.tau)
+        ao = np.empty(len(item.positions), np.float32)
+        for part, idx in parts(item):
+            val = lighting.evaluate_points(plan, part.role, part.tree, part.name,
+                                           part.positions, part.normals, plan.method, plan.tau)
+            if idx is None:
+                ao = val
+            else:
+                ao[idx] = val
     if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,
-                      time.perf_counter() - t0)
+                      time.perf_counter() - t0, item.tree_source, item.tree_why)
 
 
 def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
@@ -117,7 +127,8 @@ def report(plan: Plan, results) -> dict:
         "calibration": plan.calibration,
         "timings": dict(plan.timings),
         "notes": list(plan.notes),
-        "objects": {r.name: {"role": r.role, "tree": r.tree, "method": r.method,
+        "objects": {r.name: {"role": r.role, "tree": r.tree, "tree_source": r.tree_source,
+                             "tree_why": r.tree_why, "method": r.method,
                              "vertices": r.vertices, "seconds": r.seconds,
                              "ao_mean": float(r.ao.mean()) if r.vertices else None}
                     for r in results},
