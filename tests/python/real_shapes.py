@@ -66,3 +66,14 @@ def stem(base, height=3.0):
     v, t, _uv = cs.tapered_cylinders([[base[0], base[1], 0.0]], [[base[0], base[1], height]],
                                      0.2, 0.12, sides=8)
     return v.astype(np.float32), t.astype(np.int32)
+
+
+def cubes(centres, half):
+    """Closed axis-aligned cubes (12 outward triangles each) around centres (N, 3)."""
+    c = np.asarray(centres, np.float64).reshape(-1, 3)
+    corner = np.array([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)], float)
+    faces = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                      [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    v = c[:, None, :] + half * corner[None]
+    t = (np.arange(len(c))[:, None, None] * 8 + faces[None]).reshape(-1, 3)
+    return v.reshape(-1, 3).astype(np.float32), t.astype(np.int32)
