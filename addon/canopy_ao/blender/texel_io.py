@@ -396,7 +396,7 @@ def bake_objects(context, plan, targets, opts):
 
         def ao_fn(p, n, it=it):
             return lighting.evaluate_points(plan, it.role, it.tree, it.name, p, n,
-                                           plan.method, plan.tau)
+                                           plan.method, plan.taus())
 
         _image, stats = bake_texel(
             context, obj, ao_fn, uv_map=opts.get("uv_map") or None,

@@ -83,7 +83,8 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
         ao = np.empty(len(item.positions), np.float32)
         for part, idx in parts(item):
             val = lighting.evaluate_points(plan, part.role, part.tree, part.name,
-                                           part.positions, part.normals, plan.method, plan.tau)
+                                           part.positions, part.normals, plan.method,
+                                           plan.taus())
             if idx is None:
                 ao = val
             else:
@@ -121,6 +122,7 @@ def report(plan: Plan, results) -> dict:
         "method": plan.method,
         "requested_method": plan.settings.method,
         "tau": plan.tau,
+        "tau_by_tree": dict(plan.tau_by_tree),
         "distance": plan.settings.distance,
         "samples": plan.settings.samples,
         "proxies": proxies.proxy_dicts(plan),

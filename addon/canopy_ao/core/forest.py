@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .lighting import tau_of
 from .native import _core, require
 
 DEFAULT_EPSILON = 1e-3  # the core's default cut-off (occluders.h)
@@ -161,6 +162,7 @@ def prototype_from_plan(plan, tree, matrices, name=None):
     """The Prototype of ``tree`` as an engine Plan fitted it (its chosen shells, τ and solid
     trunks, in the space the prototype was baked in), placed by ``matrices`` (N, 4, 4) that
     map that space to each instance's."""
-    return Prototype(name or tree, list(plan.proxies.get(tree, [])), float(plan.tau),
+    return Prototype(name or tree, list(plan.proxies.get(tree, [])),
+                     tau_of(plan.taus(), tree),
                      np.asarray(matrices, np.float64).reshape(-1, 4, 4),
                      list(plan.trunks.get(tree, [])))

@@ -96,6 +96,23 @@ def golden_min(f, lo, hi, iters=16):
     return (c, fc) if fc < fd else (d, fd)
 
 
+def tau_per_tree(plan: Plan, method, tau, err):
+    """{tree: τ, None: tau}: one golden-section pass per tree (others held) from the scene-wide
+    τ. A sparse tree and a dense one have different optical depths; one τ for both darkens
+    the sparse one's leaves. A tree keeps the scene-wide τ unless its own cuts the sample's
+    squared error by more than 1 %."""
+    taus = {t: tau for t in plan.fits}
+    taus[None] = tau
+    base = err(method, taus)
+    for t in sorted(plan.fits):
+        def f(x, t=t):
+            return err(method, {**taus, t: math.exp(x)})
+        lt, e = golden_min(f, math.log(0.02), math.log(50.0))
+        if e < 0.99 * base:
+            taus[t], base = math.exp(lt), e
+    return taus
+
+
 def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     """Pick τ (unless fixed) and a method among ``candidates`` against ray-traced samples.
 
@@ -144,6 +161,8 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         else:
             lt, _e = golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
             tau = math.exp(lt)
+            if len(plan.fits) > 1:
+                tau = tau_per_tree(plan, m, tau, err)
         results[m] = (tau, err(m, tau))
         # Cost per point on one batch of the largest receiver, scaled to every receiver (a
         # batch large enough that per-call overhead does not dominate).
@@ -175,12 +194,22 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         "reference_samples": s.calibration_samples,
         "trace_seconds": t_trace,
         "seconds": time.perf_counter() - t0,
-        "candidates": {m: {"tau": t, "rmse": math.sqrt(e), "predicted_seconds": predicted[m]}
+        "candidates": {m: {"tau": _scene_tau(t), "tau_by_tree": _tree_taus(t),
+                           "rmse": math.sqrt(e), "predicted_seconds": predicted[m]}
                        for m, (t, e) in results.items()},
         "chosen": chosen,
         "why": why,
     }
     return chosen, results[chosen][0], info
+
+
+def _scene_tau(tau):
+    return float(tau[None]) if isinstance(tau, dict) else float(tau)
+
+
+def _tree_taus(tau):
+    return {t: float(v) for t, v in tau.items() if t is not None} if isinstance(tau, dict) \
+        else {}
 
 
 def choose(plan: Plan, items, grass_only_auto: bool) -> None:
@@ -200,8 +229,9 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
                 # beat every proxy within the time budget; on big ones the budget rules it out.
                 candidates.append("raytrace")
         if plan.tracer is not None and (settings.method == "auto" or settings.tau is None):
-            plan.method, plan.tau, plan.calibration = calibrate(plan, items, candidates,
-                                                                settings.tau)
+            plan.method, tau, plan.calibration = calibrate(plan, items, candidates,
+                                                           settings.tau)
+            plan.tau, plan.tau_by_tree = _scene_tau(tau), _tree_taus(tau)
         else:
             plan.method = "ellipsoid" if settings.method == "auto" else settings.method
             if settings.tau is None:

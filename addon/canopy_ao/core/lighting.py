@@ -22,10 +22,31 @@ from .proxies import own_shells
 from .scene import Plan
 
 
+def tau_of(tau, tree):
+    """τ of one tree: ``tau`` is one number for every tree or {tree: τ} (calibrated per tree;
+    a tree missing from it takes the value under None)."""
+    if isinstance(tau, dict):
+        return float(tau.get(tree, tau.get(None, 1.0)))
+    return float(tau)
+
+
 def _occluders(p, n, shells, tau, solid=False):
     if not shells or len(p) == 0:
         return np.ones(len(p), np.float32)
     return _core.ao_occluders(p, n, list(shells), float(tau), solid=solid)
+
+
+def _tree_occluders(p, n, shells_by_tree, tau):
+    """Visibility through every tree's shells, each with its own τ: V = Π (1 − occ) over the
+    shells (occluders.h), so one call per distinct τ multiplied is the same field."""
+    groups = {}
+    for t, es in shells_by_tree.items():
+        groups.setdefault(tau_of(tau, t), []).extend(es)
+    ao = None
+    for tt, es in groups.items():
+        v = _occluders(p, n, es, tt)
+        ao = v if ao is None else ao * v
+    return np.ones(len(p), np.float32) if ao is None else ao
 
 
 def _in_shell(p, n, tree_fit, method, tau):
@@ -84,7 +105,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         outside_all &= ~ins
     if outside_all.any():  # the common case for ground: one call, the core's spatial grid
         po, no = np.ascontiguousarray(p[outside_all]), np.ascontiguousarray(n[outside_all])
-        ao[outside_all] = _occluders(po, no, [e for es in shells.values() for e in es], tau)
+        ao[outside_all] = _tree_occluders(po, no, shells, tau)
     claimed = np.zeros(len(p), bool)
     for t, ins in inside.items():
         done = ins & ~claimed
@@ -96,10 +117,10 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
                                        np.ascontiguousarray(n[done]))
         # Inside several trees' shells (crowns that interlock): the in-shell model of the
         # first, the others as occluders (which skip shells a point is inside).
-        others = [e for u, es in shells.items() if u != t for e in es]
-        val = _in_shell(pi, ni, plan.fits[t], method, tau)
+        others = {u: es for u, es in shells.items() if u != t}
+        val = _in_shell(pi, ni, plan.fits[t], method, tau_of(tau, t))
         if others:
-            val = val * _occluders(pi, ni, others, tau)
+            val = val * _tree_occluders(pi, ni, others, tau)
         if every:
             ao = np.asarray(val, dtype=np.float32)
         else:
@@ -107,7 +128,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     solids = [e for t, es in plan.trunks.items()
               if t != tree or role in ("GROUND", "GRASS") for e in es]
     if solids:
-        ao = ao * _occluders(p, n, solids, tau, solid=True)
+        ao = ao * _occluders(p, n, solids, 1.0, solid=True)  # opaque: τ is not used
     if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
         ao *= _core.ao_grass(p, n, float(ground), float(blade))

@@ -63,6 +63,11 @@ class Plan:
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     forest: object = None  # forest.Forest: instanced trees occluding every receiver (attach_forest)
+    tau_by_tree: dict = field(default_factory=dict)  # τ calibrated per tree (else plan.tau)
+
+    def taus(self):
+        """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""
+        return {**self.tau_by_tree, None: self.tau} if self.tau_by_tree else self.tau
 
 
 @dataclass
