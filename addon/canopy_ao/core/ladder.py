@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from . import native
+from . import cost, native
 from .lighting import evaluate_points, trace
 from .scene import RECEIVER_ROLES, Plan
 from .settings import DEFAULT_TAU
@@ -119,8 +119,9 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     Traces a few hundred receiver points, then for each candidate finds the τ that minimises
     the mean squared error (golden-section search on log τ in [0.02, 50]; the density grid has
     no τ) and walks up the ladder while the RMSE drops by more than 10 %, stays above
-    ``target_rmse`` and the richer rung's predicted time (its cost per sample point times the
-    receivers) fits ``time_budget``. Returns (method, tau, info dict).
+    ``target_rmse`` and the richer rung's predicted time (cost.py: counted work × fixed
+    constants, never a clock, so the choice does not depend on the machine's load) fits
+    ``time_budget``. Returns (method, tau, info dict).
     """
     s = plan.settings
     picks = sample_receivers(items, s.calibration_points, s.seed)
@@ -149,9 +150,6 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
 
     n_receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
-    big = max((it for it, _p, _n in groups), key=lambda it: len(it.positions))
-    bp = np.ascontiguousarray(big.positions[:4096])
-    bn = np.ascontiguousarray(big.normals[:4096])
     results, predicted = {}, {}
     for m in candidates:
         if m not in TAU_METHODS:  # physical density / exact: no τ to fit
@@ -164,11 +162,8 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
             if len(plan.fits) > 1:
                 tau = tau_per_tree(plan, m, tau, err)
         results[m] = (tau, err(m, tau))
-        # Cost per point on one batch of the largest receiver, scaled to every receiver (a
-        # batch large enough that per-call overhead does not dominate).
-        t1 = time.perf_counter()
-        evaluate_points(plan, big.role, big.tree, big.name, bp, bn, m, tau)
-        predicted[m] = (time.perf_counter() - t1) / max(len(bp), 1) * n_receivers
+        # Counted work × fixed constants (cost.py): the same prediction whatever the load.
+        predicted[m] = cost.predict(plan, m, n_receivers)
     # Walk up the ladder: a richer rung only if it cuts the error by > 10 %, the current one
     # misses the target, and the richer one fits the time budget.
     chosen, skipped = candidates[0], []
@@ -176,7 +171,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         if math.sqrt(results[chosen][1]) <= s.target_rmse:
             break
         if results[m][1] < 0.81 * results[chosen][1]:  # RMSE down by more than 10 %
-            if s.time_budget > 0 and predicted[m] > s.time_budget:
+            if s.time_budget > 0 and predicted[m]["seconds"] > s.time_budget:
                 skipped.append(m)
                 continue
             chosen = m
@@ -195,10 +190,14 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         "trace_seconds": t_trace,
         "seconds": time.perf_counter() - t0,
         "candidates": {m: {"tau": _scene_tau(t), "tau_by_tree": _tree_taus(t),
-                           "rmse": math.sqrt(e), "predicted_seconds": predicted[m]}
+                           "rmse": math.sqrt(e), "predicted_seconds": predicted[m]["seconds"],
+                           "cost": predicted[m]}
                        for m, (t, e) in results.items()},
         "chosen": chosen,
         "why": why,
+        "cost_model": {"seconds_per_unit": dict(cost.SECONDS_PER_UNIT),
+                       "threads": cost.threads(), "receivers": n_receivers,
+                       "formula": cost.FORMULA},
     }
     return chosen, results[chosen][0], info
 
