@@ -90,7 +90,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "raytrace":
         return trace(plan, p, n, plan.settings.samples)
     if method == "grid":
-        return _grid_ao(plan, p, n)
+        return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     ao = np.ones(len(p), np.float32)
     shells = {t: own_shells(plan, t, method) for t in plan.fits}
     inside = {}
@@ -129,11 +129,20 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
               if t != tree or role in ("GROUND", "GRASS") for e in es]
     if solids:
         ao = ao * _occluders(p, n, solids, 1.0, solid=True)  # opaque: τ is not used
+    return _grass(plan, role, grass_key, p, n, ao)
+
+
+def _grass(plan: Plan, role, grass_key, p, n, ao):
+    """ao times the grass: Hegeman Eq. 9 for a blade, every grass layer over the ground
+    (grass_layer.py) for a ground point. Returns a new float32 array clipped to [0, 1]."""
+    ao = np.array(ao, dtype=np.float32)
     if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
         ao *= _core.ao_grass(p, n, float(ground), float(blade))
-    ao = np.asarray(ao, dtype=np.float32)
-    return np.clip(ao, 0.0, 1.0, out=ao)  # ao is this function's own array
+    elif role == "GROUND":
+        for layer in plan.grass_layers:
+            ao *= layer.ground_visibility(p)
+    return np.clip(ao, 0.0, 1.0, out=ao)
 
 
 def trace(plan: Plan, p, n, samples, seed=None):
@@ -146,6 +155,8 @@ def trace(plan: Plan, p, n, samples, seed=None):
 
 
 def _grid_ao(plan, p, n):
+    if plan.grid is None:  # no leaves or branches to voxelise (a grass field): nothing above
+        return np.ones(len(p), np.float32)
     d = plan.settings.distance
     kw = {"distance": float(d)} if d > 0 else {}
     return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
@@ -174,8 +185,10 @@ def build_tracer(items):
 def build_grid(items):
     """The leaf-density grid (docs/DESIGN.md, 'The method ladder') from the leaves and branches
     (CANOPY and TRUNK triangles). Not the ground: as density its area would fill the voxel layer
-    a ground receiver's grazing rays travel in (round tree: ground AO 0.67 against 0.92 traced)."""
-    if not any(it.role == "CANOPY" for it in items):
-        raise CanopyAOError("method 'grid' needs at least one CANOPY object")
-    return _core.DensityGrid(*_scene_triangles(
-        [it for it in items if it.role in ("CANOPY", "TRUNK")]))
+    a ground receiver's grazing rays travel in (round tree: ground AO 0.67 against 0.92 traced).
+    Returns None when there are none (a grass field alone: its blades and the ground under
+    them follow the grass laws, as under every other rung)."""
+    wood_and_leaves = [it for it in items if it.role in ("CANOPY", "TRUNK") and len(it.triangles)]
+    if not wood_and_leaves:
+        return None
+    return _core.DensityGrid(*_scene_triangles(wood_and_leaves))

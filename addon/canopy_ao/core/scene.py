@@ -57,6 +57,7 @@ class Plan:
     proxies: dict = field(default_factory=dict)  # tree -> [Ellipsoid] the chosen method's shells
     trunks: dict = field(default_factory=dict)  # tree -> list of _core.Ellipsoid (solid)
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
+    grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     tracer: object = None
     grid: object = None
     calibration: dict = field(default_factory=dict)
