@@ -199,19 +199,9 @@ inline float outside_law(float x, float y, float z, float nx, float ny, float nz
     q += t * t;
   }
   const float s2 = std::min((e.radii.x * inv_d) * (e.radii.y * inv_d) * std::sqrt(q), 1.0f);
-  // Snyder / Frostbite, as sphere_occlusion, every branch computed and selected.
-  const float s = std::sqrt(std::max(1.0f - c * c, 0.0f));
-  const float xs = std::sqrt(std::max(1.0f / s2 - 1.0f, 0.0f));
-  const float yv = clampf(-xs * c / std::max(s, 1e-20f), -1.0f, 1.0f);
-  const float sy = std::sqrt(std::max(1.0f - yv * yv, 0.0f));
-  const float crossing =
-      clampf(((c * fast_acos(yv) - xs * s * sy) * s2 + fast_atan2_pos(s * sy, xs)) *
-                 0.318309886183791f,
-             0.0f, 1.0f);
-  const float clear = std::max(c, 0.0f) * s2;  // wholly above (or below: 0) the horizon
-  float occ = c * c > s2 ? clear : crossing;
-  occ = s2 >= 1.0f ? 0.5f * (1.0f + c) : occ;  // on the shell: the half-space
-  occ = nn < 1e-30f ? 0.0f : occ;               // zero normal: faces away, nothing blocked
+  // Snyder / Frostbite: the one definition (occluders.h), branch-free.
+  float occ = sphere_occlusion_law(c, s2);
+  occ = nn < 1e-30f ? 0.0f : occ;  // zero normal: faces away, nothing blocked
   return clampf(1.0f - opacity * occ, 0.0f, 1.0f);
 }
 

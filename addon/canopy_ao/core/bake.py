@@ -104,7 +104,8 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     from . import forest as _forest
     t0 = time.perf_counter()
     eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
-    plan.forest = _forest.Forest(prototypes, epsilon=eps) if prototypes else None
+    plan.forest = _forest.Forest(prototypes, epsilon=eps, distance=plan.settings.distance) \
+        if prototypes else None
     plan.timings["forest"] = time.perf_counter() - t0
     if plan.forest is not None:
         # The scene's own trees may all be instances: then "no CANOPY object" is not news.

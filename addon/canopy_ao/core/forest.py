@@ -118,11 +118,15 @@ class Forest:
     prototype for its crowns, each with its own τ, and one for every solid trunk), evaluated
     for any number of receivers. V = Π (1 − occ), so the fields multiply."""
 
-    def __init__(self, prototypes, epsilon=DEFAULT_EPSILON):
+    def __init__(self, prototypes, epsilon=DEFAULT_EPSILON, distance=0.0):
         require()
         if not (0.0 <= epsilon < 1.0):
             raise ValueError(f"epsilon must be in [0, 1), got {epsilon}")
+        if not (distance >= 0.0):
+            raise ValueError(f"distance must be >= 0 (0 = unlimited), got {distance}")
         self.epsilon = float(epsilon)
+        # The AO distance (0 = unlimited): no instance beyond it along a ray occludes.
+        kw = {"distance": float(distance)} if distance > 0 else {}
         self.prototypes = list(prototypes)
         self.fields = []
         solids = []
@@ -131,11 +135,13 @@ class Forest:
             world = instance_shells(p.shells, p.matrices)
             self.shell_count += len(world)
             if world:
-                self.fields.append(_core.OccluderField(world, float(p.tau), epsilon=self.epsilon))
+                self.fields.append(_core.OccluderField(world, float(p.tau), epsilon=self.epsilon,
+                                                       **kw))
             solids += instance_shells(p.solids, p.matrices)
         self.solid_count = len(solids)
         if solids:
-            self.fields.append(_core.OccluderField(solids, 1.0, epsilon=self.epsilon, solid=True))
+            self.fields.append(_core.OccluderField(solids, 1.0, epsilon=self.epsilon, solid=True,
+                                                   **kw))
 
     @property
     def instances(self) -> int:

@@ -30,13 +30,16 @@ def tau_of(tau, tree):
     return float(tau)
 
 
-def _occluders(p, n, shells, tau, solid=False):
+def _occluders(p, n, shells, tau, distance, solid=False):
+    """Visibility through shells (or solids) seen from outside, cut at the AO distance
+    (0 = unlimited; occluders.h, 'AO distance')."""
     if not shells or len(p) == 0:
         return np.ones(len(p), np.float32)
-    return _core.ao_occluders(p, n, list(shells), float(tau), solid=solid)
+    kw = {"distance": float(distance)} if distance > 0 else {}
+    return _core.ao_occluders(p, n, list(shells), float(tau), solid=solid, **kw)
 
 
-def _tree_occluders(p, n, shells_by_tree, tau):
+def _tree_occluders(p, n, shells_by_tree, tau, distance):
     """Visibility through every tree's shells, each with its own τ: V = Π (1 − occ) over the
     shells (occluders.h), so one call per distinct τ multiplied is the same field."""
     groups = {}
@@ -44,7 +47,7 @@ def _tree_occluders(p, n, shells_by_tree, tau):
         groups.setdefault(tau_of(tau, t), []).extend(es)
     ao = None
     for tt, es in groups.items():
-        v = _occluders(p, n, es, tt)
+        v = _occluders(p, n, es, tt, distance)
         ao = v if ao is None else ao * v
     return np.ones(len(p), np.float32) if ao is None else ao
 
@@ -92,6 +95,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     ao = np.ones(len(p), np.float32)
+    dist = plan.settings.distance
     shells = {t: own_shells(plan, t, method) for t in plan.fits}
     inside = {}
     for t, es in shells.items():
@@ -105,7 +109,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         outside_all &= ~ins
     if outside_all.any():  # the common case for ground: one call, the core's spatial grid
         po, no = np.ascontiguousarray(p[outside_all]), np.ascontiguousarray(n[outside_all])
-        ao[outside_all] = _tree_occluders(po, no, shells, tau)
+        ao[outside_all] = _tree_occluders(po, no, shells, tau, dist)
     claimed = np.zeros(len(p), bool)
     for t, ins in inside.items():
         done = ins & ~claimed
@@ -120,7 +124,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         others = {u: es for u, es in shells.items() if u != t}
         val = _in_shell(pi, ni, plan.fits[t], method, tau_of(tau, t))
         if others:
-            val = val * _tree_occluders(pi, ni, others, tau)
+            val = val * _tree_occluders(pi, ni, others, tau, dist)
         if every:
             ao = np.asarray(val, dtype=np.float32)
         else:
@@ -128,7 +132,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     solids = [e for t, es in plan.trunks.items()
               if t != tree or role in ("GROUND", "GRASS") for e in es]
     if solids:
-        ao = ao * _occluders(p, n, solids, 1.0, solid=True)  # opaque: τ is not used
+        ao = ao * _occluders(p, n, solids, 1.0, dist, solid=True)  # opaque: τ is not used
     return _grass(plan, role, grass_key, p, n, ao)
 
 

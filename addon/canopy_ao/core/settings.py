@@ -11,7 +11,10 @@ DEFAULT_TAU = 1.5
 class BakeSettings:
     """method: one of ladder.METHODS. tau: optical depth (AO at a shell's centre = exp(-tau));
     None = calibrate. distance: AO distance in scene units, 0 = unlimited (Cycles' meaning: a
-    hard cut-off on ray length; the analytic models ignore it). samples: rays per point for
+    hard cut-off on ray length). Rays and the grid stop at it; the occluder laws (other trees'
+    shells, trunks, instanced forests) count only what lies within it (occluders.h, 'AO
+    distance'); the in-shell models do not shorten their paths, which end at the crown's
+    boundary (the same unless the distance is shorter than the crown). samples: rays per point for
     "raytrace". shells: k for "shells". calibration_points: reference points traced for "auto".
     time_budget: seconds the whole bake may take; "auto" does not pick a rung predicted to take
     longer (0 = no limit). target_rmse: "auto" stops climbing once a rung's sample RMSE is
