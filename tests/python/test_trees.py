@@ -80,6 +80,11 @@ def test_one_mesh_holding_two_trees_is_split():
     assert np.abs(leaves_ao[n_a:] - want[1].ao).max() < 1e-5
     parts = core_scene.parts(items[0])
     assert sum(len(idx) for _p, idx in parts) == len(items[0].positions)
+    # Receivers that are not the item's vertices (texels) take the nearest crown's tree.
+    plan = core.prepare(items, core.BakeSettings(**SETTINGS))
+    it = items[0]
+    as_texels = core.evaluate_receivers(plan, it, it.positions, it.normals)
+    assert np.abs(as_texels - leaves_ao).max() < 1e-5
 
 
 def test_tau_per_tree_lightens_the_sparse_tree(monkeypatch):

@@ -10,25 +10,22 @@ and calibrates; evaluate_item() bakes one item; bake() does both.
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from . import ladder, lighting, native, proxies, trees
-from .native import CanopyAOError
-from .scene import ItemResult, Plan, SceneItem, parts, split_trees
-from .settings import DEFAULT_TAU, BakeSettings
+from .native import CanopyAOError, refusals_are_user_errors
+from .scene import ItemResult, Plan, SceneItem, split_trees
+from .ladder import DEFAULT_TAU
+from .settings import BakeSettings, validate
 
 
+@refusals_are_user_errors
 def prepare(items, settings: BakeSettings) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError."""
     native.require()
-    if settings.method not in ladder.METHODS:
-        raise CanopyAOError(f"unknown method {settings.method!r}; one of "
-                            f"{', '.join(ladder.METHODS)}")
-    if settings.tau is not None and not (settings.tau > 0 and math.isfinite(settings.tau)):
-        raise CanopyAOError(f"tau must be a finite number > 0, got {settings.tau}")
+    validate(settings)
     items = list(items)
     t_start = time.perf_counter()
     plan = Plan(settings=settings, method=settings.method,
@@ -74,27 +71,66 @@ def prepare(items, settings: BakeSettings) -> Plan:
     return plan
 
 
-def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
-    """Bake one item with the plan's method and τ."""
-    t0 = time.perf_counter()
+@refusals_are_user_errors
+def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
+                       vertices=None) -> np.ndarray:
+    """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
+    texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
+    and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
+    rung's ray pattern aside, which follows a point's index in the call).
+
+    An item holding several trees (item.tree_names) lights each receiver with its own tree's:
+    ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the
+    vertex's tree; without it (texels) each receiver takes the tree whose fitted crown is
+    nearest (in the crown's own unit frame)."""
+    p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
+    n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
-        ao = np.ones(len(item.positions), np.float32)
+        return np.ones(len(p), np.float32)
+    if item.tree_labels is None or len(item.tree_names) <= 1:
+        ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
+                                      plan.taus())
     else:
-        ao = np.empty(len(item.positions), np.float32)
-        for part, idx in parts(item):
-            val = lighting.evaluate_points(plan, part.role, part.tree, part.name,
-                                           part.positions, part.normals, plan.method,
-                                           plan.taus())
-            if idx is None:
-                ao = val
-            else:
-                ao[idx] = val
-    if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
+        labels = (item.tree_labels[vertices] if vertices is not None
+                  else _nearest_crown(plan, item.tree_names, p))
+        ao = np.ones(len(p), np.float32)
+        for k, tree in enumerate(item.tree_names):
+            sel = np.flatnonzero(labels == k)
+            if len(sel):
+                ao[sel] = lighting.evaluate_points(
+                    plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
+                    np.ascontiguousarray(n[sel]), plan.method, plan.taus())
+    if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
+    return ao
+
+
+def _nearest_crown(plan: Plan, names, p) -> np.ndarray:
+    """Index into names of the tree whose fitted ellipsoid is nearest each point (|x'| in its
+    unit frame); trees without a crown (a stem alone) are never nearest unless none has one."""
+    best = np.zeros(len(p), np.int64)
+    dist = np.full(len(p), np.inf)
+    for k, tree in enumerate(names):
+        if tree not in plan.fits:
+            continue
+        e = plan.fits[tree][1]
+        q = (np.asarray(p, np.float64) - np.asarray(e.center, np.float64)) @ \
+            np.asarray(e.axes, np.float64).T / np.asarray(e.radii, np.float64)
+        d = np.einsum("ij,ij->i", q, q)
+        better = d < dist
+        best[better], dist[better] = k, d[better]
+    return best
+
+
+def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
+    """Bake one item's vertices with the plan's method and τ."""
+    t0 = time.perf_counter()
+    ao = evaluate_receivers(plan, item, item.positions, item.normals, vertices=slice(None))
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,
                       time.perf_counter() - t0, item.tree_source, item.tree_why)
 
 
+@refusals_are_user_errors
 def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     """Make instanced trees occlude every item evaluate_item() bakes with this plan.
 
