@@ -1,5 +1,6 @@
 """What a rung costs, predicted from counted work (no clock), so "auto" makes the same choice
-on a quiet machine and under load (docs/DESIGN.md, 'The method ladder').
+on a quiet machine and under load (docs/DESIGN.md, 'Auto: the cheapest rung that is good
+enough').
 
 Work per receiver, counted from the plan:
 - sphere, ellipsoid, reeves_blau: 1 in-shell evaluation + one per occluder (every other
