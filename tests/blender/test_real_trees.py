@@ -54,9 +54,9 @@ def two_sapling_trees():
 def test_sapling_trunks_and_two_trees_in_one_collection(two_sapling_trees):
     """Before: every Sapling trunk was guessed CANOPY, and the two trees loose in the scene
     collection were fitted as one."""
-    from canopy_ao.blender import gather
+    from canopy_ao.blender import properties
     from canopy_ao.blender.job import run_bake
-    opts = gather.scene_settings_opts(bpy.context.scene)
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="ellipsoid", tau=1.5, distance=0.0)
     _job, rep = run_bake(bpy.context, [], opts)
     objs = rep["objects"]
