@@ -136,3 +136,22 @@ def test_touching_crowns_split_by_their_stems_and_a_fork_is_nostem():
     fork = (fork[0] + np.float32([0, 0, 1.0]), fork[1])
     got = trees.assign_trees([("L", "CANOPY", *la), ("W", "TRUNK", *join(stem((0, 0)), fork))])
     assert len(got["L"].trees) == 1 and len(got["W"].trees) == 1, got
+
+
+def test_assign_trees_degenerate_input():
+    """No objects, a faceless canopy, coincident points, a trunk alone: an answer for every
+    CANOPY and TRUNK object, one label per vertex, no error."""
+    z = np.zeros((0, 3), np.int32)
+    assert trees.assign_trees([]) == {}
+    pts = np.random.default_rng(0).normal(size=(100, 3)).astype(np.float32)
+    for objs in ([("L", "CANOPY", pts, z)], [("L", "CANOPY", np.zeros((10, 3), np.float32), z)],
+                 [("T", "TRUNK", pts, z)],
+                 [("L", "CANOPY", np.zeros((0, 3), np.float32), z), ("T", "TRUNK", pts, z)],
+                 [("G", "GROUND", pts, z)]):
+        got = trees.assign_trees(objs)
+        for name, role, p, _t in objs:
+            if role in ("CANOPY", "TRUNK") and len(p):
+                g = got[name]
+                assert len(g.labels) == len(p) and g.labels.max() < len(g.trees)
+            else:
+                assert name not in got
