@@ -151,6 +151,11 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
             f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
             f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
             "per receiver)")
+        if plan.calibration:
+            # Calibration traced the scene's own triangles only: say so rather than imply the
+            # choice was checked under the forest.
+            plan.notes.append("the method and τ were chosen against rays that do not see the "
+                              "instanced trees (the ray tracer has no instances yet)")
 
 
 def report(plan: Plan, results) -> dict:
