@@ -121,10 +121,11 @@ def run(proto, count, side, vertices, epsilon, sub):
     }
 
 
-def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256):
+def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256, distance=0.0):
     """The law, not the speed: a small forest of real tree meshes traced by Embree against the
     instances' occluders (and the same trees as real objects through the engine, which must
-    agree with the instances: same law, same shells)."""
+    agree with the instances: same law, same shells). distance > 0: the AO distance, for the
+    rays and the occluders alike (and "ignoring it": the occluders without it)."""
     from canopy_ao import _core
     scene = cs.round_tree(seed=0, leaves=4000, ground=False)
     mats = instance_matrices(trees, side, seed=3)
@@ -142,9 +143,10 @@ def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256)
     p = np.ascontiguousarray(p, dtype=np.float32)
     n = np.ascontiguousarray(np.tile(np.float32([0, 0, 1]), (points, 1)))
     ref = _core.RayTracer(np.concatenate(verts), np.concatenate(tris).astype(np.int32)).ao(
-        p, n, samples=samples)
+        p, n, samples=samples, distance=distance if distance > 0 else math.inf)
     pr = forest.prototype_from_plan(proto, "T", mats)
-    inst = forest.Forest([pr], epsilon=forest.DEFAULT_EPSILON).ao(p, n)
+    inst = forest.Forest([pr], epsilon=forest.DEFAULT_EPSILON, distance=distance).ao(p, n)
+    ignoring = forest.Forest([pr], epsilon=forest.DEFAULT_EPSILON).ao(p, n)
     # The previous occluder law (solid sphere × mean-chord opacity), same shells and trunks.
     eps = forest.DEFAULT_EPSILON
     old = (_core.ao_occluders(p, n, forest.instance_shells(pr.shells, mats), float(pr.tau),
@@ -153,12 +155,17 @@ def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256)
                               solid=True))
     ground = core.SceneItem("ground", "GROUND", "", p, n, np.zeros((0, 3), np.int32))
     plan = core.prepare(items + [ground], core.BakeSettings(method=proto.method,
-                                                                  tau=proto.tau, shells=4))
+                                                                  tau=proto.tau, shells=4,
+                                                                  distance=distance))
     real = core.evaluate_item(plan, ground).ao
     print(f"\nAgainst Embree ({samples} rays, {points} ground points, {trees} real round trees "
-          f"on {side:g} m, τ {proto.tau:.3g}, {proto.method}):")
-    for name, a in (("instances", inst), ("real objects", real), ("solid_opacity", old)):
-        print(f"  {name:12s} mean AO {a.mean():.3f} (traced {ref.mean():.3f}), MAE "
+          f"on {side:g} m, τ {proto.tau:.3g}, {proto.method}, AO distance "
+          f"{distance if distance > 0 else 'unlimited'}):")
+    rows = [("instances", inst), ("real objects", real), ("solid_opacity", old)]
+    if distance > 0:
+        rows.append(("instances ignoring the distance", ignoring))
+    for name, a in rows:
+        print(f"  {name:31s} mean AO {a.mean():.3f} (traced {ref.mean():.3f}), MAE "
               f"{np.abs(a - ref).mean():.3f}, bias {(a - ref).mean():+.3f}, "
               f"corr {np.corrcoef(a, ref)[0, 1]:.3f}")
     print(f"  instances vs real objects: max |Δ| {np.abs(inst - real).max():.4f}")
@@ -190,6 +197,9 @@ def main(argv=None):
                     help="most vertices timed at ε = 0 (fewer for big forests: ≤ 1e8 pairs)")
     ap.add_argument("--check", action="store_true",
                     help="also compare a small forest with Embree (the law, not the speed)")
+    ap.add_argument("--distance", type=float, default=0.0,
+                    help="--check: AO distance for rays and occluders (0 = unlimited)")
+    ap.add_argument("--check-only", action="store_true", help="only the --check comparison")
     args = ap.parse_args(argv)
     counts = [int(float(c)) for c in args.counts.split(",")]
     verts = int(args.vertices)
@@ -200,13 +210,16 @@ def main(argv=None):
           f"trunk, τ {proto.tau:.3g} (calibrated); "
           f"ground {int(round(math.sqrt(verts))) ** 2} vertices; "
           f"ε {args.epsilon:g}")
+    if args.check_only:
+        check_against_raytrace(proto, distance=args.distance)
+        return
     table(f"Fixed ground, {args.side:.0f} m square (density grows with the count)",
           [run(proto, c, args.side, verts, args.epsilon, args.subsample) for c in counts])
     table(f"Fixed density, {args.density:g} trees/m² (the forest grows with the count)",
           [run(proto, c, math.sqrt(c / args.density), verts, args.epsilon, args.subsample)
            for c in counts])
     if args.check:
-        check_against_raytrace(proto)
+        check_against_raytrace(proto, distance=args.distance)
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -115,8 +116,9 @@ void bind_models(py::module_& m) {
       "ao_occluders",
       [](const py::array& positions, const py::array& normals,
          const std::vector<Ellipsoid>& shells, double tau, float epsilon, bool solid,
-         const std::string& law) {
-        const OccluderOptions opt{tau_arg(tau), epsilon, solid, law_arg(law)};
+         const std::string& law, double distance) {
+        const OccluderOptions opt{tau_arg(tau), epsilon, solid, law_arg(law),
+                                  distance_arg(distance)};
         const Receivers r = receivers_arg(positions, normals);
         return compute(r.positions.size, [&](float* o) {
           ao_occluders(r.positions, r.normals, shells, opt, o);
@@ -124,25 +126,29 @@ void bind_models(py::module_& m) {
       },
       py::arg("positions"), py::arg("normals"), py::arg("shells"), py::arg("tau"),
       py::arg("epsilon") = 1e-3, py::arg("solid") = false, py::arg("law") = "medium",
+      py::arg("distance") = std::numeric_limits<float>::infinity(),
       "Shells seen from outside as horizon-clipped, cosine-weighted occluders, combined as "
       "prod(1 - occ_i). law=\"solid_opacity\": a solid sphere (the shell's projected-area "
       "radius) scaled by the opacity 1 - exp(-4 tau/3); law=\"medium\": that sphere filled "
       "with a uniform random medium of tau per radius, occ = 1 - medium table AO (exact "
       "expectation, short chords near the rim); solid=True: opaque spheres (law ignored). Each "
       "occluder is ignored beyond d_far = r / sin(acos(1 - epsilon/2pi)) (epsilon=0: no "
-      "cut-off), found through a uniform grid. Receivers inside a shell skip it. Returns "
-      "float32 (N,) in [0, 1].");
+      "cut-off), found through a uniform grid. distance: the AO distance, a hard cut-off as "
+      "Cycles' (only what lies within it along a ray counts; inf = unlimited). Receivers "
+      "inside a shell skip it. Returns float32 (N,) in [0, 1].");
 
   py::class_<OccluderField>(m, "OccluderField",
                             "Occluders with their spatial grid, built once for repeated "
                             "ao() calls (same law as ao_occluders).")
       .def(py::init([](const std::vector<Ellipsoid>& shells, double tau, float epsilon,
-                       bool solid, const std::string& law) {
-             return new OccluderField(shells,
-                                      OccluderOptions{tau_arg(tau), epsilon, solid, law_arg(law)});
+                       bool solid, const std::string& law, double distance) {
+             return new OccluderField(shells, OccluderOptions{tau_arg(tau), epsilon, solid,
+                                                              law_arg(law),
+                                                              distance_arg(distance)});
            }),
            py::arg("shells"), py::arg("tau"), py::arg("epsilon") = 1e-3,
-           py::arg("solid") = false, py::arg("law") = "medium")
+           py::arg("solid") = false, py::arg("law") = "medium",
+           py::arg("distance") = std::numeric_limits<float>::infinity())
       .def(
           "ao",
           [](const OccluderField& f, const py::array& positions, const py::array& normals) {

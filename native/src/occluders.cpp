@@ -18,26 +18,30 @@ constexpr int kMaxDim = 1024;
 
 float sphere_occlusion(float cos_theta, float sin2_sigma) {
   if (!(sin2_sigma > 0)) return 0.0f;  // also NaN
-  const float c = std::clamp(cos_theta, -1.0f, 1.0f);
-  if (sin2_sigma >= 1.0f) return 0.5f * (1.0f + c);  // on/in the sphere: the half-space
-  const float s2 = sin2_sigma;
-  if (c * c > s2) return c > 0 ? s2 * c : 0.0f;  // wholly above / below the horizon
-  // Crossing the horizon (Snyder; Frostbite illuminanceSphereOrDisk). Here sin θ ≥ cos σ > 0.
-  // Float is enough (max error vs quadrature ~5e-6, tested); acosf/atan2f are ~2× cheaper.
-  const float s = std::sqrt(std::max(0.0f, 1.0f - c * c));
-  const float x = std::sqrt(1.0f / s2 - 1.0f);
-  const float y = std::clamp(-x * c / s, -1.0f, 1.0f);
-  const float sy = std::sqrt(std::max(0.0f, 1.0f - y * y));
-  const float r = (c * std::acos(y) - x * s * sy) * s2 + std::atan2(s * sy, x);
-  return std::clamp(r * static_cast<float>(1.0 / kPi), 0.0f, 1.0f);
+  return sphere_occlusion_law(std::clamp(cos_theta, -1.0f, 1.0f), sin2_sigma);
 }
+
+namespace {
+// The share of a shell's blocked fraction that lies within the AO distance: the cosine-weighted
+// cone within reach over the whole silhouette's (occluders.h, "AO distance"). 1 when D does not
+// bind; the sphere with squared radius r2 stands for the shell.
+float reach_share(float c, float d2, float r2, float distance) {
+  const float full = std::min(r2 / d2, 1.0f);
+  const float part = reach_sin2(d2, r2, distance);
+  if (part >= full) return 1.0f;
+  if (!(part > 0)) return 0.0f;
+  const float whole = sphere_occlusion(c, full);
+  return whole > 0 ? std::clamp(sphere_occlusion(c, part) / whole, 0.0f, 1.0f) : 0.0f;
+}
+}  // namespace
 
 float shell_opacity(float tau) {
   // Mean chord of a sphere 4R/3 (Cauchy) through a medium of τ per radius.
   return static_cast<float>(1.0 - std::exp(-4.0 * static_cast<double>(tau) / 3.0));
 }
 
-float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity) {
+float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity,
+                          float distance) {
   const Vec3 u = shell.to_unit(x);
   if (!(dot(u, u) > 1.0f)) return 1.0f;  // inside: the canopy model's job
   const float nn = dot(n, n);
@@ -56,13 +60,16 @@ float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity)
     const float t = dot(dv, shell.axes[k]) / d * (shell.radii.z / shell.radii[k]);
     q += t * t;
   }
-  const float sin2 = std::min((shell.radii.x / d) * (shell.radii.y / d) * std::sqrt(q), 1.0f);
+  float sin2 = std::min((shell.radii.x / d) * (shell.radii.y / d) * std::sqrt(q), 1.0f);
+  if (distance < std::numeric_limits<float>::infinity()) {
+    sin2 = reach_sin2(d2, sin2 * d2, distance);  // the opaque sphere: the reached cone, exact
+  }
   const float occ = opacity * sphere_occlusion(nd / d, sin2);
   return std::clamp(1.0f - occ, 0.0f, 1.0f);
 }
 
 float occluder_visibility_medium(Vec3 x, Vec3 n, const Ellipsoid& shell,
-                                 const MediumTable::Slice& slice) {
+                                 const MediumTable::Slice& slice, float distance) {
   // The unit frame of DESIGN 3.2, as the in-shell models: x' = diag(1/r) Qᵀ (x − C), normal by
   // the inverse transpose (an affine map keeps the tangent half-space, so "wholly below the
   // horizon" is exact). Measured against the same table on occluder_visibility's equivalent
@@ -75,7 +82,20 @@ float occluder_visibility_medium(Vec3 x, Vec3 n, const Ellipsoid& shell,
   const float ru = std::sqrt(uu);
   const float cb = std::clamp(dot(nu, u) / ru, -1.0f, 1.0f);  // cos β in the unit frame
   if (cb * ru >= 1.0f) return 1.0f;  // the unit sphere wholly below the horizon
-  return slice.ao(ru, cb);
+  const float v = slice.ao(ru, cb);
+  if (!(distance < std::numeric_limits<float>::infinity())) return v;
+  // The AO distance, in world terms: the sphere of the shell's projected area (as
+  // occluder_visibility) gives the share of the blocked fraction within reach.
+  const Vec3 dv = shell.center - x;
+  const float d2 = dot(dv, dv), d = std::sqrt(d2);
+  float q = 0;
+  for (int k = 0; k < 3; ++k) {
+    const float t = dot(dv, shell.axes[k]) / d * (shell.radii.z / shell.radii[k]);
+    q += t * t;
+  }
+  const float r2 = std::min((shell.radii.x / d) * (shell.radii.y / d) * std::sqrt(q), 1.0f) * d2;
+  const float c = dot(n, dv) / (d * std::sqrt(dot(n, n)));
+  return std::clamp(1.0f - (1.0f - v) * reach_share(c, d2, r2, distance), 0.0f, 1.0f);
 }
 
 // === OccluderField
@@ -87,6 +107,11 @@ OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOption
                                 std::to_string(options.epsilon));
   }
   for (const Ellipsoid& s : shells_) check_ellipsoid(s);
+  if (!(options.distance > 0)) {  // also NaN
+    throw std::invalid_argument("distance must be > 0 (inf = unlimited), got " +
+                                std::to_string(options.distance));
+  }
+  distance_ = options.distance;
   opacity_ = options.solid ? 1.0f : shell_opacity(options.tau);
   medium_ = !options.solid && options.law == OccluderLaw::Medium;
   if (medium_) slice_ = MediumTable::get().slice(options.tau);  // outside any parallel body
@@ -98,7 +123,8 @@ OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOption
     rmax_[i] = std::max({shells_[i].radii.x, shells_[i].radii.y, shells_[i].radii.z});
   }
 
-  if (options.epsilon == 0 || n == 0) {
+  const bool limited = distance_ < std::numeric_limits<float>::infinity();
+  if ((options.epsilon == 0 && !limited) || n == 0) {
     // No cut-off: a single list of everything, used for every receiver.
     unbounded_ = true;
     std::fill(far_.begin(), far_.end(), std::numeric_limits<float>::infinity());
@@ -109,16 +135,18 @@ OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOption
     return;
   }
 
-  // Shanmugam–Arikan Eq. 5 with the shell's largest radius (r_eq ≤ r_max).
+  // Shanmugam–Arikan Eq. 5 with the shell's largest radius (r_eq ≤ r_max), and the AO
+  // distance: nothing beyond D + r_max is reached.
   const double e = static_cast<double>(options.epsilon) / (2.0 * kPi);
-  const double sin_far = std::sqrt(1.0 - (1.0 - e) * (1.0 - e));
+  const double sin_far = options.epsilon > 0 ? std::sqrt(1.0 - (1.0 - e) * (1.0 - e)) : 0.0;
   Vec3 lo{std::numeric_limits<float>::max(), std::numeric_limits<float>::max(),
           std::numeric_limits<float>::max()};
   Vec3 hi = -lo;
   for (std::size_t i = 0; i < n; ++i) {
     const Ellipsoid& s = shells_[i];
     const float rmax = std::max({s.radii.x, s.radii.y, s.radii.z});
-    far_[i] = static_cast<float>(rmax / sin_far);
+    const double eps_far = sin_far > 0 ? rmax / sin_far : std::numeric_limits<double>::infinity();
+    far_[i] = static_cast<float>(std::min(eps_far, static_cast<double>(distance_) + rmax));
     for (int k = 0; k < 3; ++k) {
       lo[k] = std::min(lo[k], s.center[k] - far_[i]);
       hi[k] = std::max(hi[k], s.center[k] + far_[i]);
@@ -209,8 +237,8 @@ float OccluderField::visibility(Vec3 x, Vec3 n) const {
     // Bounding sphere wholly below the tangent plane (cos θ ≤ −sin σ): blocks nothing. Cheap,
     // and it removes about half the pairs before any transcendental function.
     if (dot(nu, dv) <= -rmax_[i]) continue;
-    v *= medium_ ? occluder_visibility_medium(x, nu, shells_[i], slice_)
-                 : occluder_visibility(x, nu, shells_[i], opacity_);  // V = Π (1 − occ_i)
+    v *= medium_ ? occluder_visibility_medium(x, nu, shells_[i], slice_, distance_)
+                 : occluder_visibility(x, nu, shells_[i], opacity_, distance_);  // Π (1 − occ_i)
   }
   return v;
 }

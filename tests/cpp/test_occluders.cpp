@@ -371,3 +371,92 @@ TEST(OccludersVsEmbree, LeafCloudBallMediumLaw) {
               "bias %+.4f; solid x opacity law bias %+.4f, MAE %.4f\n",
               worst, bias, bias_old, mae_old);
 }
+
+// === The AO distance (occluders.h, "AO distance"): a hard cut-off, as Cycles. An opaque sphere
+// is exact (the cone of directions meeting it within D); checked against Embree rays with the
+// same distance on a triangulated sphere, for receivers whose D cuts the sphere (partly and
+// wholly), reaches all of it, or falls short of it.
+TEST(OccludersVsEmbree, AODistanceCutsASolidSphereExactly) {
+  const Vec3 centre{0, 0, 0};
+  const float radius = 1.0f;
+  std::vector<float> v;
+  std::vector<std::int32_t> t;
+  const int nu = 256, nv = 128;
+  for (int j = 0; j <= nv; ++j)
+    for (int i = 0; i < nu; ++i) {
+      const double th = kPi * j / nv, ph = 2 * kPi * i / nu;
+      v.insert(v.end(), {float(std::sin(th) * std::cos(ph)), float(std::sin(th) * std::sin(ph)),
+                         float(std::cos(th))});
+    }
+  for (int j = 0; j < nv; ++j)
+    for (int i = 0; i < nu; ++i) {
+      const int a = j * nu + i, b = j * nu + (i + 1) % nu, c = a + nu, d = b + nu;
+      t.insert(t.end(), {a, c, b, b, c, d});
+    }
+  const RayTracer rt({v.data(), v.size() / 3}, t.data(), t.size() / 3);
+  int partial = 0, none = 0;
+  for (float dist : {0.4f, 1.2f, 2.0f, 3.5f}) {
+    std::vector<float> p, n;
+    for (float x : {1.5f, 2.5f, 4.0f}) {
+      for (float tilt_deg : {0.0f, 50.0f, 80.0f, 100.0f}) {  // normal from facing it to away
+        const float tr = tilt_deg * float(kPi) / 180.0f;
+        p.insert(p.end(), {x, 0, 0});
+        n.insert(n.end(), {-std::cos(tr), 0, std::sin(tr)});
+      }
+    }
+    const std::size_t count = p.size() / 3;
+    RayTraceOptions ro;
+    ro.samples = 4096;
+    ro.distance = dist;
+    const auto ref = rt.ao({p.data(), count}, {n.data(), count}, ro);
+    OccluderOptions o;
+    o.solid = true;
+    o.epsilon = 0;
+    o.distance = dist;
+    const OccluderField field({Ellipsoid::from_sphere({centre, radius})}, o);
+    std::vector<float> got(count);
+    field.ao({p.data(), count}, {n.data(), count}, got.data());
+    for (std::size_t i = 0; i < count; ++i) {
+      const float d = p[3 * i];
+      if (dist <= d - radius) {
+        ++none;
+        EXPECT_EQ(got[i], 1.0f);
+      } else if (dist * dist < d * d - radius * radius) {
+        ++partial;
+      }
+      EXPECT_NEAR(got[i], ref[i], 4e-3) << "D=" << dist << " x=" << d << " n=(" << n[3 * i]
+                                         << ", " << n[3 * i + 2] << ")";
+    }
+  }
+  EXPECT_GE(partial, 8);
+  EXPECT_GE(none, 8);
+}
+
+TEST(Occluders, AODistanceLimitsForShells) {
+  // Either law: beyond reach nothing, within reach of the whole silhouette what no distance
+  // gives, and in between monotone in D.
+  const Ellipsoid shell = Ellipsoid::from_sphere({{0, 0, 3}, 1.0f});
+  const Vec3 x{0.5f, 0, 0}, nrm{0, 0, 1};
+  for (OccluderLaw law : {OccluderLaw::Medium, OccluderLaw::SolidOpacity}) {
+    OccluderOptions o;
+    o.tau = 1.5f;
+    o.epsilon = 0;
+    o.law = law;
+    const float open = OccluderField({shell}, o).visibility(x, nrm);
+    float last = 1.0f;
+    for (float dist : {0.5f, 2.0f, 2.2f, 2.5f, 2.8f, 3.0f, 50.0f}) {
+      o.distance = dist;
+      const float got = OccluderField({shell}, o).visibility(x, nrm);
+      EXPECT_LE(got, last + 1e-6f) << dist;
+      last = got;
+      if (dist < 2.0f) EXPECT_EQ(got, 1.0f);
+    }
+    EXPECT_NEAR(last, open, 1e-6f);
+    EXPECT_LT(open, 0.95f);
+  }
+  OccluderOptions bad;
+  bad.distance = 0;
+  EXPECT_THROW(OccluderField({shell}, bad), std::invalid_argument);
+  bad.distance = std::nanf("");
+  EXPECT_THROW(OccluderField({shell}, bad), std::invalid_argument);
+}

@@ -64,3 +64,53 @@ def test_auto_weighs_the_grass_law_against_rays_on_a_grass_field():
     assert method == min(c, key=lambda m: c[m]["rmse"]), cal["why"]
     _m, tight = auto(cs.grass_field(), time_budget=1e-6)
     assert _m == "ellipsoid" and "budget" in tight["why"]
+
+
+def _bake_bytes(scene, **kw):
+    res, rep = core.bake(items(scene), core.BakeSettings(method="auto", tau=None, **kw))
+    return rep, b"".join(r.ao.tobytes() for r in res)
+
+
+def test_auto_does_not_read_the_clock(monkeypatch):
+    """A clock that races (a loaded machine, seen by a timing model) changes nothing: the
+    cost is predicted from counted work with fixed constants."""
+    scene = cs.weeping_tree(leaves=4000)
+    rep, data = _bake_bytes(scene, time_budget=1.0)
+    assert rep["method"] == "raytrace"  # within the budget by the counted cost
+    from canopy_ao.core import ladder
+    import time as _time
+    real = _time.perf_counter
+    state = {"t": real()}
+
+    def racing():
+        state["t"] += 10.0  # every call: ten seconds later
+        return state["t"]
+    monkeypatch.setattr(ladder.time, "perf_counter", racing)
+    rep2, data2 = _bake_bytes(scene, time_budget=1.0)
+    monkeypatch.setattr(ladder.time, "perf_counter", real)
+    assert rep2["method"] == rep["method"] and data2 == data
+    c = rep["calibration"]["candidates"]
+    for m, e in c.items():
+        assert e["predicted_seconds"] == rep2["calibration"]["candidates"][m]["predicted_seconds"]
+        assert e["cost"]["work"] > 0
+    assert "formula" in rep["calibration"]["cost_model"]
+
+
+def test_auto_gives_the_same_bytes_under_load():
+    """Bake, start processes that burn every core, bake again: same choice, same bytes."""
+    import os
+    import subprocess
+    import sys
+    scene = cs.round_tree(leaves=3000)
+    rep, data = _bake_bytes(scene)
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
+               for _ in range(os.cpu_count() or 2)]
+    try:
+        rep2, data2 = _bake_bytes(scene)
+    finally:
+        for b in burners:
+            b.kill()
+            b.wait()
+    assert rep2["method"] == rep["method"]
+    assert rep2["tau"] == rep["tau"]
+    assert data2 == data

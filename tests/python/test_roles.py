@@ -10,8 +10,9 @@ sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, os.path.join(HERE, "..", "..", "examples"))
 sys.path.insert(0, HERE)
 
-from canopy_ao.core import roles  # noqa: E402
+from canopy_ao.core import roles, trees  # noqa: E402
 import tree_scene as ts  # noqa: E402
+from real_shapes import bent_tubes, join, leaves, stem  # noqa: E402
 
 
 def _same_partition(a, b):
@@ -69,3 +70,88 @@ def test_blade_heights():
     ground, blade = roles.blade_heights(p + np.float32([0, 0, 2.0]), t)
     assert ground == pytest.approx(2.0, abs=1e-6)
     assert blade == pytest.approx(0.3, abs=1e-6)
+
+
+# === Real-asset shapes: bent branch tubes, thick leaves, trees sharing one collection =========
+
+def test_bent_branch_tubes_are_a_trunk():
+    """A Sapling trunk is many disconnected, bent, tapering tubes: their points' covariance is
+    as flat as a leaf's (the old guess said CANOPY), but each tube's cross-section is closed
+    (its mean normal is ~0)."""
+    p, t = bent_tubes(np.random.default_rng(1))
+    role, why = roles.guess_role(p, t)
+    assert role == "TRUNK", why
+    lab = roles.connected_components(len(p), t)
+    _a, openness, plate = roles.piece_shape(p, t, lab, lab.max() + 1)
+    assert openness.max() < 0.2 and plate.max() < 0.8
+
+
+def test_flat_and_thick_leaves_are_a_canopy():
+    rng = np.random.default_rng(2)
+    for thick in (0.0, 0.004):  # cards, and cards given a thickness (closed, but plates)
+        p, t = leaves(rng, thick=thick)
+        role, why = roles.guess_role(p, t)
+        assert role == "CANOPY", (thick, why)
+
+
+def test_two_trees_in_one_collection_are_told_apart():
+    """Two trees loose in one collection (no parents, no names): their leaves and branches
+    are split by where they stand, both as separate objects and joined into one mesh each."""
+    pytest.importorskip("canopy_scenes")
+    rng = np.random.default_rng(3)
+    la, lb = leaves(rng, centre=(0, 0, 5)), leaves(rng, centre=(9, 1, 5))
+    ba = join(stem((0, 0)), bent_tubes(rng, 20, base=(0, 0)))
+    bb = join(stem((9, 1)), bent_tubes(rng, 20, base=(9, 1)))
+    objs = [("leaves_a", "CANOPY", *la), ("leaves_b", "CANOPY", *lb),
+            ("wood_a", "TRUNK", *ba), ("wood_b", "TRUNK", *bb), ]
+    got = trees.assign_trees(objs, "Collection")
+    for name in ("leaves_a", "leaves_b", "wood_a", "wood_b"):
+        assert len(got[name].trees) == 1, (name, got[name])
+    assert got["leaves_a"].trees == got["wood_a"].trees
+    assert got["leaves_b"].trees == got["wood_b"].trees
+    assert got["leaves_a"].trees != got["leaves_b"].trees
+    # Joined: one leaf mesh and one wood mesh holding both trees.
+    lv, wd = join(la, lb), join(ba, bb)
+    got = trees.assign_trees([("L", "CANOPY", *lv), ("W", "TRUNK", *wd)])
+    truth_l = np.r_[np.zeros(len(la[0])), np.ones(len(lb[0]))]
+    truth_w = np.r_[np.zeros(len(ba[0])), np.ones(len(bb[0]))]
+    assert len(got["L"].trees) == 2 and got["L"].trees == got["W"].trees
+    for g, truth in ((got["L"], truth_l), (got["W"], truth_w)):
+        assert len(set(zip(g.labels.tolist(), truth.tolist()))) == 2  # the same partition
+    assert got["L"].labels[0] == got["W"].labels[0]  # the same tree for a's leaves and wood
+
+
+def test_touching_crowns_split_by_their_stems_and_a_fork_is_nostem():
+    pytest.importorskip("canopy_scenes")
+    rng = np.random.default_rng(4)
+    la, lb = leaves(rng, centre=(0, 0, 5)), leaves(rng, centre=(4, 0, 5))  # crowns overlap
+    got = trees.assign_trees([("L", "CANOPY", *join(la, lb)),
+                              ("W", "TRUNK", *join(stem((0, 0)), stem((4, 0))))])
+    assert len(got["L"].trees) == 2
+    lab = got["L"].labels
+    side = join(la, lb)[0][:, 0] > 2.0
+    assert np.mean(lab[side] == lab[side][0]) > 0.9 and lab[side][0] != lab[~side][0]
+    # A fork: a second tube starting 1 m up, 0.3 m beside the bole, stands on it.
+    fork = stem((0.3, 0))
+    fork = (fork[0] + np.float32([0, 0, 1.0]), fork[1])
+    got = trees.assign_trees([("L", "CANOPY", *la), ("W", "TRUNK", *join(stem((0, 0)), fork))])
+    assert len(got["L"].trees) == 1 and len(got["W"].trees) == 1, got
+
+
+def test_assign_trees_degenerate_input():
+    """No objects, a faceless canopy, coincident points, a trunk alone: an answer for every
+    CANOPY and TRUNK object, one label per vertex, no error."""
+    z = np.zeros((0, 3), np.int32)
+    assert trees.assign_trees([]) == {}
+    pts = np.random.default_rng(0).normal(size=(100, 3)).astype(np.float32)
+    for objs in ([("L", "CANOPY", pts, z)], [("L", "CANOPY", np.zeros((10, 3), np.float32), z)],
+                 [("T", "TRUNK", pts, z)],
+                 [("L", "CANOPY", np.zeros((0, 3), np.float32), z), ("T", "TRUNK", pts, z)],
+                 [("G", "GROUND", pts, z)]):
+        got = trees.assign_trees(objs)
+        for name, role, p, _t in objs:
+            if role in ("CANOPY", "TRUNK") and len(p):
+                g = got[name]
+                assert len(g.labels) == len(p) and g.labels.max() < len(g.trees)
+            else:
+                assert name not in got

@@ -12,21 +12,27 @@ from ..core.scene import SceneItem
 
 
 def tree_of(obj):
-    """Which tree an object belongs to: the user's name (or a generator's ``canopy_ao_tree``
-    tag), else the root of its parent chain (a trunk parenting its leaves), else its first
-    collection (the scene's own collection makes one tree of everything loose in it)."""
+    """Which tree an object belongs to (the name of tree_and_source)."""
+    return tree_and_source(obj)[0]
+
+
+def tree_and_source(obj):
+    """(tree, source): the user's name (or a generator's ``canopy_ao_tree`` tag), else the root
+    of its parent chain (a trunk parenting its leaves): source "set"; else its first collection
+    ("collection") or the scene ("scene"): groups, not trees, that the core splits by where
+    the pieces stand (core/trees.py)."""
     if obj.canopy_ao.tree:
-        return obj.canopy_ao.tree
+        return obj.canopy_ao.tree, "set"
     if isinstance(obj.get("canopy_ao_tree"), str) and obj["canopy_ao_tree"]:
-        return obj["canopy_ao_tree"]  # set by a scene generator (examples/blender_scene.py)
+        return obj["canopy_ao_tree"], "set"  # set by a scene generator (examples/blender_scene.py)
     if obj.parent is not None or obj.children:
         root = obj
         while root.parent is not None:
             root = root.parent
-        return root.canopy_ao.tree or root.name
+        return root.canopy_ao.tree or root.name, "set"
     if obj.users_collection:
-        return obj.users_collection[0].name
-    return "Scene"
+        return obj.users_collection[0].name, "collection"
+    return "Scene", "scene"
 
 
 # Guesses of this session, keyed by a cheap signature of the geometry (the guess costs ~1 s
@@ -131,7 +137,8 @@ def scene_items(context, depsgraph, targets, opts, timings):
         timings["roles"] = timings.get("roles", 0.0) + time.perf_counter() - t0
         if role == "IGNORE":
             continue
-        items.append(SceneItem(name, role, tree_of(obj), pos, nor, tris))
+        tree, source = tree_and_source(obj)
+        items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source))
         objects[name] = obj
         how[name] = why
     return items, objects, how

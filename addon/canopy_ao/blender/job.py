@@ -108,15 +108,17 @@ class BakeJob:
         self._next += 1
         t0 = time.perf_counter()
         try:
-            t.ao[a:b] = core.evaluate_receivers(self.plan, t.item, t.positions[a:b],
-                                                t.normals[a:b])
+            t.ao[a:b] = core.evaluate_receivers(
+                self.plan, t.item, t.positions[a:b], t.normals[a:b],
+                vertices=slice(a, b) if t.kind == "vertex" else None)
         except CanopyAOError as exc:
             raise CanopyAOError(f"{t.item.name}: {exc}") from exc
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
         it = t.item
-        r = core.ItemResult(it.name, it.role, it.tree, self.plan.method, t.ao, t.seconds)
+        r = core.ItemResult(it.name, it.role, it.tree, self.plan.method, t.ao, t.seconds,
+                            it.tree_source, it.tree_why)
         self.results.append(r)
         return (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method "
                 f"{r.method}, {t.count} {t.kind}{'s' if t.count != 1 else ''}, "

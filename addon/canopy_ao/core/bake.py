@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-from . import ladder, lighting, native, proxies
+from . import ladder, lighting, native, proxies, trees
 from .native import CanopyAOError, refusals_are_user_errors
-from .scene import ItemResult, Plan, SceneItem
+from .scene import ItemResult, Plan, SceneItem, split_trees
 from .ladder import DEFAULT_TAU
 from .settings import BakeSettings, validate
 
@@ -31,6 +31,10 @@ def prepare(items, settings: BakeSettings) -> Plan:
     plan = Plan(settings=settings, method=settings.method,
                 tau=settings.tau if settings.tau is not None else DEFAULT_TAU)
     t0 = time.perf_counter()
+    trees.resolve(items)  # trees only a collection groups: told apart by where they stand
+    plan.timings["trees"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
 
@@ -42,7 +46,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
     if needs_tracer:
         t0 = time.perf_counter()
         try:
-            plan.tracer = lighting.build_tracer(items)
+            plan.tracer = lighting.build_tracer(whole)
         except CanopyAOError as exc:
             if settings.method == "raytrace":
                 raise
@@ -51,12 +55,12 @@ def prepare(items, settings: BakeSettings) -> Plan:
 
     if settings.method == "grid":
         t0 = time.perf_counter()
-        plan.grid = lighting.build_grid(items)
+        plan.grid = lighting.build_grid(whole)
         plan.timings["grid"] = time.perf_counter() - t0
     elif settings.method == "auto" and plan.fits and plan.tracer is not None:
         t0 = time.perf_counter()
         try:  # the top rung of the ladder: only worth it if it beats the shells (calibrate)
-            plan.grid = lighting.build_grid(items)
+            plan.grid = lighting.build_grid(whole)
         except CanopyAOError as exc:
             plan.notes.append(f"density grid not considered: {exc}")
         plan.timings["grid"] = time.perf_counter() - t0
@@ -68,28 +72,62 @@ def prepare(items, settings: BakeSettings) -> Plan:
 
 
 @refusals_are_user_errors
-def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals) -> np.ndarray:
+def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
+                       vertices=None) -> np.ndarray:
     """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
     texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
     and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
-    rung's ray pattern aside, which follows a point's index in the call)."""
+    rung's ray pattern aside, which follows a point's index in the call).
+
+    An item holding several trees (item.tree_names) lights each receiver with its own tree's:
+    ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the
+    vertex's tree; without it (texels) each receiver takes the tree whose fitted crown is
+    nearest (in the crown's own unit frame)."""
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
         return np.ones(len(p), np.float32)
-    ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
-                                  plan.tau)
+    if item.tree_labels is None or len(item.tree_names) <= 1:
+        ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
+                                      plan.taus())
+    else:
+        labels = (item.tree_labels[vertices] if vertices is not None
+                  else _nearest_crown(plan, item.tree_names, p))
+        ao = np.ones(len(p), np.float32)
+        for k, tree in enumerate(item.tree_names):
+            sel = np.flatnonzero(labels == k)
+            if len(sel):
+                ao[sel] = lighting.evaluate_points(
+                    plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
+                    np.ascontiguousarray(n[sel]), plan.method, plan.taus())
     if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     return ao
 
 
+def _nearest_crown(plan: Plan, names, p) -> np.ndarray:
+    """Index into names of the tree whose fitted ellipsoid is nearest each point (|x'| in its
+    unit frame); trees without a crown (a stem alone) are never nearest unless none has one."""
+    best = np.zeros(len(p), np.int64)
+    dist = np.full(len(p), np.inf)
+    for k, tree in enumerate(names):
+        if tree not in plan.fits:
+            continue
+        e = plan.fits[tree][1]
+        q = (np.asarray(p, np.float64) - np.asarray(e.center, np.float64)) @ \
+            np.asarray(e.axes, np.float64).T / np.asarray(e.radii, np.float64)
+        d = np.einsum("ij,ij->i", q, q)
+        better = d < dist
+        best[better], dist[better] = k, d[better]
+    return best
+
+
 def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
     """Bake one item's vertices with the plan's method and τ."""
     t0 = time.perf_counter()
-    ao = evaluate_receivers(plan, item, item.positions, item.normals)
+    ao = evaluate_receivers(plan, item, item.positions, item.normals, vertices=slice(None))
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,
-                      time.perf_counter() - t0)
+                      time.perf_counter() - t0, item.tree_source, item.tree_why)
 
 
 @refusals_are_user_errors
@@ -102,7 +140,8 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     from . import forest as _forest
     t0 = time.perf_counter()
     eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
-    plan.forest = _forest.Forest(prototypes, epsilon=eps) if prototypes else None
+    plan.forest = _forest.Forest(prototypes, epsilon=eps, distance=plan.settings.distance) \
+        if prototypes else None
     plan.timings["forest"] = time.perf_counter() - t0
     if plan.forest is not None:
         # The scene's own trees may all be instances: then "no CANOPY object" is not news.
@@ -112,6 +151,11 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
             f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
             f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
             "per receiver)")
+        if plan.calibration:
+            # Calibration traced the scene's own triangles only: say so rather than imply the
+            # choice was checked under the forest.
+            plan.notes.append("the method and τ were chosen against rays that do not see the "
+                              "instanced trees (the ray tracer has no instances yet)")
 
 
 def report(plan: Plan, results) -> dict:
@@ -120,13 +164,15 @@ def report(plan: Plan, results) -> dict:
         "method": plan.method,
         "requested_method": plan.settings.method,
         "tau": plan.tau,
+        "tau_by_tree": dict(plan.tau_by_tree),
         "distance": plan.settings.distance,
         "samples": plan.settings.samples,
         "proxies": proxies.proxy_dicts(plan),
         "calibration": plan.calibration,
         "timings": dict(plan.timings),
         "notes": list(plan.notes),
-        "objects": {r.name: {"role": r.role, "tree": r.tree, "method": r.method,
+        "objects": {r.name: {"role": r.role, "tree": r.tree, "tree_source": r.tree_source,
+                             "tree_why": r.tree_why, "method": r.method,
                              "vertices": r.vertices, "seconds": r.seconds,
                              "ao_mean": float(r.ao.mean()) if r.vertices else None}
                     for r in results},

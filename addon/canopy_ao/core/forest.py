@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .lighting import tau_of
 from .native import _core, require
 
 DEFAULT_EPSILON = 1e-3  # the core's default cut-off (occluders.h)
@@ -118,11 +119,15 @@ class Forest:
     prototype for its crowns, each with its own τ, and one for every solid trunk), evaluated
     for any number of receivers. V = Π (1 − occ), so the fields multiply."""
 
-    def __init__(self, prototypes, epsilon=DEFAULT_EPSILON):
+    def __init__(self, prototypes, epsilon=DEFAULT_EPSILON, distance=0.0):
         require()
         if not (0.0 <= epsilon < 1.0):
             raise ValueError(f"epsilon must be in [0, 1), got {epsilon}")
+        if not (distance >= 0.0):
+            raise ValueError(f"distance must be >= 0 (0 = unlimited), got {distance}")
         self.epsilon = float(epsilon)
+        # The AO distance (0 = unlimited): no instance beyond it along a ray occludes.
+        kw = {"distance": float(distance)} if distance > 0 else {}
         self.prototypes = list(prototypes)
         self.fields = []
         solids = []
@@ -131,11 +136,13 @@ class Forest:
             world = instance_shells(p.shells, p.matrices)
             self.shell_count += len(world)
             if world:
-                self.fields.append(_core.OccluderField(world, float(p.tau), epsilon=self.epsilon))
+                self.fields.append(_core.OccluderField(world, float(p.tau), epsilon=self.epsilon,
+                                                       **kw))
             solids += instance_shells(p.solids, p.matrices)
         self.solid_count = len(solids)
         if solids:
-            self.fields.append(_core.OccluderField(solids, 1.0, epsilon=self.epsilon, solid=True))
+            self.fields.append(_core.OccluderField(solids, 1.0, epsilon=self.epsilon, solid=True,
+                                                   **kw))
 
     @property
     def instances(self) -> int:
@@ -162,6 +169,7 @@ def prototype_from_plan(plan, tree, matrices, name=None):
     """The Prototype of ``tree`` as an engine Plan fitted it (its chosen shells, τ and solid
     trunks, in the space the prototype was baked in), placed by ``matrices`` (N, 4, 4) that
     map that space to each instance's."""
-    return Prototype(name or tree, list(plan.proxies.get(tree, [])), float(plan.tau),
+    return Prototype(name or tree, list(plan.proxies.get(tree, [])),
+                     tau_of(plan.taus(), tree),
                      np.asarray(matrices, np.float64).reshape(-1, 4, 4),
                      list(plan.trunks.get(tree, [])))

@@ -22,10 +22,34 @@ from .proxies import own_shells
 from .scene import Plan
 
 
-def _occluders(p, n, shells, tau, solid=False):
+def tau_of(tau, tree):
+    """τ of one tree: ``tau`` is one number for every tree or {tree: τ} (calibrated per tree;
+    a tree missing from it takes the value under None)."""
+    if isinstance(tau, dict):
+        return float(tau.get(tree, tau.get(None, 1.0)))
+    return float(tau)
+
+
+def _occluders(p, n, shells, tau, distance, solid=False):
+    """Visibility through shells (or solids) seen from outside, cut at the AO distance
+    (0 = unlimited; occluders.h, 'AO distance')."""
     if not shells or len(p) == 0:
         return np.ones(len(p), np.float32)
-    return _core.ao_occluders(p, n, list(shells), float(tau), solid=solid)
+    kw = {"distance": float(distance)} if distance > 0 else {}
+    return _core.ao_occluders(p, n, list(shells), float(tau), solid=solid, **kw)
+
+
+def _tree_occluders(p, n, shells_by_tree, tau, distance):
+    """Visibility through every tree's shells, each with its own τ: V = Π (1 − occ) over the
+    shells (occluders.h), so one call per distinct τ multiplied is the same field."""
+    groups = {}
+    for t, es in shells_by_tree.items():
+        groups.setdefault(tau_of(tau, t), []).extend(es)
+    ao = None
+    for tt, es in groups.items():
+        v = _occluders(p, n, es, tt, distance)
+        ao = v if ao is None else ao * v
+    return np.ones(len(p), np.float32) if ao is None else ao
 
 
 def _in_shell(p, n, tree_fit, method, tau):
@@ -69,8 +93,9 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "raytrace":
         return trace(plan, p, n, plan.settings.samples)
     if method == "grid":
-        return _grid_ao(plan, p, n)
+        return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     ao = np.ones(len(p), np.float32)
+    dist = plan.settings.distance
     shells = {t: own_shells(plan, t, method) for t in plan.fits}
     inside = {}
     for t, es in shells.items():
@@ -84,7 +109,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         outside_all &= ~ins
     if outside_all.any():  # the common case for ground: one call, the core's spatial grid
         po, no = np.ascontiguousarray(p[outside_all]), np.ascontiguousarray(n[outside_all])
-        ao[outside_all] = _occluders(po, no, [e for es in shells.values() for e in es], tau)
+        ao[outside_all] = _tree_occluders(po, no, shells, tau, dist)
     claimed = np.zeros(len(p), bool)
     for t, ins in inside.items():
         done = ins & ~claimed
@@ -96,10 +121,10 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
                                        np.ascontiguousarray(n[done]))
         # Inside several trees' shells (crowns that interlock): the in-shell model of the
         # first, the others as occluders (which skip shells a point is inside).
-        others = [e for u, es in shells.items() if u != t for e in es]
-        val = _in_shell(pi, ni, plan.fits[t], method, tau)
+        others = {u: es for u, es in shells.items() if u != t}
+        val = _in_shell(pi, ni, plan.fits[t], method, tau_of(tau, t))
         if others:
-            val = val * _occluders(pi, ni, others, tau)
+            val = val * _tree_occluders(pi, ni, others, tau, dist)
         if every:
             ao = np.asarray(val, dtype=np.float32)
         else:
@@ -107,12 +132,21 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     solids = [e for t, es in plan.trunks.items()
               if t != tree or role in ("GROUND", "GRASS") for e in es]
     if solids:
-        ao = ao * _occluders(p, n, solids, tau, solid=True)
+        ao = ao * _occluders(p, n, solids, 1.0, dist, solid=True)  # opaque: τ is not used
+    return _grass(plan, role, grass_key, p, n, ao)
+
+
+def _grass(plan: Plan, role, grass_key, p, n, ao):
+    """ao times the grass: Hegeman Eq. 9 for a blade, every grass layer over the ground
+    (grass_layer.py) for a ground point. Returns a new float32 array clipped to [0, 1]."""
+    ao = np.array(ao, dtype=np.float32)
     if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
         ao *= _core.ao_grass(p, n, float(ground), float(blade))
-    ao = np.asarray(ao, dtype=np.float32)
-    return np.clip(ao, 0.0, 1.0, out=ao)  # ao is this function's own array
+    elif role == "GROUND":
+        for layer in plan.grass_layers:
+            ao *= layer.ground_visibility(p)
+    return np.clip(ao, 0.0, 1.0, out=ao)
 
 
 def trace(plan: Plan, p, n, samples, seed=None):
@@ -125,6 +159,8 @@ def trace(plan: Plan, p, n, samples, seed=None):
 
 
 def _grid_ao(plan, p, n):
+    if plan.grid is None:  # no leaves or branches to voxelise (a grass field): nothing above
+        return np.ones(len(p), np.float32)
     d = plan.settings.distance
     kw = {"distance": float(d)} if d > 0 else {}
     return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
@@ -153,8 +189,10 @@ def build_tracer(items):
 def build_grid(items):
     """The leaf-density grid (docs/DESIGN.md, 'The method ladder') from the leaves and branches
     (CANOPY and TRUNK triangles). Not the ground: as density its area would fill the voxel layer
-    a ground receiver's grazing rays travel in (round tree: ground AO 0.67 against 0.92 traced)."""
-    if not any(it.role == "CANOPY" for it in items):
-        raise CanopyAOError("method 'grid' needs at least one CANOPY object")
-    return _core.DensityGrid(*_scene_triangles(
-        [it for it in items if it.role in ("CANOPY", "TRUNK")]))
+    a ground receiver's grazing rays travel in (round tree: ground AO 0.67 against 0.92 traced).
+    Returns None when there are none (a grass field alone: its blades and the ground under
+    them follow the grass laws, as under every other rung)."""
+    wood_and_leaves = [it for it in items if it.role in ("CANOPY", "TRUNK") and len(it.triangles)]
+    if not wood_and_leaves:
+        return None
+    return _core.DensityGrid(*_scene_triangles(wood_and_leaves))

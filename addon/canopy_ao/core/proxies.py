@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import roles as _roles
+from .grass_layer import grass_layer
 from .native import _core
 from .scene import Plan, SceneItem
 
@@ -59,7 +60,8 @@ def bole(plan: Plan, item: SceneItem) -> np.ndarray:
 
 def fit_scene(plan: Plan, items) -> None:
     """Fill plan.fits (per tree, from its CANOPY points), plan.trunks (a solid ellipsoid per
-    trunk, fitted to its bole) and plan.grass (ground level and blade height per grass item)."""
+    trunk, fitted to its bole), plan.grass (ground level and blade height per grass item) and
+    plan.grass_layers (each grass field as an occluder of the ground under it)."""
     trees = {}
     for it in items:
         if it.role == "CANOPY" and len(it.positions):
@@ -75,6 +77,9 @@ def fit_scene(plan: Plan, items) -> None:
                 plan.trunks.setdefault(it.tree, []).append(_core.fit_ellipsoid(b))
         if it.role == "GRASS":
             plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
+            layer = grass_layer(it.name, it.positions, it.triangles, *plan.grass[it.name])
+            if layer is not None:
+                plan.grass_layers.append(layer)
 
 
 def proxy_dicts(plan: Plan) -> dict:

@@ -94,6 +94,7 @@ class MeshStats:
     component_aspect: float  # median component height / width (blades are tall and thin)
     component_flatness: float  # median λmin/λmid of each piece's covariance: 0 = flat card
     labels: np.ndarray = field(repr=False, default=None)
+    tube_fraction: float = 0.0  # share of the surface area in closed (tube or solid) pieces
 
 
 def mesh_stats(positions: np.ndarray, triangles: np.ndarray) -> MeshStats:
@@ -124,7 +125,56 @@ def mesh_stats(positions: np.ndarray, triangles: np.ndarray) -> MeshStats:
         component_aspect=float(np.median(cext[:, 2] / cwidth)),
         component_flatness=_flatness(p, labels, k),
         labels=labels,
+        tube_fraction=_tube_fraction(p, triangles, labels, k),
     )
+
+
+# A piece is closed (a tube or a solid) when its area-weighted mean normal is below this
+# fraction of its area; a flat or cupped card (a leaf, a blade) is near 1.
+CLOSED_OPENNESS = 0.3
+# ... and its normals do not all share one direction: the largest eigenvalue of the
+# area-weighted normal tensor is ~1 for a thin plate (a leaf given a thickness), ~0.5 for a
+# tube (normals all round its axis), 1/3 for a ball.
+CLOSED_PLATE = 0.8
+
+
+def piece_shape(positions, triangles, labels, k):
+    """Per connected piece: (area, openness, plate), float64 (k,) each.
+
+    openness = |Σ a n| / Σ a over the piece's triangles (a: area, n: unit normal): the mean
+    normal of a closed surface is exactly 0 (divergence theorem), of an open tube nearly 0 (only
+    its two end openings are missing), of a flat card 1. It does not care how a branch bends,
+    unlike the covariance of its points (a curved Sapling branch looks as flat as a leaf to
+    that). plate = λmax of Σ a n nᵀ / Σ a tells a thin solid plate (≈ 1) from a tube (≈ 0.5).
+    Pieces without triangles get area 0, openness 1, plate 1."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(t) == 0 or k == 0:
+        return np.zeros(k), np.ones(k), np.ones(k)
+    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+    cr = 0.5 * np.cross(b - a, c - a)  # area × unit normal
+    area = np.linalg.norm(cr, axis=1)
+    lab = labels[t[:, 0]]
+    A = np.bincount(lab, area, k)
+    S = np.stack([np.bincount(lab, cr[:, i], k) for i in range(3)], 1)
+    safe = np.maximum(A, 1e-300)
+    openness = np.where(A > 0, np.linalg.norm(S, axis=1) / safe, 1.0)
+    w = np.where(area > 0, 1.0 / np.maximum(area, 1e-300), 0.0)  # a n nᵀ = cr crᵀ / a
+    T = np.empty((k, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            T[:, i, j] = T[:, j, i] = np.bincount(lab, cr[:, i] * cr[:, j] * w, k) / safe
+    plate = np.where(A > 0, np.linalg.eigvalsh(T)[:, 2], 1.0)
+    return A, openness, plate
+
+
+def _tube_fraction(p, triangles, labels, k):
+    area, openness, plate = piece_shape(p, triangles, labels, k)
+    total = area.sum()
+    if not total > 0:
+        return 0.0
+    closed = (openness < CLOSED_OPENNESS) & (plate < CLOSED_PLATE)
+    return float(area[closed].sum() / total)
 
 
 def _flatness(p, labels, k, max_pieces=4000):
@@ -159,8 +209,11 @@ def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
     - flat and wide (z extent < 5 % of the xy extent, few pieces) → GROUND;
     - many small pieces whose lowest points lie near one plane, taller than wide, the whole
       object low and wide → GRASS;
+    - many small pieces, most of their area in closed tubes (unwelded branches: Sapling's
+      branch curves converted to a mesh, however they bend) → TRUNK;
     - many small flat pieces in a blob → CANOPY;
-    - many tube-like pieces (unwelded branches), or one or a few solid pieces → TRUNK.
+    - many tube-like pieces without faces (point covariance), or one or a few solid pieces →
+      TRUNK.
     """
     s = mesh_stats(positions, triangles)
     if s.n_vertices == 0:
@@ -169,7 +222,10 @@ def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
     many = s.n_components >= MANY_COMPONENTS and s.component_size_ratio < 0.25
     if flat and not many:
         return "GROUND", f"flat (height {s.z_extent:.3g} vs width {s.xy_extent:.3g})"
-    if many and s.component_flatness > 0.6:
+    if many and s.tube_fraction > 0.5:
+        return "TRUNK", (f"{s.n_components} pieces, {100 * s.tube_fraction:.0f} % of the area "
+                         "in closed tubes (branches)")
+    if many and len(triangles) == 0 and s.component_flatness > 0.6:
         return "TRUNK", f"{s.n_components} tube-like pieces (branches)"
     if many:
         low_and_wide = s.z_extent < 0.5 * s.xy_extent

@@ -22,6 +22,14 @@ class SceneItem:
     positions: np.ndarray
     normals: np.ndarray
     triangles: np.ndarray
+    # Where the tree came from: "set" (the user's or a generator's name, a parent chain) is
+    # kept; "collection" or "scene" (a group, not a tree) is split by trees.resolve().
+    tree_source: str = "set"
+    # An item holding several trees (one mesh of a grove's leaves): tree_names[tree_labels[v]]
+    # is vertex v's tree; None when the whole item is one tree.
+    tree_labels: np.ndarray | None = None
+    tree_names: tuple = ()
+    tree_why: str = ""
 
     def __post_init__(self):
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
@@ -29,6 +37,9 @@ class SceneItem:
         self.triangles = np.ascontiguousarray(self.triangles, dtype=np.int32).reshape(-1, 3)
         if self.role not in _roles.ROLES:
             raise CanopyAOError(f"{self.name}: unknown role {self.role!r} (one of {_roles.ROLES})")
+        if self.tree_labels is not None and len(self.tree_labels) != len(self.positions):
+            raise CanopyAOError(f"{self.name}: {len(self.tree_labels)} tree labels for "
+                                f"{len(self.positions)} vertices")
         if len(self.positions) != len(self.normals):
             raise CanopyAOError(f"{self.name}: {len(self.positions)} positions but "
                                 f"{len(self.normals)} normals")
@@ -45,12 +56,18 @@ class Plan:
     proxies: dict = field(default_factory=dict)  # tree -> [Ellipsoid] the chosen method's shells
     trunks: dict = field(default_factory=dict)  # tree -> list of _core.Ellipsoid (solid)
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
+    grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     tracer: object = None
     grid: object = None
     calibration: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     forest: object = None  # forest.Forest: instanced trees occluding every receiver (attach_forest)
+    tau_by_tree: dict = field(default_factory=dict)  # τ calibrated per tree (else plan.tau)
+
+    def taus(self):
+        """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""
+        return {**self.tau_by_tree, None: self.tau} if self.tau_by_tree else self.tau
 
 
 @dataclass
@@ -61,7 +78,36 @@ class ItemResult:
     method: str
     ao: np.ndarray
     seconds: float
+    tree_source: str = "set"
+    tree_why: str = ""
 
     @property
     def vertices(self) -> int:
         return int(len(self.ao))
+
+
+def parts(item: SceneItem):
+    """[(part, vertex indices)] of an item holding several trees: each part a SceneItem of one
+    tree (its vertices, and the triangles wholly among them); [(item, None)] otherwise."""
+    if item.tree_labels is None or len(item.tree_names) <= 1:
+        return [(item, None)]
+    out = []
+    tri_tree = item.tree_labels[item.triangles[:, 0]] if len(item.triangles) else None
+    for k, tree in enumerate(item.tree_names):
+        idx = np.flatnonzero(item.tree_labels == k)
+        tris = np.zeros((0, 3), np.int32)
+        if tri_tree is not None:
+            keep = (tri_tree == k) & (item.tree_labels[item.triangles[:, 1]] == k) \
+                & (item.tree_labels[item.triangles[:, 2]] == k)
+            remap = np.full(len(item.positions), -1, np.int64)
+            remap[idx] = np.arange(len(idx))
+            tris = remap[item.triangles[keep]]
+        out.append((SceneItem(item.name, item.role, tree, item.positions[idx],
+                              item.normals[idx], tris, tree_source=item.tree_source,
+                              tree_why=item.tree_why), idx))
+    return out
+
+
+def split_trees(items):
+    """Every item, those holding several trees replaced by one part per tree."""
+    return [part for it in items for part, _idx in parts(it)]

@@ -130,8 +130,10 @@ OPTIONS = (
            none_prop="calibrate_tau", none_label="Calibrate τ",
            none_help="Calibrate the optical depth against ray-traced samples"),
     Option("distance", "float", 0.0, "AO Distance",
-           "Ray length cut-off (as Cycles' world AO distance); 0 = unlimited. Used by the "
-           "ray-traced method, the density grid and calibration", min=0.0, unit='LENGTH',
+           "Ray length cut-off (as Cycles' world AO distance); 0 = unlimited. Rays, the "
+           "density grid and calibration stop at it; the occluder laws (other trees, trunks, "
+           "instanced forests) count only what lies within it; the in-shell models do not "
+           "shorten paths inside a crown", min=0.0, unit='LENGTH',
            cli_default="the World's AO distance, as Cycles uses it; unlimited without a world"),
     Option("samples", "int", 64, "Samples", "Rays per vertex for the ray-traced method",
            min=1, max=65536, soft_max=1024),

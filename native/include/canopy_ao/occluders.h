@@ -38,19 +38,65 @@
 // occluders' reach bounds the cost per receiver by the local occluder density, not their count.
 // ε = 0 disables the cut-off (every occluder for every receiver).
 //
+// AO distance D (Cycles' hard cut-off: a ray counts only what it meets within D). The
+// directions from x that meet a sphere (centre at distance d, radius r) within D form a
+// circular cone about the direction to its centre: the whole silhouette (sin²σ = r²/d²) when D
+// reaches the tangent points (D² ≥ d² − r²); nothing when D ≤ d − r; between, the cone through
+// the circle where the sphere meets the ball of radius D about x,
+//   cos α = (D² + d² − r²) / (2 D d)          (law of cosines; reach_sin2 below),
+// so the opaque sphere's occlusion is sphere_occlusion(cos θ, sin²α), exact. A shell (either
+// law) blocks its own fraction times sphere_occlusion(α)/sphere_occlusion(σ): the share of its
+// silhouette's cosine-weighted solid angle within reach (exact as D → ∞ and D ≤ d − r; the
+// chord inside a partly reached shell is not shortened). Shells' reach for the spatial grid is
+// min(d_far, D + r_max).
+//
 // Receivers inside a shell (|x'| ≤ 1 in its unit frame) skip that shell: inside is the canopy
 // model's job (canopy_model.h). Zero-length normals: treated as facing away from the occluder
 // (it is below the horizon, occ = 0). All results in [0, 1], 1 = open sky.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
+#include "canopy_ao/fast_math.h"
 #include "canopy_ao/geometry.h"
 #include "canopy_ao/medium_table.h"
 
 namespace canopy_ao {
+
+/// Snyder's horizon-clipped form factor of a sphere (the formula above), the one definition:
+/// branch-free with fast_acos / fast_atan2_pos, so loops over it vectorise (canopy_model.cpp's
+/// blend band calls it per point; sphere_occlusion is it with argument checks). c = cos θ in
+/// [−1, 1], s2 = sin²σ > 0; s2 ≥ 1 gives the half-space (1 + c)/2.
+inline float sphere_occlusion_law(float c, float s2) {
+  const float s = std::sqrt(std::max(1.0f - c * c, 0.0f));
+  const float xs = std::sqrt(std::max(1.0f / s2 - 1.0f, 0.0f));
+  const float yv = clampf(-xs * c / std::max(s, 1e-20f), -1.0f, 1.0f);
+  const float sy = std::sqrt(std::max(1.0f - yv * yv, 0.0f));
+  const float crossing =
+      clampf(((c * fast_acos(yv) - xs * s * sy) * s2 + fast_atan2_pos(s * sy, xs)) *
+                 0.318309886183791f,
+             0.0f, 1.0f);
+  const float clear = std::max(c, 0.0f) * s2;  // wholly above (or below: 0) the horizon
+  const float occ = c * c > s2 ? clear : crossing;
+  return s2 >= 1.0f ? 0.5f * (1.0f + c) : occ;  // on the sphere: the half-space
+}
+
+/// sin² of the half-angle of the cone of directions that meet a sphere (squared centre
+/// distance d2, squared radius r2) within distance D (see "AO distance" above): r2/d2 when D
+/// reaches the tangent points, 0 when D ≤ d − r. D = +inf gives r2/d2.
+inline float reach_sin2(float d2, float r2, float distance) {
+  const float full = std::min(r2 / d2, 1.0f);
+  if (!(distance * distance < d2 - r2)) return full;  // reaches the silhouette (or inside)
+  const float d = std::sqrt(d2);
+  if (distance <= d - std::sqrt(r2)) return 0.0f;
+  const float ca = (distance * distance + d2 - r2) / (2.0f * distance * d);
+  return std::min(std::max(1.0f - ca * ca, 0.0f), full);
+}
 
 /// Exact horizon-clipped cosine-weighted fraction of the AO hemisphere blocked by a solid
 /// sphere with angular radius σ whose centre is at angle θ from the normal. In [0, 1].
@@ -61,8 +107,10 @@ float sphere_occlusion(float cos_theta, float sin2_sigma);
 /// Opacity of a leaf shell of optical depth τ seen from outside: 1 − exp(−4τ/3).
 float shell_opacity(float tau);
 
-/// Visibility (1 − occ) of one receiver outside one shell, no cut-off. 1 if x is inside.
-float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity);
+/// Visibility (1 − occ) of one receiver outside one shell, no ε cut-off; `distance` the AO
+/// distance (+inf: unlimited). 1 if x is inside.
+float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity,
+                          float distance = std::numeric_limits<float>::infinity());
 
 /// Visibility of one receiver outside one shell under the medium law (OccluderLaw::Medium):
 /// the receiver is mapped into the shell's unit frame (DESIGN 3.2, as ao_medium_ellipsoid) and
@@ -70,7 +118,8 @@ float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity)
 /// V = medium_ao(|x'|, n'·x'/|x'|, τ) — exact for spheres; exactly 1 when the shell is wholly
 /// below the horizon. `slice` = MediumTable::get().slice(τ). 1 if x is inside or n = 0.
 float occluder_visibility_medium(Vec3 x, Vec3 n, const Ellipsoid& shell,
-                                 const MediumTable::Slice& slice);
+                                 const MediumTable::Slice& slice,
+                                 float distance = std::numeric_limits<float>::infinity());
 
 // === Options
 enum class OccluderLaw {
@@ -83,6 +132,8 @@ struct OccluderOptions {
   float epsilon = 1e-3f;    ///< cut-off, in [0, 1); 0 = no cut-off
   bool solid = false;       ///< opaque occluders (opacity 1), τ and law ignored
   OccluderLaw law = OccluderLaw::Medium;  ///< how a (non-solid) shell occludes
+  /// AO distance D (> 0; +inf = unlimited): a hard cut-off, as Cycles (see "AO distance").
+  float distance = std::numeric_limits<float>::infinity();
 };
 
 /// A set of occluders with their spatial grid, built once, evaluated many times.
@@ -103,7 +154,7 @@ class OccluderField {
   std::size_t size() const { return shells_.size(); }
   /// Largest number of candidate occluders in one grid cell (the per-receiver cost bound).
   std::size_t max_candidates() const { return max_candidates_; }
-  /// Cut-off distance of occluder i (inf when ε = 0).
+  /// Reach of occluder i: min(d_far, D + r_max) (inf when ε = 0 and D = inf).
   float cutoff(std::size_t i) const { return far_[i]; }
 
  private:
@@ -111,6 +162,7 @@ class OccluderField {
   std::vector<float> far_;   // d_far per occluder
   std::vector<float> rmax_;  // largest semi-axis per occluder (bounding sphere)
   float opacity_ = 1.0f;
+  float distance_ = std::numeric_limits<float>::infinity();
   bool medium_ = false;          // OccluderLaw::Medium (and not solid)
   MediumTable::Slice slice_;     // medium table at τ (medium_ only)
   bool unbounded_ = false;  // ε = 0: one list holds every occluder

@@ -1,0 +1,77 @@
+"""What a rung costs, predicted from counted work (no clock), so "auto" makes the same choice
+on a quiet machine and under load (docs/DESIGN.md, 'Auto: the cheapest rung that is good
+enough').
+
+Work per receiver, counted from the plan:
+- sphere, ellipsoid, reeves_blau: 1 in-shell evaluation + one per occluder (every other
+  shell and every trunk solid in the scene: an upper bound, the occluder grid skips far ones);
+- shells: k in-shell evaluations (its tree's shells) + the occluders;
+- medium: as shells, each a medium-table lookup (a costlier unit);
+- grid: DensityAOOptions.directions line integrals, each ~kExactVoxels + 2 log2(resolution)
+  voxel steps (exact DDA near, mip steps growing with distance: density_grid.h);
+- raytrace: samples rays, each ~log2(triangles) BVH steps.
+Predicted seconds = Σ work × the unit's constant / threads; the constants are seconds per
+unit on one core of the machine that measured them, fixed here (machine speed scales them all
+alike; the choice depends on their ratios and on the time budget).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .native import _core
+
+# Seconds per unit of work on one core, measured with
+#   nice /usr/bin/python3 bench/cost_constants.py
+# (round tree, quick size: 25,872 receivers, each rung's evaluation of every receiver timed
+# best of 5 on one thread, divided by the units counted below; 2-core shared machine,
+# 2026-12-01: 1.6e-8, 8.1e-8, 7.1e-8, 4.6e-8). Re-measure when a kernel changes speed by 2×.
+SECONDS_PER_UNIT = {
+    "shell": 1.6e-8,         # one analytic shell evaluation (in-shell model or occluder)
+    "medium": 8.0e-8,        # one medium-table shell evaluation
+    "voxel_step": 7.0e-8,    # one step of a density-grid line integral
+    "bvh_step": 4.5e-8,      # one BVH level of one Embree ray (rays: samples × log2 M)
+}
+FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: analytic 1 + "
+           "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "
+           "directions × (exact voxels + 2 log2 resolution), raytrace samples × log2 triangles")
+GRID_DIRECTIONS = 32         # DensityAOOptions.directions (the add-on's default)
+GRID_RESOLUTION = 48         # DensityGridOptions.resolution (the add-on's default)
+GRID_EXACT_VOXELS = 4        # DensityGrid::kExactVoxels
+
+
+def work(plan, method: str, receivers: int) -> tuple[str, float]:
+    """(unit, count) of the work ``method`` does for ``receivers`` points of this plan."""
+    from .proxies import own_shells
+    solids = sum(len(es) for es in plan.trunks.values())
+    shells = {t: len(own_shells(plan, t, method)) for t in plan.fits} if method in (
+        "sphere", "ellipsoid", "reeves_blau", "shells", "medium") else {}
+    total = sum(shells.values())
+    if method in ("sphere", "ellipsoid", "reeves_blau"):
+        return "shell", receivers * float(1 + total + solids)
+    if method in ("shells", "medium"):
+        k = max(shells.values(), default=1)
+        return ("medium" if method == "medium" else "shell"), receivers * float(k + total + solids)
+    if method == "grid":
+        steps = GRID_EXACT_VOXELS + 2 * math.log2(GRID_RESOLUTION)
+        return "voxel_step", receivers * float(GRID_DIRECTIONS) * steps
+    if method == "raytrace":
+        m = plan.tracer.triangle_count if plan.tracer is not None else 1
+        depth = math.log2(max(int(m), 2))
+        return "bvh_step", receivers * float(plan.settings.samples) * depth
+    raise ValueError(f"no cost model for method {method!r}")
+
+
+def threads() -> int:
+    """Worker threads the native calls use (set_max_threads caps them)."""
+    return max(1, int(_core.max_threads())) if _core is not None else 1
+
+
+def predict(plan, method: str, receivers: int) -> dict:
+    """{"unit", "work", "seconds_per_unit", "threads", "seconds"} for ``method`` on
+    ``receivers`` points: the cost model above, no timing."""
+    unit, count = work(plan, method, receivers)
+    c = SECONDS_PER_UNIT[unit]
+    n = threads()
+    return {"unit": unit, "work": count, "seconds_per_unit": c, "threads": n,
+            "seconds": count * c / n}

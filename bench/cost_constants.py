@@ -1,0 +1,67 @@
+"""Measure the cost model's constants (addon/canopy_ao/core/cost.py, SECONDS_PER_UNIT).
+
+    /usr/bin/python3 bench/cost_constants.py [--scene round_tree] [--repeats 5]
+
+Bakes every receiver of a scene with each rung on ONE thread, takes the best of a few runs
+(the least disturbed by other work on the machine), and divides by the work the cost model
+counts for that rung: seconds per unit. Prints the measured constants next to the ones in the
+code and the model's prediction against the measured time per rung. Auto never times itself
+while it bakes; it uses the constants in the code, so its choice does not follow the load.
+"""
+import argparse
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(REPO, "examples"))
+sys.path.insert(0, os.path.join(REPO, "addon"))
+
+import canopy_scenes as cs  # noqa: E402
+from canopy_ao import _core, core  # noqa: E402
+from canopy_ao.core import cost, lighting  # noqa: E402
+
+UNIT_OF = {"ellipsoid": "shell", "medium": "medium", "grid": "voxel_step",
+           "raytrace": "bvh_step"}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", default="round_tree")
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    scene = cs.make_scene(args.scene, quick=True)
+    items = [core.SceneItem(p.name, p.role.upper(), p.tree or "T", p.vertices,
+                            cs.vertex_normals(p.vertices, p.triangles), p.triangles)
+             for p in scene]
+    receivers = sum(len(it.positions) for it in items)
+    previous = _core.set_max_threads(1)
+    try:
+        rows = []
+        for method in ("sphere", "ellipsoid", "shells", "medium", "grid", "raytrace"):
+            s = core.BakeSettings(method=method, tau=1.5, samples=16)
+            plan = core.prepare(items, s)
+            if method in ("raytrace",) or plan.tracer is None:
+                plan.tracer = plan.tracer or lighting.build_tracer(items)
+            best = float("inf")
+            for _ in range(args.repeats):
+                t0 = time.perf_counter()
+                for it in items:
+                    core.evaluate_item(plan, it)
+                best = min(best, time.perf_counter() - t0)
+            unit, count = cost.work(plan, method, receivers)
+            rows.append((method, unit, count, best))
+    finally:
+        _core.set_max_threads(previous)
+    print(f"{args.scene}: {receivers} receivers, one thread, best of {args.repeats}")
+    print(f"{'method':10s} {'unit':11s} {'work':>12s} {'seconds':>9s} {'s/unit':>9s} "
+          f"{'in code':>9s} {'predicted':>9s}")
+    for method, unit, count, best in rows:
+        code = cost.SECONDS_PER_UNIT[unit]
+        print(f"{method:10s} {unit:11s} {count:12.4g} {best:9.4f} {best / count:9.3g} "
+              f"{code:9.3g} {count * code:9.4f}")
+
+
+if __name__ == "__main__":
+    main()
