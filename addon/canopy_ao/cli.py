@@ -39,6 +39,17 @@ def _positive_int(text):
     return v
 
 
+def _nonneg_int(text):
+    v = int(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
+    return v
+
+
+class BakeFailed(Exception):
+    """A bake that could not be done; the message says why (printed as canopy_ao: error:)."""
+
+
 def build_parser():
     from .core.ladder import METHODS
 
@@ -81,6 +92,9 @@ def build_parser():
     p.add_argument("--cycles-samples", type=_positive_int, default=64)
     p.add_argument("--report", metavar="FILE.json", help="write a JSON report here")
     p.add_argument("--save", action="store_true", help="save the .blend after baking")
+    p.add_argument("--threads", type=_nonneg_int, default=0,
+                   help="cap the native core's worker threads (0 = every core; results do "
+                        "not depend on it), so several bakes can share a machine")
     return p
 
 
@@ -100,7 +114,10 @@ def main(argv=None):
     """Parse the args after ``--``, bake, report; sys.exit with 0 on success."""
     args = build_parser().parse_args(_argv(argv))  # exits 2 with usage on bad arguments
     try:
-        code = _run(args)
+        run(args)
+        code = 0
+    except BakeFailed as exc:
+        _fail(str(exc))
     except SystemExit:
         raise
     except Exception as exc:  # an unexpected failure must still fail the process
@@ -111,7 +128,9 @@ def main(argv=None):
     sys.exit(code)
 
 
-def _run(args):
+def run(args):
+    """Bake the open file as ``args`` (from build_parser) say, print one line per object, and
+    return the report; raises BakeFailed with a message when the bake cannot be done."""
     import addon_utils
     import bpy
 
@@ -123,15 +142,18 @@ def _run(args):
         pkg.__time__ = os.path.getmtime(pkg.__file__)
         addon_utils.enable(__package__, default_set=False, handle_error=None)
         if not hasattr(bpy.types.Scene, "canopy_ao"):
-            _fail("the canopy_ao add-on could not be enabled (see the messages above)")
+            raise BakeFailed("the canopy_ao add-on could not be enabled (see the messages "
+                             "above)")
     from .blender import gather, job
-    from .core.native import CanopyAOError, core_status
+    from .core.native import CanopyAOError, core_status, require
 
     ok, msg = core_status()
     if not ok:
-        _fail(msg)
+        raise BakeFailed(msg)
+    if args.threads:
+        require().set_max_threads(args.threads)
     if args.save and not bpy.data.filepath:
-        _fail("--save needs a saved .blend (give the .blend before --python-expr)")
+        raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
     distance = (args.distance if args.distance is not None
                 else gather.world_ao_distance(bpy.context.scene))
     opts = dict(method=args.method, tau=args.tau, distance=distance, samples=args.samples,
@@ -150,7 +172,7 @@ def _run(args):
     try:
         bake_job, rep = job.run_bake(context, args.objects or [], opts)
     except CanopyAOError as exc:
-        _fail(str(exc))
+        raise BakeFailed(str(exc)) from None
     for r in bake_job.results:
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
@@ -173,8 +195,8 @@ def _run(args):
             with open(bpy.path.abspath(args.report), "w") as f:
                 json.dump(rep, f, indent=1, default=float)
         except OSError as exc:
-            _fail(f"cannot write the report: {exc}")
+            raise BakeFailed(f"cannot write the report: {exc}") from None
     if args.save:
         bpy.ops.wm.save_mainfile()
         print(f"canopy_ao: saved {bpy.data.filepath}", flush=True)
-    return 0
+    return rep
