@@ -208,7 +208,7 @@ def main(argv):
     if a.tau != "auto":
         kw["tau"] = float(a.tau)
     else:
-        bpy.context.scene.canopy_ao.tau_auto = True
+        bpy.context.scene.canopy_ao.calibrate_tau = True
 
     def bake():
         r = bpy.ops.canopy_ao.bake(**kw)

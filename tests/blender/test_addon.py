@@ -92,9 +92,9 @@ def test_bake_values(tree_scene_objects):
 
 
 def test_auto_method_reports_choice(tree_scene_objects):
-    from canopy_ao.blender import gather
+    from canopy_ao.blender import properties
     from canopy_ao.blender.job import run_bake
-    opts = gather.scene_settings_opts(bpy.context.scene)
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="auto", tau=None, distance=0.0)
     job, rep = run_bake(bpy.context, ["Leaves", "Ground"], opts)
     assert rep["method"] in ("sphere", "ellipsoid", "shells", "medium", "grid", "raytrace")
@@ -210,10 +210,10 @@ def test_texel_mode_without_uvs_errors_clearly(tree_scene_objects):
 
 def test_check_against_cycles(tree_scene_objects):
     """The operator's Cycles check: a per-object error in the report (16 samples: ~2 s)."""
-    from canopy_ao.blender import gather
+    from canopy_ao.blender import properties
     from canopy_ao.blender.job import run_bake
     pytest.importorskip("canopy_ao.blender.cycles_check")
-    opts = gather.scene_settings_opts(bpy.context.scene)
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="ellipsoid", tau=2.0, distance=0.0, check_cycles=True,
                 cycles_samples=16, show_proxies=False)
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
@@ -264,7 +264,7 @@ def test_panels_draw(tree_scene_objects):
     bpy.context.view_layer.objects.active = bpy.data.objects["Leaves"]
     log = draw_panels()
     props = {name for kind, name in log if kind == "prop"}
-    assert {"method", "tau", "distance", "attribute_name", "role", "tree"} <= props
+    assert {"method", "tau", "distance", "attribute", "role", "tree"} <= props
     assert ("operator", "canopy_ao.bake") in log
     assert any(kind == "label" and text.startswith("CANOPY") for kind, text in log)
 
@@ -341,7 +341,7 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
     from canopy_ao import cli
     with pytest.raises(SystemExit) as exc:
         cli.main(["--tau", "-1"])
-    assert exc.value.code == 2 and "tau must be > 0" in capsys.readouterr().err
+    assert exc.value.code == 2 and "tau must be a finite number > 0" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
         cli.main(["--objects", "Ground", "--aov", "AO", "--method", "sphere"])
     assert exc.value.code == 1 and "collides" in capsys.readouterr().err
@@ -350,6 +350,99 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
         cli.main(["--objects", "Ground", "--method", "sphere", "--tau", "2", "--no-proxies"])
     assert exc.value.code == 0
     assert capsys.readouterr().out.startswith("Ground: role GROUND, method sphere")
+
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--samples", "99999999999"], "samples must be an integer in [1, 65536]"),
+    (["--tau", "inf"], "tau must be a finite number > 0"),
+    (["--tau", "1e400"], "tau must be a finite number > 0"),
+    (["--distance", "nan"], "distance must be a finite number >= 0"),
+    (["--time-budget", "nan"], "time_budget must be a finite number >= 0"),
+    (["--target-error", "nan"], "target_rmse must be a finite number in [0, 1]"),
+    (["--resolution", "0"], "resolution must be an integer in [1, 16384]"),
+    (["--cycles-samples", "-3"], "cycles_samples must be an integer in [1, 65536]"),
+])
+def test_cli_numbers_out_of_range_exit_2_with_a_message(tree_scene_objects, capsys, args,
+                                                          message):
+    """Every number is checked against its option's range before the bake starts, and nothing
+    in the scene changes."""
+    from canopy_ao import cli
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere"] + args)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and message in err and "Traceback" not in err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
+def test_every_option_reachable_from_panel_operator_and_cli():
+    """One declaration per option (core/settings.py) gives a scene property the panel draws,
+    an operator property and a command-line argument."""
+    from canopy_ao import cli
+    from canopy_ao.blender import panels
+    from canopy_ao.core.settings import OPTIONS
+    from types import SimpleNamespace
+    s = bpy.context.scene.canopy_ao
+    old = (s.method, s.mode)
+    try:
+        drawn = set()
+        for method, mode in (("raytrace", "TEXEL"), ("auto", "VERTEX")):
+            s.method, s.mode = method, mode
+            log = []
+            for panel in (panels.CANOPY_AO_PT_main, panels.CANOPY_AO_PT_advanced):
+                panel.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+            drawn |= {name for kind, name in log if kind == "prop"}
+    finally:
+        s.method, s.mode = old
+    op = bpy.ops.canopy_ao.bake.get_rna_type().properties.keys()
+    flags = {a.dest for a in cli.build_parser()._actions}
+    for o in OPTIONS:
+        assert o.name in drawn and o.name in op, o.name
+        assert o.name in flags or o.cli is None or o.cli_enables, o.name
+        if o.none_prop:
+            assert o.none_prop in drawn and o.none_prop in op
+    assert "calibrate_tau" in op and "tau_auto" not in op
+
+
+def test_operator_number_without_its_switch_is_used(tree_scene_objects):
+    """bpy.ops.canopy_ao.bake(tau=2) bakes with τ 2 although the panel says Calibrate τ; tau=0
+    is refused with how to calibrate instead of silently meaning something else."""
+    s = bpy.context.scene.canopy_ao
+    s.calibrate_tau = True
+    assert bake(objects="Ground,Leaves", method="sphere", tau=2.0) == {'FINISHED'}
+    assert "τ 2" in s.last_report
+    with pytest.raises(RuntimeError, match="calibrate_tau"):
+        bpy.ops.canopy_ao.bake(objects="Ground,Leaves", method="sphere", tau=0.0)
+
+
+
+def _break_evaluation(monkeypatch):
+    from canopy_ao.core import lighting
+
+    def broken(*a, **k):
+        raise RuntimeError("boom: a bug in the evaluation")
+
+    monkeypatch.setattr(lighting, "evaluate_points", broken)
+
+
+def test_a_bug_is_reported_as_one_and_changes_nothing(tree_scene_objects, monkeypatch, capfd):
+    """A bug is not dressed up as 'bake failed': the operator says it is an internal error,
+    prints the traceback, and nothing is written."""
+    _break_evaluation(monkeypatch)
+    with pytest.raises(RuntimeError, match="internal error.*boom"):
+        bake(objects="Ground,Leaves", method="sphere", tau=2.0)
+    assert "Traceback" in capfd.readouterr().err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
+def test_cli_shows_a_bug_with_its_traceback(tree_scene_objects, monkeypatch, capsys):
+    from canopy_ao import cli
+    _break_evaluation(monkeypatch)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere", "--tau", "2"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 1 and "Traceback" in err and "RuntimeError: boom" in err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
 
 
 def test_fast_read_matches_evaluated_copy(tree_scene_objects):
@@ -413,7 +506,7 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
         np.testing.assert_array_equal(ao_of(n), before[n])
     assert set(job.LAST_TIMINGS) >= {"positions", "normals", "evaluate", "write"}
     asked.clear()
-    bpy.context.scene.canopy_ao.tau_auto = True  # calibration traces every triangle
+    bpy.context.scene.canopy_ao.calibrate_tau = True  # calibration traces every triangle
     assert bake(method="sphere") == {'FINISHED'}
     assert all(asked.values())
 
@@ -421,7 +514,7 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
 def test_ao_distance_follows_the_world_unless_typed():
     """The default AO distance is the World's, the one Cycles' AO bake applies (DESIGN 9), so a
     bake and its Cycles check agree at any scene scale; typing one needs 'From World' off."""
-    from canopy_ao.blender import gather
+    from canopy_ao.blender import properties
     scene = bpy.context.scene
     s = scene.canopy_ao
     world = scene.world or bpy.data.worlds.new("DistanceTestWorld")
@@ -430,12 +523,12 @@ def test_ao_distance_follows_the_world_unless_typed():
     try:
         world.light_settings.distance = 37.5
         s.use_world_distance, s.distance = True, 4.0
-        assert gather.scene_settings_opts(scene)["distance"] == pytest.approx(37.5)
+        assert properties.scene_options(scene)["distance"] == pytest.approx(37.5)
         s.use_world_distance = False
-        assert gather.scene_settings_opts(scene)["distance"] == pytest.approx(4.0)
+        assert properties.scene_options(scene)["distance"] == pytest.approx(4.0)
         s.use_world_distance = True
         scene.world = None
-        assert gather.scene_settings_opts(scene)["distance"] == 0.0  # unlimited
+        assert properties.scene_options(scene)["distance"] == 0.0  # unlimited
     finally:
         scene.world = old_world
         world.light_settings.distance, s.use_world_distance, s.distance = old

@@ -10,7 +10,7 @@ import pytest
 
 import tree_scene
 from conftest import _clear_scene, add_mesh
-from canopy_ao.blender import gather, mesh_io
+from canopy_ao.blender import mesh_io, properties
 from canopy_ao.blender.job import run_bake
 
 ATTR = "CanopyAO"
@@ -30,7 +30,7 @@ def proto():
     p, t = tree_scene.plane(size=24.0, cuts=48)
     add_mesh("Ground", p, t)
     bpy.context.view_layer.layer_collection.children["TreeProto"].exclude = True
-    bpy.context.scene.canopy_ao.tau_auto = True
+    bpy.context.scene.canopy_ao.calibrate_tau = True
     yield coll
     _clear_scene()
 
@@ -43,7 +43,7 @@ def ground_xy():
 
 
 def bake_all():
-    opts = gather.scene_settings_opts(bpy.context.scene)
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="ellipsoid", tau=2.0, distance=0.0, show_proxies=False)
     return run_bake(bpy.context, ["Ground"], opts)
 

@@ -115,7 +115,7 @@ def test_bad_input_is_refused():
         core.SceneItem("x", "LEAVES", "", p, p, t)
     with pytest.raises(core.CanopyAOError, match="normals"):
         core.SceneItem("x", "GROUND", "", p, p[:2], t)
-    with pytest.raises(core.CanopyAOError, match="unknown method"):
+    with pytest.raises(core.CanopyAOError, match="method must be one of"):
         core.prepare([], core.BakeSettings(method="magic"))
     with pytest.raises(core.CanopyAOError, match="tau"):
         core.prepare([], core.BakeSettings(method="sphere", tau=-1.0))

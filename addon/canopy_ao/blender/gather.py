@@ -73,12 +73,6 @@ def world_ao_distance(scene):
     return float(scene.world.light_settings.distance) if scene.world else 0.0
 
 
-def ao_distance(scene, settings):
-    """The panel's AO distance: the World's by default, so a bake and its Cycles check agree
-    whatever the scene's scale; the typed value when 'From World' is off."""
-    return world_ao_distance(scene) if settings.use_world_distance else settings.distance
-
-
 def is_candidate(obj):
     """A mesh that may take part in a bake (not one of our proxy displays)."""
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
@@ -127,12 +121,9 @@ def scene_items(context, depsgraph, targets, opts, timings):
             opts["method"], opts["tau"], declared[0])
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
-        try:
-            pos, nor, tris = mesh_io.evaluated_arrays(
-                obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
-                triangles=tris_needed, timings=timings)
-        except mesh_io.MeshIOError as exc:
-            raise CanopyAOError(str(exc)) from None
+        pos, nor, tris = mesh_io.evaluated_arrays(
+            obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
+            triangles=tris_needed, timings=timings)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
         if declared is None and not ladder.triangles_needed(opts["method"], opts["tau"], role):
@@ -144,14 +135,3 @@ def scene_items(context, depsgraph, targets, opts, timings):
         objects[name] = obj
         how[name] = why
     return items, objects, how
-
-
-def scene_settings_opts(scene):
-    """The bake options as the scene's panel has them."""
-    s = scene.canopy_ao
-    return dict(method=s.method, tau=None if s.tau_auto else s.tau, distance=ao_distance(scene, s),
-                samples=s.samples, attribute=s.attribute_name, overwrite=s.overwrite,
-                wire_material=s.wire_material, add_aov=s.add_aov, aov_name=s.aov_name,
-                mode=s.mode, uv_map=s.uv_map, resolution=s.resolution, image_dir=s.image_dir,
-                show_proxies=s.show_proxies, check_cycles=s.check_cycles,
-                cycles_samples=s.cycles_samples)

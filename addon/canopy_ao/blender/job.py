@@ -8,7 +8,7 @@ import numpy as np
 
 from . import cycles_check, gather, instances, materials, mesh_io
 from .. import core
-from ..core import metrics
+from ..core import metrics, settings
 from ..core.native import CanopyAOError
 
 # Seconds per stage of the last committed bake (for bench/blender_bake_speed.py).
@@ -20,7 +20,13 @@ class BakeJob:
     a time, then commit every write at once, so a cancelled or failed bake changes nothing."""
 
     def __init__(self, context, object_names, opts):
-        self.opts = opts
+        """opts: option name -> value (properties.scene_options, cli.options_from_args);
+        options left out take their defaults. Raises CanopyAOError before changing anything."""
+        opts = self.opts = dict(settings.defaults(), **opts)
+        for o in settings.OPTIONS:  # every value in range before anything is read or written
+            opts[o.name] = o.check(opts[o.name])
+        self.settings = settings.BakeSettings(**{o.name: opts[o.name] for o in settings.OPTIONS
+                                                 if o.group == "bake"})
         self.scene = context.scene
         self.results = []
         # Seconds per stage of this bake (bench/blender_bake_speed.py prints them).
@@ -35,9 +41,6 @@ class BakeJob:
                 materials.check_aov_name(opts["aov_name"])
             except ValueError as exc:
                 raise CanopyAOError(str(exc)) from None
-        if opts["method"] not in core.METHODS:
-            raise CanopyAOError(f"unknown method '{opts['method']}'; one of "
-                                f"{', '.join(core.METHODS)}")
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -54,18 +57,10 @@ class BakeJob:
         t0 = time.perf_counter()
         # Instanced trees (particles, collection instances, geometry nodes): each prototype is
         # baked once (its instances share its mesh) and every instance occludes (instances.py).
-        try:
-            self.prototypes = instances.Prototypes(depsgraph, vertex_mode=opts["mode"] == 'VERTEX')
-        except mesh_io.MeshIOError as exc:
-            raise CanopyAOError(str(exc)) from None
+        self.prototypes = instances.Prototypes(depsgraph, vertex_mode=opts["mode"] == 'VERTEX')
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
-        self.settings = core.BakeSettings(
-            method=opts["method"], tau=opts["tau"], distance=opts["distance"],
-            samples=opts["samples"], time_budget=opts.get("time_budget", 2.0),
-            target_rmse=opts.get("target_rmse", 0.06),
-            forest_epsilon=opts.get("forest_epsilon", 1e-2))
         self.plan = None
         self.index = 0
         self._lap("instances", t0)
@@ -83,16 +78,15 @@ class BakeJob:
 
     def prepare(self):
         t0 = time.perf_counter()
-        try:
-            self.plan = core.prepare(self.items, self.settings)
-            t0 = self._lap("prepare (fit, calibrate)", t0)
-            if self.prototypes:
-                skip = {it.name for it in self.targets}
-                core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
-                self.lines.extend(self.prototypes.lines())
-                self._lap("instances", t0)
-        except (CanopyAOError, ValueError, RuntimeError) as exc:
-            raise CanopyAOError(f"bake failed: {exc}") from exc
+        # CanopyAOError (bad input, with its reason) passes to the caller as it is; anything
+        # else is a bug and keeps its traceback.
+        self.plan = core.prepare(self.items, self.settings)
+        t0 = self._lap("prepare (fit, calibrate)", t0)
+        if self.prototypes:
+            skip = {it.name for it in self.targets}
+            core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
+            self.lines.extend(self.prototypes.lines())
+            self._lap("instances", t0)
 
     def step(self):
         """Bake the next target; returns the line to report, or None when all are done."""
@@ -103,8 +97,8 @@ class BakeJob:
         t0 = time.perf_counter()
         try:
             r = core.evaluate_item(self.plan, it)
-        except (CanopyAOError, ValueError, RuntimeError) as exc:
-            raise CanopyAOError(f"{it.name}: bake failed: {exc}") from exc
+        except CanopyAOError as exc:
+            raise CanopyAOError(f"{it.name}: {exc}") from exc
         self._lap("evaluate", t0)
         self.results.append(r)
         line = (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method {r.method}, "

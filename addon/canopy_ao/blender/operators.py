@@ -1,14 +1,16 @@
 """The operators: bake (modal in a window, blocking in the background), guess roles, remove
 the material wiring. The bake itself is a BakeJob (job.py), shared with the command line."""
 
+import traceback
+
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import StringProperty
 
 from . import mesh_io
-from .gather import scene_settings_opts
 from .job import BakeJob
-from .properties import method_items
+from .properties import option_properties, raw_values, resolve
 from ..core import roles
+from ..core.settings import OPTIONS
 from ..core.native import CanopyAOError, core_status
 
 
@@ -22,28 +24,11 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
     bl_label = "Bake Canopy AO"
     bl_options = {'REGISTER', 'UNDO'}
 
-    # Every setting can be given as an argument; one left unset takes the scene's panel value.
+    # Every option of core/settings.py is an argument (option_properties, added below); one
+    # left unset takes the scene's panel value.
     objects: StringProperty(name="Objects", default="",
                             description="Comma-separated object names; empty = the selection, "
                                         "or every visible mesh")
-    method: EnumProperty(name="Method", items=method_items)
-    tau: FloatProperty(name="τ", default=0.0, min=0.0,
-                       description="Optical depth; 0 = calibrate automatically")
-    distance: FloatProperty(name="AO Distance", default=10.0, min=0.0)
-    samples: IntProperty(name="Samples", default=64, min=1)
-    attribute: StringProperty(name="Attribute", default="CanopyAO")
-    overwrite: BoolProperty(name="Overwrite", default=False)
-    show_proxies: BoolProperty(name="Show Proxies", default=True)
-    wire_material: BoolProperty(name="Wire Material", default=False)
-    add_aov: BoolProperty(name="Add AOV", default=False)
-    aov_name: StringProperty(name="AOV Name", default="BakedAO")
-    mode: EnumProperty(name="Output", items=[("VERTEX", "Per Vertex", ""),
-                                             ("TEXEL", "Per Texel", "")], default="VERTEX")
-    uv_map: StringProperty(name="UV Map", default="")
-    resolution: IntProperty(name="Resolution", default=1024, min=16, max=16384)
-    image_dir: StringProperty(name="Image Folder", default="//canopy_ao", subtype='DIR_PATH')
-    check_cycles: BoolProperty(name="Check with Cycles", default=False)
-    cycles_samples: IntProperty(name="Cycles Samples", default=64, min=1)
 
     _timer = None
     _job = None
@@ -61,31 +46,38 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         return True
 
     def _opts(self, context):
-        opts = scene_settings_opts(context.scene)
-        keymap = {"attribute": "attribute", "method": "method", "distance": "distance",
-                  "samples": "samples", "overwrite": "overwrite", "show_proxies": "show_proxies",
-                  "wire_material": "wire_material", "add_aov": "add_aov",
-                  "aov_name": "aov_name", "check_cycles": "check_cycles",
-                  "cycles_samples": "cycles_samples", "mode": "mode", "uv_map": "uv_map",
-                  "resolution": "resolution", "image_dir": "image_dir"}
-        for prop, key in keymap.items():
-            if self.properties.is_property_set(prop):
-                opts[key] = getattr(self, prop)
-        if self.properties.is_property_set("tau"):
-            opts["tau"] = self.tau if self.tau > 0 else None
-        return opts
+        is_set = self.properties.is_property_set
+        values = raw_values(context.scene.canopy_ao)
+        for name in values:
+            if is_set(name):
+                values[name] = getattr(self, name)
+        # A number given without its switch means that number: tau=2 bakes with τ 2, whatever
+        # the panel's Calibrate τ; distance=10 is used even when the panel follows the World.
+        for o in OPTIONS:
+            if o.none_prop and is_set(o.name) and not is_set(o.none_prop):
+                values[o.none_prop] = False
+        if is_set("distance") and not is_set("use_world_distance"):
+            values["use_world_distance"] = False
+        return resolve(values, context.scene)
 
     def _names(self):
         return [s.strip() for s in self.objects.split(",") if s.strip()]
 
     def _report_error(self, exc):
-        self.report({'ERROR'}, str(exc))
+        """CanopyAOError: its message. Anything else is a bug: the traceback goes to the
+        console and the report says it is one."""
+        if isinstance(exc, CanopyAOError):
+            self.report({'ERROR'}, str(exc))
+        else:
+            traceback.print_exception(type(exc), exc, exc.__traceback__)
+            self.report({'ERROR'}, f"Canopy AO internal error ({type(exc).__name__}: {exc}); "
+                                   "the traceback is in the system console, please report it")
         return {'CANCELLED'}
 
     def _finish(self, context, job, lines_reported=False):
         try:
             job.commit(context)
-        except (CanopyAOError, mesh_io.MeshIOError, RuntimeError) as exc:
+        except Exception as exc:  # reported, never left to Blender half-handled
             return self._report_error(exc)
         rep = job.report_dict
         for line in job.lines if not lines_reported else ():
@@ -112,7 +104,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                     job.lines.append(line)
             finally:
                 wm.progress_end()
-        except CanopyAOError as exc:
+        except Exception as exc:
             return self._report_error(exc)
         return self._finish(context, job)
 
@@ -121,7 +113,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
             return self.execute(context)
         try:
             self._job = BakeJob(context, self._names(), self._opts(context))
-        except CanopyAOError as exc:
+        except Exception as exc:
             return self._report_error(exc)
         wm = context.window_manager
         wm.progress_begin(0, self._job.steps)
@@ -157,7 +149,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                 job.lines.append(line)
                 self.report({'INFO'}, line)
             context.window_manager.progress_update(job.index + 1)
-        except CanopyAOError as exc:
+        except Exception as exc:  # whatever it is, the timer and the status text go
             self._stop(context)
             return self._report_error(exc)
         return {'RUNNING_MODAL'}
@@ -228,6 +220,8 @@ class CANOPY_AO_OT_remove_wiring(bpy.types.Operator):
     def invoke(self, context, event):
         return self.execute(context)
 
+
+CANOPY_AO_OT_bake.__annotations__.update(option_properties())
 
 classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles, CANOPY_AO_OT_remove_wiring)
 

@@ -1,37 +1,76 @@
-"""Settings: scene.canopy_ao (the bake) and Object.canopy_ao (role, tree, last result)."""
+"""Settings in Blender: scene.canopy_ao (the bake's options, generated from core/settings.py's
+OPTIONS, plus the last report) and Object.canopy_ao (role, tree, last result). The bake
+operator's properties come from the same generator (option_properties)."""
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-from ..core import ladder
-
-METHOD_LABELS = {
-    "auto": ("Auto", "Calibrate tau and pick sphere / ellipsoid / shells against a few hundred "
-                     "ray-traced points: the cheapest model that is good enough"),
-    "sphere": ("Sphere", "One fitted sphere per tree (Hegeman Eq. 4-6)"),
-    "ellipsoid": ("Ellipsoid", "One fitted ellipsoid per tree"),
-    "shells": ("Shells", "Several ellipsoid shells per tree (k-means clusters)"),
-    "medium": ("Leaf medium", "The shells filled with randomly oriented leaves: exact expected "
-                              "AO of a uniform medium (tabulated)"),
-    "reeves_blau": ("Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
-    "grid": ("Density grid", "Leaf density voxelised, rays marched through it"),
-    "raytrace": ("Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
-}
+from ..core.settings import OPTIONS
+from .gather import world_ao_distance
 
 
-# Blender keeps only pointers to a dynamic enum's strings: hold the list for the session.
-_METHOD_ITEMS = []
+def _number_kw(o):
+    kw = {}
+    if o.min is not None:
+        kw["min"] = o.min
+    if o.max is not None:
+        kw["max"] = o.max
+    if o.soft_max is not None:
+        kw["soft_max"] = o.soft_max
+    return kw
 
 
-def method_items(self, context):
-    # Offer only what the loaded native module can run ("grid" needs DensityGrid); the numbers
-    # stay fixed so a saved choice keeps its meaning.
-    if not _METHOD_ITEMS:
-        avail = ladder.available_methods()
-        _METHOD_ITEMS.extend((m, *METHOD_LABELS[m], i) for i, m in enumerate(ladder.METHODS)
-                             if m in avail or m == "auto")
-    return _METHOD_ITEMS
+def _property(o):
+    """The bpy property of one option (its number, for an optional one)."""
+    kw = dict(name=o.label, description=o.help)
+    if o.kind == "float":
+        default = o.number_default if o.none_prop else o.default
+        return FloatProperty(default=default, unit=o.unit, **_number_kw(o), **kw)
+    if o.kind == "int":
+        return IntProperty(default=o.default, **_number_kw(o), **kw)
+    if o.kind == "bool":
+        return BoolProperty(default=o.default, **kw)
+    if o.kind == "str":
+        return StringProperty(default=o.default, subtype=o.subtype, **kw)
+    # Fixed numbers, so a saved choice keeps its meaning when items are added.
+    items = [(i, label, text, n) for n, (i, label, text) in enumerate(o.items)]
+    return EnumProperty(items=items, default=o.default, **kw)
+
+
+def option_properties():
+    """{name: bpy property} for every option, and the None switch of optional numbers
+    (calibrate_tau), in OPTIONS order."""
+    out = {}
+    for o in OPTIONS:
+        if o.none_prop:
+            out[o.none_prop] = BoolProperty(name=o.none_label, description=o.none_help,
+                                            default=o.default is None)
+        out[o.name] = _property(o)
+    return out
+
+
+def resolve(values, scene):
+    """Options as a bake takes them, from raw property values: an optional number is None when
+    its switch is on (calibrate_tau: τ None), and the AO distance is the World's when
+    use_world_distance is on."""
+    opts = {o.name: values[o.name] for o in OPTIONS}
+    for o in OPTIONS:
+        if o.none_prop and values[o.none_prop]:
+            opts[o.name] = None
+    if values["use_world_distance"]:
+        opts["distance"] = world_ao_distance(scene)
+    return opts
+
+
+def raw_values(group):
+    """Every option's (and None switch's) value as a property group or operator holds it."""
+    return {name: getattr(group, name) for name in option_properties()}
+
+
+def scene_options(scene):
+    """The bake options as the scene's panel has them."""
+    return resolve(raw_values(scene.canopy_ao), scene)
 
 
 ROLE_ITEMS = [
@@ -44,50 +83,11 @@ ROLE_ITEMS = [
     ("IGNORE", "Ignore", "Takes no part in the bake"),
 ]
 
-
-class CanopyAOSceneSettings(bpy.types.PropertyGroup):
-    method: EnumProperty(name="Method", items=method_items,
-                         description="How the AO is computed")
-    tau_auto: BoolProperty(name="Auto τ", default=True,
-                           description="Calibrate the optical depth against ray-traced samples")
-    tau: FloatProperty(name="τ", default=1.5, min=0.001, soft_max=20.0,
-                       description="Optical depth of a canopy: AO at its centre is exp(-τ)")
-    use_world_distance: BoolProperty(
-        name="From World", default=True,
-        description="Use the World's AO distance (World > Ambient Occlusion > Distance), as "
-                    "Cycles' AO bake does, so the bake and a Cycles check agree at any scale")
-    distance: FloatProperty(name="AO Distance", default=10.0, min=0.0, unit='LENGTH',
-                            description="Ray length cut-off (as Cycles' world AO distance); "
-                                        "0 = unlimited. Used by the ray-traced method and "
-                                        "calibration")
-    samples: IntProperty(name="Samples", default=64, min=1, soft_max=1024,
-                         description="Rays per vertex for the ray-traced method")
-    attribute_name: StringProperty(name="Attribute", default="CanopyAO",
-                                   description="Color attribute (POINT, FLOAT_COLOR) to write")
-    overwrite: BoolProperty(name="Overwrite", default=False,
-                            description="Replace an attribute of this name that Canopy AO did "
-                                        "not make")
-    wire_material: BoolProperty(name="Wire Material", default=False,
-                                description="Connect the baked attribute into the materials")
-    add_aov: BoolProperty(name="Add AOV", default=False,
-                          description="Add a shader AOV output and a view-layer AOV")
-    aov_name: StringProperty(name="AOV Name", default="BakedAO",
-                             description="Name of the AOV ('AO' would collide with Cycles' own "
-                                         "AO pass)")
-    mode: EnumProperty(name="Output", items=[
-        ("VERTEX", "Per Vertex", "A color attribute"),
-        ("TEXEL", "Per Texel", "An image in the UV layout")], default="VERTEX")
-    uv_map: StringProperty(name="UV Map", default="", description="Empty = active UV map")
-    resolution: IntProperty(name="Resolution", default=1024, min=16, max=16384)
-    image_dir: StringProperty(name="Image Folder", default="//canopy_ao", subtype='DIR_PATH')
-    show_proxies: BoolProperty(name="Show Proxies", default=True,
-                               description="Show the fitted shells as empties in a "
-                                           "'Canopy AO Proxies' collection")
-    check_cycles: BoolProperty(name="Check with Cycles", default=False,
-                               description="Also bake Cycles AO and report the error (slow)")
-    cycles_samples: IntProperty(name="Cycles Samples", default=64, min=1, soft_max=4096)
-    last_report: StringProperty(name="Last Bake", default="",
-                                description="Summary of the last bake")
+CanopyAOSceneSettings = type("CanopyAOSceneSettings", (bpy.types.PropertyGroup,), {
+    "__annotations__": dict(option_properties(), last_report=StringProperty(
+        name="Last Bake", default="", description="Summary of the last bake")),
+    "__doc__": "The bake's options (core/settings.py) and the last bake's summary",
+})
 
 
 class CanopyAOObjectSettings(bpy.types.PropertyGroup):

@@ -10,25 +10,22 @@ and calibrates; evaluate_item() bakes one item; bake() does both.
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from . import ladder, lighting, native, proxies
-from .native import CanopyAOError
+from .native import CanopyAOError, refusals_are_user_errors
 from .scene import ItemResult, Plan, SceneItem
-from .settings import DEFAULT_TAU, BakeSettings
+from .ladder import DEFAULT_TAU
+from .settings import BakeSettings, validate
 
 
+@refusals_are_user_errors
 def prepare(items, settings: BakeSettings) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError."""
     native.require()
-    if settings.method not in ladder.METHODS:
-        raise CanopyAOError(f"unknown method {settings.method!r}; one of "
-                            f"{', '.join(ladder.METHODS)}")
-    if settings.tau is not None and not (settings.tau > 0 and math.isfinite(settings.tau)):
-        raise CanopyAOError(f"tau must be a finite number > 0, got {settings.tau}")
+    validate(settings)
     items = list(items)
     t_start = time.perf_counter()
     plan = Plan(settings=settings, method=settings.method,
@@ -70,6 +67,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
     return plan
 
 
+@refusals_are_user_errors
 def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
     """Bake one item with the plan's method and τ."""
     t0 = time.perf_counter()
@@ -84,6 +82,7 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
                       time.perf_counter() - t0)
 
 
+@refusals_are_user_errors
 def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     """Make instanced trees occlude every item evaluate_item() bakes with this plan.
 

@@ -16,10 +16,24 @@ import numpy as np
 from . import native
 from .lighting import evaluate_points, trace
 from .scene import RECEIVER_ROLES, Plan
-from .settings import DEFAULT_TAU
 
+# (name, label, help) of each rung; settings.OPTIONS offers them in this order.
+RUNGS = (
+    ("auto", "Auto", "Calibrate tau and climb sphere / ellipsoid / shells / medium / grid / "
+                     "rays against a few hundred ray-traced points: the cheapest rung that is "
+                     "good enough within the time budget"),
+    ("sphere", "Sphere", "One fitted sphere per tree (Hegeman Eq. 4-6)"),
+    ("ellipsoid", "Ellipsoid", "One fitted ellipsoid per tree"),
+    ("shells", "Shells", "Several ellipsoid shells per tree (k-means clusters)"),
+    ("medium", "Leaf medium", "The shells filled with randomly oriented leaves: exact expected "
+                              "AO of a uniform medium (tabulated)"),
+    ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
+    ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
+    ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
+)
+METHODS = tuple(r[0] for r in RUNGS)
 ANALYTIC_METHODS = ("sphere", "ellipsoid", "shells")
-METHODS = ("auto",) + ANALYTIC_METHODS + ("medium", "reeves_blau", "grid", "raytrace")
+DEFAULT_TAU = 1.5  # τ when it is neither given nor calibrated
 # Rungs that take τ (the density grid has physical density; rays are exact).
 TAU_METHODS = ANALYTIC_METHODS + ("medium", "reeves_blau")
 

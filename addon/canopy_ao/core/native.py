@@ -7,6 +7,7 @@ to build it), so a missing or stale build is detected once, here, not at each ca
 
 from __future__ import annotations
 
+import functools
 import sys
 
 
@@ -14,6 +15,22 @@ class CanopyAOError(ValueError):
     """A bake that cannot be done as asked (bad input, a scene problem, a missing build), with
     a message a user can act on. A ValueError, as the native module's refusals of bad input
     are; not a RuntimeError, so catching it never hides a bug (which keeps its traceback)."""
+
+
+def refusals_are_user_errors(fn):
+    """Decorator for the core's entry points: a ValueError from inside (the native module's
+    documented refusal of bad input, e.g. a mesh with NaN coordinates) reaches the caller as a
+    CanopyAOError with the same message, the original chained. Every other exception is a bug
+    and passes unchanged, with its traceback."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except CanopyAOError:
+            raise
+        except ValueError as exc:
+            raise CanopyAOError(str(exc)) from exc
+    return wrapper
 
 
 # What the add-on calls. A module built from older sources lacks some: it is then reported as

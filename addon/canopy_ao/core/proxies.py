@@ -8,10 +8,9 @@ import numpy as np
 from . import roles as _roles
 from .native import _core
 from .scene import Plan, SceneItem
-from .settings import BakeSettings
 
 
-def fit_tree(points: np.ndarray, settings: BakeSettings):
+def fit_tree(points: np.ndarray, settings):
     """Fitted canopy proxies for one tree: (sphere, ellipsoid, [k shells]). The k-means shells
     cost most (1.2 s for 1M points), so only the methods that use them get them; the others
     get [ellipsoid]."""

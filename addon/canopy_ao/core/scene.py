@@ -8,7 +8,6 @@ import numpy as np
 
 from . import roles as _roles
 from .native import CanopyAOError
-from .settings import BakeSettings
 
 RECEIVER_ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS")
 
@@ -39,7 +38,7 @@ class SceneItem:
 class Plan:
     """What prepare() decided: proxies per tree, method, τ, and the shared state for the bake."""
 
-    settings: BakeSettings
+    settings: object  # settings.BakeSettings
     method: str
     tau: float
     fits: dict = field(default_factory=dict)  # tree -> (Sphere, Ellipsoid, [Ellipsoid] shells)
