@@ -142,8 +142,7 @@ def run(args):
     ok, msg = core_status()
     if not ok:
         raise BakeFailed(msg)
-    if args.threads:
-        require().set_max_threads(args.threads)
+    require().set_max_threads(args.threads)  # 0 also lifts a cap an earlier bake here set
     if args.save and not bpy.data.filepath:
         raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
     opts = options_from_args(args, gather.world_ao_distance(bpy.context.scene))
