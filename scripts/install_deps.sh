@@ -9,7 +9,7 @@ pkgs=(
   pybind11-dev libembree-dev libopenimageio-dev libtbb-dev
   libgtest-dev libbenchmark-dev
   blender xvfb xauth
-  slurmctld slurmd slurm-client munge nodejs  # batch bakes: a one-node Slurm, Flamenco's JS
+  slurmctld slurmd slurm-client munge parallel nodejs  # batch back ends; Flamenco's JS
 )
 if [[ "${1:-}" == "--with-bench" ]]; then
   pkgs+=(python3-matplotlib)

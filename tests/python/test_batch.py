@@ -1,6 +1,6 @@
 """Batch bakes end to end: `python3 -m canopy_ao.batch` on tiny generated scenes, through the
-local back end and through a real single-node Slurm cluster (started here, on loopback), and the
-Flamenco job type's command lines against the batch's own.
+local back end, GNU parallel and a real single-node Slurm cluster (started here, on loopback),
+and the Flamenco job type's command lines against the batch's own.
 
 These start Blender processes (the batch's tasks), so they need Blender and the built module
 as the Blender tests do. The Slurm test skips only when Slurm's programs are not installed
@@ -188,6 +188,19 @@ def test_bad_batch_arguments_exit_2_before_any_bake(tmp_path, env, scenes):
     code, log = batch(env, srcs[0], "--output", str(tmp_path / "in"))
     assert code == 2 and "would overwrite it" in log
     assert not os.path.exists(tmp_path / "o")
+
+
+@pytest.mark.skipif(shutil.which("parallel") is None, reason="GNU parallel is not installed "
+                    "(scripts/install_deps.sh installs it)")
+def test_gnu_parallel_back_end_runs_the_same_tasks(tmp_path, env, scenes):
+    srcs = _inputs(scenes, str(tmp_path / "in"), 3)
+    out = str(tmp_path / "out")
+    code, log = batch(env, str(tmp_path / "in"), "--output", out, "--backend", "parallel",
+                      "-j", "2", "--files-per-task", "2")
+    assert code == 0 and "3 to bake in 2 task(s) on parallel" in log, log
+    rows = summary(out)
+    assert [rows[os.path.basename(s)]["status"] for s in srcs] == ["ok"] * 3, log
+    check_outputs(env, [(s, os.path.join(out, os.path.basename(s))) for s in srcs])
 
 
 @pytest.mark.skipif(bool(slurm_cluster.missing()), reason="Slurm is not installed (missing "

@@ -37,7 +37,9 @@ def build_parser():
     p.add_argument("--in-place", action="store_true",
                    help="save the bake into the source files themselves (reports still go "
                         "to --output)")
-    p.add_argument("--backend", choices=("local", "slurm"), default="local")
+    p.add_argument("--backend", choices=("local", "parallel", "slurm"), default="local",
+                   help="local: a process pool here; parallel: GNU parallel here; slurm: an "
+                        "array job")
     p.add_argument("-j", "--jobs", type=_positive, default=1, metavar="N",
                    help="bakes at once: local processes, or the Slurm array's %%N cap")
     p.add_argument("--files-per-task", type=_positive, default=None, metavar="K",
@@ -121,7 +123,7 @@ def run(args, bake_args):
             print(shlex.join(runner.command(p, t)))
         return 0
     if p["tasks"]:
-        (run_slurm if slurm else run_local)(p, args)
+        BACKENDS[args.backend](p, args)
 
     rows = runner.collect(p, todo)
     for s in skipped:
@@ -153,13 +155,34 @@ def run_local(p, args):
         list(pool.map(one, range(len(p["tasks"]))))
 
 
+def _addon_parent():
+    """The folder holding the canopy_ao package (what PYTHONPATH needs for the runner)."""
+    return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def runner_command(plan_path, python=sys.executable):
+    return [python, "-m", "canopy_ao.batch.runner", plan_path]
+
+
+def run_parallel(p, args):
+    """GNU parallel running -j runners at once, one per task, as the Slurm array does."""
+    plan_path = runner.save_plan(p)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [_addon_parent()] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])))
+    cmd = ["parallel", "--will-cite", "--halt", "never", "-j", str(args.jobs),
+           *runner_command(plan_path), ":::", *map(str, range(len(p["tasks"])))]
+    try:
+        subprocess.run(cmd, env=env, check=False)  # failures are in the reports
+    except FileNotFoundError:
+        raise plan.BatchError("GNU parallel is not installed (apt install parallel), or use "
+                              "--backend local") from None
+
+
 def slurm_script(p, plan_path, python=sys.executable):
     """The sbatch script of one array element: the same runner the local back end calls."""
-    addon_parent = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     return ("#!/bin/sh\n"
-            f"export PYTHONPATH={shlex.quote(addon_parent)}${{PYTHONPATH:+:$PYTHONPATH}}\n"
-            f"exec {shlex.quote(python)} -m canopy_ao.batch.runner {shlex.quote(plan_path)} "
-            "\"$SLURM_ARRAY_TASK_ID\"\n")
+            f"export PYTHONPATH={shlex.quote(_addon_parent())}${{PYTHONPATH:+:$PYTHONPATH}}\n"
+            f"exec {shlex.join(runner_command(plan_path, python))} \"$SLURM_ARRAY_TASK_ID\"\n")
 
 
 def sbatch_command(p, args, script_path):
@@ -201,6 +224,8 @@ def run_slurm(p, args):
             return job
         time.sleep(args.poll)
 
+
+BACKENDS = {"local": run_local, "parallel": run_parallel, "slurm": run_slurm}
 
 if __name__ == "__main__":
     sys.exit(main())
