@@ -27,13 +27,6 @@ def _arg_type(option):
     return convert
 
 
-def _threads(text):
-    v = int(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
-    return v
-
-
 class BakeFailed(Exception):
     """A bake that could not be done; the message says why (printed as canopy_ao: error:)."""
 
@@ -70,7 +63,7 @@ def build_parser():
             _add_option(p, o)
     p.add_argument("--report", metavar="FILE.json", help="write a JSON report here")
     p.add_argument("--save", action="store_true", help="save the .blend after baking")
-    p.add_argument("--threads", type=_threads, default=0,
+    p.add_argument("--threads", type=int, default=0, metavar="N",
                    help="cap the native core's worker threads (0 = every core; results do "
                         "not depend on it), so several bakes can share a machine")
     return p
@@ -104,7 +97,10 @@ def _fail(message, code=1):
 
 def main(argv=None):
     """Parse the args after ``--``, bake, report; sys.exit with 0 on success."""
-    args = build_parser().parse_args(_argv(argv))  # exits 2 with usage on bad arguments
+    parser = build_parser()
+    args = parser.parse_args(_argv(argv))  # exits 2 with usage on bad arguments
+    if args.threads < 0:
+        parser.error(f"--threads must be >= 0, got {args.threads}")
     try:
         run(args)
         code = 0
