@@ -188,9 +188,10 @@ def slurm_script(p, plan_path, python=sys.executable):
 def sbatch_command(p, args, script_path):
     n = len(p["tasks"])
     logs = p["logs"]
+    # --threads 0 (every core) asks nothing: the cluster's default CPUs per task apply.
+    cpus = [f"--cpus-per-task={p['threads']}"] if p["threads"] else []
     return ["sbatch", "--parsable", "--job-name=canopy_ao_batch",
-            f"--array=0-{n - 1}%{args.jobs}",
-            f"--cpus-per-task={max(1, p['threads'])}",
+            f"--array=0-{n - 1}%{args.jobs}", *cpus,
             f"--output={os.path.join(logs, 'slurm-%A_%a.out')}",
             *args.sbatch_arg, script_path]
 

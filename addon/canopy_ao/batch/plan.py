@@ -43,7 +43,7 @@ def read_manifest(path: str) -> list[str]:
     base = os.path.dirname(os.path.abspath(path))
     entries = []
     for line in lines:
-        line = line.split("#", 1)[0].strip() if not line.lstrip().startswith("#") else ""
+        line = line.split("#", 1)[0].strip()
         if line:
             entries.append(line if os.path.isabs(line) else os.path.join(base, line))
     return entries
