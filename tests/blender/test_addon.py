@@ -512,7 +512,8 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     """Set roles and a given τ with an analytic model: no object's triangles are fetched, and
     the bake equals the one that fetched them (grass keeps its blades)."""
-    from canopy_ao.blender import job, mesh_io as mio
+    from canopy_ao.blender import mesh_io as mio, properties
+    from canopy_ao.blender.job import run_bake
     roles = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
     for name, role in roles.items():
         bpy.data.objects[name].canopy_ao.role = role
@@ -530,7 +531,10 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     assert asked == {"Trunk": False, "Leaves": False, "Ground": False, "Grass": True}
     for n in roles:
         np.testing.assert_array_equal(ao_of(n), before[n])
-    assert set(job.LAST_TIMINGS) >= {"positions", "normals", "evaluate", "write"}
+    opts = dict(properties.scene_options(bpy.context.scene), method="sphere", tau=1.5,
+                distance=0.0)
+    _job, rep = run_bake(bpy.context, list(roles), opts)  # its times come back in the report
+    assert set(rep["stage_seconds"]) >= {"positions", "normals", "evaluate", "write"}
     asked.clear()
     bpy.context.scene.canopy_ao.calibrate_tau = True  # calibration traces every triangle
     assert bake(method="sphere") == {'FINISHED'}
@@ -538,8 +542,9 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
 
 
 def test_ao_distance_follows_the_world_unless_typed():
-    """The default AO distance is the World's, the one Cycles' AO bake applies (DESIGN 9), so a
-    bake and its Cycles check agree at any scene scale; typing one needs 'From World' off."""
+    """The default AO distance is the World's, the one Cycles' AO bake applies (docs/DESIGN.md,
+    'Facts measured in Blender'), so a bake and its Cycles check agree at any scene scale; typing
+    one needs 'From World' off."""
     from canopy_ao.blender import properties
     scene = bpy.context.scene
     s = scene.canopy_ao

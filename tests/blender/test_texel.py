@@ -1,4 +1,4 @@
-"""texel.py: per-texel bake glue (UV gather, raster, image file, wiring)."""
+"""texel_io.py: per-texel receivers and results (UV gather, native raster, image file, wiring)."""
 import os
 
 import bpy
@@ -124,12 +124,12 @@ def test_margin_dilates_outside_the_island(scene, tmp_path):
     assert stats["margin_texels"] == 10 * 10 - 64
 
 
-def test_numpy_raster_counts_shared_edges_once():
+def test_raster_counts_shared_edges_once():
     # two triangles of a unit quad, UV = the whole tile: every texel once, no overlap
     uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], dtype=np.float32)
     pos = np.concatenate([uvs, np.zeros((6, 1), np.float32)], axis=1)
     nrm = np.tile(np.array([[0, 0, 1]], np.float32), (6, 1))
-    pixels, tpos, tnrm, stats = texel._rasterize_numpy(uvs, pos, nrm, 8, 8)
+    pixels, tpos, tnrm, stats = texel.rasterize(uvs, pos, nrm, 8, 8)
     assert np.array_equal(pixels, np.arange(64))
     assert stats["overlapping_texels"] == 0
     assert np.allclose(tpos[:, 0], ((pixels % 8) + 0.5) / 8)
@@ -159,18 +159,19 @@ def test_texel_bake_checks_against_cycles(scene, tmp_path):
     assert m["mae"] < 0.12 and -1.0 <= m["corr"] <= 1.0
 
 
-def test_native_raster_agrees_with_numpy_stand_in(scene):
-    core = texel._core()
-    if core is None or not hasattr(core, "rasterize_uv"):
-        pytest.skip("this build of _core has no rasterize_uv")
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+def test_texels_of_a_moved_sphere_lie_on_it_in_world_space(scene):
+    """The texel receivers come from the evaluated mesh in world space (the transform the
+    vertex path uses): every texel of a UV sphere moved and scaled lies on that sphere, with
+    its outward unit normal."""
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, radius=1.0,
+                                         location=(3.0, -1.0, 2.0))
     obj = bpy.context.object
-    uvs, pos, nrm = texel.gather_corner_triangles(obj, bpy.context.evaluated_depsgraph_get(),
-                                                  "UVMap")
-    pa, xa, na, sa = texel.rasterize(uvs, pos, nrm, 64, 64)
-    pb, xb, nb, sb = texel._rasterize_numpy(uvs, pos, nrm, 64, 64)
-    assert sa["raster"] == "native" and sb["raster"] == "numpy"
-    assert sa["exact_texels"] == sb["exact_texels"] == len(pb)
-    common, ia, ib = np.intersect1d(pa, pb, return_indices=True)
-    assert len(common) == len(pb)  # native adds conservative texels only
-    assert np.abs(xa[ia] - xb[ib]).max() < 1e-5 and np.abs(na[ia] - nb[ib]).max() < 1e-5
+    obj.scale = (2.0, 2.0, 2.0)
+    bpy.context.view_layer.update()
+    rx = texel.receivers(obj, bpy.context.evaluated_depsgraph_get(), "UVMap", 64)
+    assert len(rx.pixels) > 1000 and rx.stats["texels"] == len(rx.pixels)
+    r = np.linalg.norm(rx.positions - np.float32([3.0, -1.0, 2.0]), axis=1)
+    assert np.all(np.abs(r - 2.0) < 0.05)  # polygonal sphere: inside the true one by < 2 %
+    assert np.allclose(np.linalg.norm(rx.normals, axis=1), 1.0, atol=1e-4)
+    outward = (rx.positions - np.float32([3.0, -1.0, 2.0])) / r[:, None]
+    assert np.einsum("ij,ij->i", outward, rx.normals).min() > 0.9

@@ -97,6 +97,49 @@ def steps():
         operators.CANOPY_AO_OT_bake._stop, lighting.evaluate_points = real_stop, real_eval
     check(stops == [1], f"the modal did not clean up after a bug (stop called {len(stops)}x)")
     check("Broken" not in ground(), "a failed bake wrote its attribute")
+
+    # A texel bake: its texels are evaluated chunk by chunk across timer ticks (progress moves),
+    # and Esc stops it with no image or file written.
+    from canopy_ao.blender import job as job_mod
+    import tempfile
+    bpy.ops.mesh.primitive_plane_add(size=20.0)
+    plane = bpy.context.object
+    plane.name = "TexelGround"
+    image_dir = tempfile.mkdtemp(prefix="canopy_ao_ui_")
+    seen, real_step = [], job_mod.BakeJob.step
+
+    def recording_step(self):
+        seen.append((self.steps_done, self.steps))
+        return real_step(self)
+
+    saved = job_mod.CHUNK, operators.TICK, job_mod.BakeJob.step
+    job_mod.CHUNK, operators.TICK, job_mod.BakeJob.step = 64, 0.0, recording_step
+    try:
+        with bpy.context.temp_override(**window_ctx()):
+            r = bpy.ops.canopy_ao.bake('INVOKE_DEFAULT', objects="TexelGround",
+                                       method="ellipsoid", tau=2.0, mode='TEXEL',
+                                       resolution=128, image_dir=image_dir)
+        check(r == {'RUNNING_MODAL'}, f"texel invoke gave {r}")
+        for _ in range(100):
+            if len(seen) >= 10:
+                break
+            yield 0.05
+        check(len(seen) >= 10, f"the texel bake made {len(seen)} steps in 5 s")
+        win.event_simulate(type='ESC', value='PRESS')
+        win.event_simulate(type='ESC', value='RELEASE')
+        yield 0.5
+        n_at_esc = len(seen)
+        yield 0.5
+    finally:
+        job_mod.CHUNK, operators.TICK, job_mod.BakeJob.step = saved
+    done = [d for d, _total in seen]
+    total = seen[0][1]
+    check(total > 100, f"a 128² texel bake in chunks of 64 has {total} steps")
+    check(done == sorted(done) and done[-1] > done[0], f"progress did not move: {done[:20]}")
+    check(len(seen) == n_at_esc and done[-1] < total - 1, "Esc did not stop the texel bake")
+    check(not os.listdir(image_dir), "a cancelled texel bake wrote a file")
+    check(not any(img.get("canopy_ao_object") == "TexelGround" for img in bpy.data.images),
+          "a cancelled texel bake made an image")
     print("UI-OK", flush=True)
     os._exit(0)
 

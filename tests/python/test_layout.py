@@ -37,3 +37,21 @@ def test_native_module_imported_in_one_place():
                 if re.search(r"^\s*(from \.+ import _core|import canopy_ao\._core)", text, re.M):
                     found.append(os.path.relpath(path, PACKAGE))
     assert found == [os.path.join("core", "native.py")]
+
+
+# Files allowed past the limit for now, each with the reason (docs/DESIGN.md, 'Architecture').
+LONG = {os.path.join("blender", "materials.py"):
+        "its Blender 4.3/5.2 compatibility edits land first; then the view-layer AOV part moves"}
+
+
+def test_no_file_in_the_addon_is_long():
+    long = {}
+    for root, _dirs, files in os.walk(PACKAGE):
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(root, f)
+                with open(path, encoding="utf-8") as fh:
+                    n = sum(1 for _ in fh)
+                if n > 350:
+                    long[os.path.relpath(path, PACKAGE)] = n
+    assert set(long) <= set(LONG), long

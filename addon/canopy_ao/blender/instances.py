@@ -1,5 +1,6 @@
 """Instanced trees in Blender: find them, bake each prototype once, let every instance occlude
-(issue 6, item 6; the math is in forest.py, which needs no bpy).
+(docs/DESIGN.md, 'How each role is lit'; the math is in core/forest.py, which needs no
+bpy).
 
 Instances come from the evaluated depsgraph (``depsgraph.object_instances``), which covers
 particle systems, collection-instance empties and geometry-nodes instances alike. Each instance
@@ -18,7 +19,7 @@ instance).
 
 import numpy as np
 
-from . import gather, mesh_io
+from . import gather, materials, mesh_io
 from .. import core
 from ..core import forest
 
@@ -111,9 +112,16 @@ class Prototypes:
                     self.results.append(core.evaluate_item(plan, it))
         return protos
 
-    def commit(self, attribute, overwrite):
+    def commit(self, txn, opts):
+        """Write each prototype's attribute (and wiring), recorded in txn (commit.Transaction)."""
+        from .targets import wire_undo
         for r in self.results:
-            mesh_io.write_ao_attribute(self.objects[r.name], attribute, r.ao, overwrite=overwrite)
+            obj = self.objects[r.name]
+            txn.attribute(obj, opts["attribute"])
+            mesh_io.write_ao_attribute(obj, opts["attribute"], r.ao, overwrite=opts["overwrite"])
+            if opts["wire_material"]:
+                wire_undo(txn, obj)
+                materials.wire_vertex_ao(obj, opts["attribute"], opts["aov_name"])
 
     def lines(self):
         out = []

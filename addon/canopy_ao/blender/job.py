@@ -1,5 +1,6 @@
 """One bake in Blender, shared by the operator (modal or not) and the command line: gather and
-check (nothing changed on failure), prepare, evaluate one target per step, commit."""
+check (nothing changed on failure), prepare, evaluate receivers in chunks (one per step, so
+progress and Esc cover vertices and texels alike), commit everything or nothing."""
 
 import time
 
@@ -7,12 +8,14 @@ import bpy
 import numpy as np
 
 from . import cycles_check, gather, instances, materials, mesh_io
+from .commit import Transaction
+from .targets import TexelTarget, VertexTarget
 from .. import core
 from ..core import metrics, settings
 from ..core.native import CanopyAOError
 
-# Seconds per stage of the last committed bake (for bench/blender_bake_speed.py).
-LAST_TIMINGS = {}
+# Receivers per step: a modal tick stays short, and per-call overhead stays small.
+CHUNK = 1 << 16
 
 
 class BakeJob:
@@ -46,14 +49,18 @@ class BakeJob:
         depsgraph = context.evaluated_depsgraph_get()
         self.items, self.objects, self.how = gather.scene_items(context, depsgraph, targets,
                                                                 opts, self.timings)
-        self.targets = [it for it in self.items if it.name in target_names]
+        # Every target's receivers, read now: vertices, or texels rasterised from its UVs.
+        t0 = time.perf_counter()
+        self.targets = [VertexTarget(it, self.objects[it.name], opts) if opts["mode"] == 'VERTEX'
+                        else TexelTarget(it, self.objects[it.name], opts, depsgraph)
+                        for it in self.items if it.name in target_names]
         if not self.targets:
             raise CanopyAOError("every object to bake has the role Ignore")
-        for it in self.targets if opts["mode"] == 'VERTEX' else ():
-            why = mesh_io.check_attribute(self.objects[it.name], opts["attribute"],
-                                          opts["overwrite"])
-            if why:
-                raise CanopyAOError(why + " (nothing was changed)")
+        # (target, first, last receiver) per step; an empty target still gets its one step.
+        self._chunks = [(t, a, min(a + CHUNK, t.count)) for t in self.targets
+                        for a in range(0, max(t.count, 1), CHUNK)]
+        self._next = 0
+        self._lap("receivers", t0)
         t0 = time.perf_counter()
         # Instanced trees (particles, collection instances, geometry nodes): each prototype is
         # baked once (its instances share its mesh) and every instance occludes (instances.py).
@@ -62,7 +69,6 @@ class BakeJob:
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
         self.plan = None
-        self.index = 0
         self._lap("instances", t0)
         self._lap("gather (total)", t_start)
 
@@ -74,7 +80,12 @@ class BakeJob:
 
     @property
     def steps(self):
-        return len(self.targets) + 1
+        """Steps of the whole bake: prepare, then one per chunk of receivers."""
+        return len(self._chunks) + 1
+
+    @property
+    def steps_done(self):
+        return self._next + (self.plan is not None)
 
     def prepare(self):
         t0 = time.perf_counter()
@@ -83,77 +94,70 @@ class BakeJob:
         self.plan = core.prepare(self.items, self.settings)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes:
-            skip = {it.name for it in self.targets}
+            skip = {t.item.name for t in self.targets}
             core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
             self.lines.extend(self.prototypes.lines())
             self._lap("instances", t0)
 
     def step(self):
-        """Bake the next target; returns the line to report, or None when all are done."""
-        if self.index >= len(self.targets):
+        """Evaluate the next chunk of receivers. Returns the line to report when it completes
+        a target, "" when it does not, None when every chunk is done."""
+        if self._next >= len(self._chunks):
             return None
-        it = self.targets[self.index]
-        self.index += 1
+        t, a, b = self._chunks[self._next]
+        self._next += 1
         t0 = time.perf_counter()
         try:
-            r = core.evaluate_item(self.plan, it)
+            t.ao[a:b] = core.evaluate_receivers(self.plan, t.item, t.positions[a:b],
+                                                t.normals[a:b])
         except CanopyAOError as exc:
-            raise CanopyAOError(f"{it.name}: {exc}") from exc
-        self._lap("evaluate", t0)
+            raise CanopyAOError(f"{t.item.name}: {exc}") from exc
+        t.seconds += self._lap("evaluate", t0) - t0
+        if b < t.count:
+            return ""
+        it = t.item
+        r = core.ItemResult(it.name, it.role, it.tree, self.plan.method, t.ao, t.seconds)
         self.results.append(r)
-        line = (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method {r.method}, "
-                f"{r.vertices} vertices, {r.seconds:.3f} s")
-        return line
+        return (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method "
+                f"{r.method}, {t.count} {t.kind}{'s' if t.count != 1 else ''}, "
+                f"{r.seconds:.3f} s")
 
-    def run(self, progress=None):
+    def run(self):
+        """prepare() and every step(), blocking."""
         self.prepare()
-        while True:
-            if progress:
-                progress(self.index)
-            if self.step() is None:
-                break
+        while self.step() is not None:
+            pass
 
     def commit(self, context):
-        """Write every result, then the optional extras. Returns the JSON-ready report."""
+        """Write every result (attributes or images, the instances' attributes, the wiring and
+        AOV), then run the Cycles check if asked: all of it or, on any failure, none (the
+        Transaction undoes what was written, and the error goes on). Returns the JSON-ready
+        report, whose "stage_seconds" are this bake's times per stage."""
         o = self.opts
-        texel_stats = {}
         t0 = time.perf_counter()
-        if o["mode"] == 'TEXEL':
-            from . import texel_io
-            try:
-                texel_stats = texel_io.bake_objects(context, self.plan, self.targets, o)
-            except ValueError as exc:  # no UV map, bad resolution: said before any change
-                raise CanopyAOError(str(exc)) from None
-        else:
-            for r in self.results:
-                obj = self.objects[r.name]
-                mesh_io.write_ao_attribute(obj, o["attribute"], r.ao, overwrite=o["overwrite"])
-            self.prototypes.commit(o["attribute"], o["overwrite"])
-        t0 = self._lap("write", t0)
+        txn = Transaction()
+        try:
+            for t in self.targets:
+                t.write(txn, o)
+            self.prototypes.commit(txn, o)
+            if o["add_aov"]:
+                if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
+                           for a in vl.aovs):
+                    txn.add(lambda: materials.remove_view_layer_aov(self.scene, o["aov_name"]))
+                materials.ensure_view_layer_aov(self.scene, o["aov_name"])
+            t0 = self._lap("write", t0)
+            rep = self._report()
+            if o["check_cycles"]:
+                self._check_cycles(context, rep)
+        except BaseException:
+            txn.rollback()
+            raise
+        txn.done()
+        t0 = self._lap("report, extras", t0)
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, core.proxy_dicts(self.plan))
         elif mesh_io.PROXY_COLLECTION in bpy.data.collections:
             mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
-        t0 = self._lap("proxies", t0)
-        rep = core.report(self.plan, self.results)
-        rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
-        rep["mode"] = o["mode"].lower()
-        rep["instances"] = {
-            "instances": self.prototypes.count if self.prototypes else 0,
-            "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
-                                    "seconds": r.seconds, "ao_mean": float(r.ao.mean())
-                                    if r.vertices else None}
-                           for r in self.prototypes.results}}
-        for name, st in texel_stats.items():
-            rep["objects"][name]["texel"] = {k: v for k, v in st.items()
-                                             if isinstance(v, (int, float, str, list))}
-            rep["notes"].extend(st.get("warnings", []))
-        for r in self.results:
-            rep["objects"][r.name]["role_source"] = self.how[r.name]
-        if o["mode"] == 'VERTEX' and o["wire_material"] or o["add_aov"]:
-            self._wire(rep)
-        if o["check_cycles"]:
-            self._check_cycles(context, rep)
         for r in self.results:
             e = rep["objects"][r.name]
             text = (f"{e['role']}, {e['method']}, {e['vertices']} verts, {e['seconds']:.3f} s, "
@@ -163,36 +167,58 @@ class BakeJob:
             self.objects[r.name].canopy_ao.last_result = text
         self.scene.canopy_ao.last_report = (
             f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)")
-        self._lap("report, extras", t0)
+        self._lap("proxies", t0)
         rep["stage_seconds"] = dict(self.timings)
-        LAST_TIMINGS.clear()
-        LAST_TIMINGS.update(self.timings)
         self.report_dict = rep
         return rep
 
-    def _wire(self, rep):
+    def _report(self):
         o = self.opts
-        if o["wire_material"]:
-            for r in self.results:
-                materials.wire_vertex_ao(self.objects[r.name], o["attribute"], o["aov_name"])
-            for r in self.prototypes.results:
-                materials.wire_vertex_ao(self.prototypes.objects[r.name], o["attribute"],
-                                         o["aov_name"])
-        if o["add_aov"]:
-            materials.ensure_view_layer_aov(self.scene, o["aov_name"])
+        rep = core.report(self.plan, self.results)
+        rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
+        rep["mode"] = o["mode"].lower()
+        rep["instances"] = {
+            "instances": self.prototypes.count if self.prototypes else 0,
+            "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
+                                    "seconds": r.seconds, "ao_mean": float(r.ao.mean())
+                                    if r.vertices else None}
+                           for r in self.prototypes.results}}
+        for t in self.targets:
+            e = rep["objects"][t.item.name]
+            e["role_source"] = self.how[t.item.name]
+            e["vertices"] = len(t.item.positions)
+            if t.kind == "texel":
+                e["texel"] = t.report()
+                rep["notes"].extend(t.stats.get("warnings", []))
+        return rep
 
     def _check_cycles(self, context, rep):
-        objs = [self.objects[r.name] for r in self.results]
+        """Cycles' AO bake of the same objects, compared receiver by receiver: per vertex (one
+        Cycles bake for every vertex target), or per texel of the image just written."""
         d = self.opts["distance"]
-        ref = cycles_check.bake_cycles_vertex_ao(context, objs, d if d > 0 else 1.0e6,
-                                                 self.opts["cycles_samples"])
-        for r in self.results:
-            if r.name in ref and np.shape(ref[r.name]) != r.ao.shape:
-                rep["notes"].append(f"{r.name}: Cycles check skipped (its modifiers change the "
-                                    "vertex count)")
-            elif r.name in ref:
-                rep["objects"][r.name]["cycles"] = {
-                    k: float(v) for k, v in metrics.compare(r.ao, ref[r.name]).items()}
+        d = d if d > 0 else 1.0e6
+        samples = self.opts["cycles_samples"]
+        vertex = [t for t in self.targets if t.kind == "vertex"]
+        try:
+            ref = (cycles_check.bake_cycles_vertex_ao(context, [t.obj for t in vertex], d,
+                                                      samples) if vertex else {})
+            for t in vertex:
+                name = t.item.name
+                if name in ref and np.shape(ref[name]) != t.ao.shape:
+                    rep["notes"].append(f"{name}: Cycles check skipped (its modifiers change "
+                                        "the vertex count)")
+                elif name in ref:
+                    rep["objects"][name]["cycles"] = {
+                        k: float(v) for k, v in metrics.compare(t.ao, ref[name]).items()}
+            for t in self.targets:
+                if t.kind == "texel":
+                    m = cycles_check.check_texel(context, t.obj, t.stats["image"], t.rx.uv_map,
+                                                 d, samples, ours_mask=t.stats["mask"] == 1)
+                    rep["objects"][t.item.name]["cycles"] = {k: float(v) for k, v in m.items()}
+        except CanopyAOError:
+            raise
+        except ValueError as exc:  # the check's refusals (an empty material slot, ...)
+            raise CanopyAOError(f"Cycles check: {exc}") from exc
 
 
 def run_bake(context, object_names, opts):

@@ -1,6 +1,7 @@
 """The operators: bake (modal in a window, blocking in the background), guess roles, remove
 the material wiring. The bake itself is a BakeJob (job.py), shared with the command line."""
 
+import time
 import traceback
 
 import bpy
@@ -12,6 +13,10 @@ from .properties import option_properties, raw_values, resolve
 from ..core import roles
 from ..core.settings import OPTIONS
 from ..core.native import CanopyAOError, core_status
+
+
+# Seconds of work per modal tick: short enough for Esc and the progress bar to answer at once.
+TICK = 0.05
 
 
 # === The operator ============================================================================
@@ -97,11 +102,12 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
             try:
                 job.prepare()
                 while True:
-                    wm.progress_update(job.index + 1)
+                    wm.progress_update(job.steps_done)
                     line = job.step()
                     if line is None:
                         break
-                    job.lines.append(line)
+                    if line:
+                        job.lines.append(line)
             finally:
                 wm.progress_end()
         except Exception as exc:
@@ -142,13 +148,20 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
             if job.plan is None:
                 job.prepare()  # fitting and calibration: one tick
             else:
-                line = job.step()
-                if line is None:
-                    self._stop(context)
-                    return self._finish(context, job, lines_reported=True)
-                job.lines.append(line)
-                self.report({'INFO'}, line)
-            context.window_manager.progress_update(job.index + 1)
+                # Chunks for up to TICK seconds (at least one), then back to Blender (redraw,
+                # Esc).
+                t_end = time.perf_counter() + TICK
+                while True:
+                    line = job.step()
+                    if line is None:
+                        self._stop(context)
+                        return self._finish(context, job, lines_reported=True)
+                    if line:
+                        job.lines.append(line)
+                        self.report({'INFO'}, line)
+                    if time.perf_counter() >= t_end:
+                        break
+            context.window_manager.progress_update(job.steps_done)
         except Exception as exc:  # whatever it is, the timer and the status text go
             self._stop(context)
             return self._report_error(exc)

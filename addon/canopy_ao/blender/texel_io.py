@@ -1,54 +1,49 @@
-"""Per-texel AO: Blender glue around the native UV raster (DESIGN 6, issue 4).
+"""Per-texel receivers and results in Blender, around the native UV raster
+(docs/DESIGN.md, 'Data flow').
 
     evaluated mesh ──foreach_get──► per-corner UV / world position / world normal (float32)
-    ──_core.rasterize_uv──► one receiver point per covered texel ──ao_fn──► AO per texel
-    ──_core.splat_texels──► image + dilated margin ──► EXR file ──► Blender image, wired
-
-The native functions are used when this build of ``_core`` has them; otherwise a numpy
-rasterizer (texel centres only, no conservative texels) stands in and the stats say so.
+    ──_core.rasterize_uv──► one receiver point per covered texel (TexelReceivers)
+    ──the bake's evaluation──► AO per texel ──_core.splat_texels──► image + dilated margin
+    ──_core.write_image──► EXR file ──► Blender image, wired
 
 Image conventions (texel_raster.h, Blender): texel (i, j) has its centre at
 uv = ((i + 0.5) / W, (j + 0.5) / H); row 0 is the bottom (v = 0).
 """
 import os
 import tempfile
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
-from . import materials
-from ..core import lighting, native
-
-__all__ = ["bake_texel", "bake_objects", "gather_corner_triangles", "rasterize",
-           "splat", "image_name"]
+from . import materials, mesh_io
+from ..core.native import CanopyAOError, _core
 
 TAG = "canopy_ao"
 OBJ_KEY = "canopy_ao_object"   # on our images: the object they belong to
+MAX_RESOLUTION = 16384
 
 
 def image_name(obj):
     return f"{obj.name}_CanopyAO"
 
 
-def _core():
-    return native._core
+# === Mesh → texel receivers
 
-
-# === Mesh → per-corner arrays
-
-def _resolve_uv_map(obj, uv_map):
+def resolve_uv_map(obj, uv_map):
+    """The UV map's name (the active one when uv_map is empty); CanopyAOError without it."""
     me = obj.data
     if len(me.uv_layers) == 0:
-        raise ValueError(f"Object '{obj.name}' has no UV map; add one (UV > Smart UV Project) "
-                         "or bake per vertex")
+        raise CanopyAOError(f"Object '{obj.name}' has no UV map; add one (UV > Smart UV "
+                            "Project) or bake per vertex")
     if not uv_map:
         layer = me.uv_layers.active or me.uv_layers[0]
         return layer.name
     if me.uv_layers.get(uv_map) is None:
         names = ", ".join(l.name for l in me.uv_layers)
-        raise ValueError(f"Object '{obj.name}' has no UV map named '{uv_map}' (it has: "
-                         f"{names}); pick one of those or leave the UV map empty for the "
-                         "active one")
+        raise CanopyAOError(f"Object '{obj.name}' has no UV map named '{uv_map}' (it has: "
+                            f"{names}); pick one of those or leave the UV map empty for the "
+                            "active one")
     return uv_map
 
 
@@ -67,190 +62,102 @@ def gather_corner_triangles(obj, depsgraph, uv_map):
 
     Returns (uvs float32 (3M, 2), positions float32 (3M, 3), normals float32 (3M, 3) unit);
     corner k of triangle t is row 3t + k. Normals are corner (split) normals, so flat and
-    smooth shading and custom normals are what the texels see.
+    smooth shading and custom normals are what the texels see. World space as for vertices
+    (mesh_io's transform).
     """
     ob_eval = obj.evaluated_get(depsgraph)
     mesh = ob_eval.to_mesh()
     try:
         layer = mesh.uv_layers.get(uv_map)
         if layer is None:
-            raise ValueError(f"Object '{obj.name}': its modifiers drop UV map '{uv_map}'; "
-                             "apply them or choose a UV map the evaluated mesh keeps")
+            raise CanopyAOError(f"Object '{obj.name}': its modifiers drop UV map '{uv_map}'; "
+                                "apply them or choose a UV map the evaluated mesh keeps")
         mesh.calc_loop_triangles()
-        n_tri = len(mesh.loop_triangles)
-        n_loops = len(mesh.loops)
-        n_verts = len(mesh.vertices)
+        n_tri, n_loops, n_verts = len(mesh.loop_triangles), len(mesh.loops), len(mesh.vertices)
         corner = np.empty(n_tri * 3, dtype=np.int32)
         mesh.loop_triangles.foreach_get("loops", corner)
         loop_vert = np.empty(n_loops, dtype=np.int32)
         mesh.loops.foreach_get("vertex_index", loop_vert)
         co = np.empty(n_verts * 3, dtype=np.float32)
         mesh.vertices.foreach_get("co", co)
-        co = co.reshape(n_verts, 3)
         uv = np.empty(n_loops * 2, dtype=np.float32)
         layer.data.foreach_get("uv", uv)
-        uv = uv.reshape(n_loops, 2)
         nor = _corner_normals(mesh, n_loops)
     finally:
         ob_eval.to_mesh_clear()
-    m = np.array(obj.matrix_world, dtype=np.float64)
-    pos = co[loop_vert[corner]].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-    try:
-        nm = np.linalg.inv(m[:3, :3]).T  # normals transform by the inverse transpose
-    except np.linalg.LinAlgError:
-        nm = np.eye(3)
-    nrm = nor[corner].astype(np.float64) @ nm.T
-    ln = np.linalg.norm(nrm, axis=1, keepdims=True)
-    nrm = np.where(ln > 1e-20, nrm / np.maximum(ln, 1e-20), 0.0)
-    return (np.ascontiguousarray(uv[corner], dtype=np.float32),
-            np.ascontiguousarray(pos, dtype=np.float32),
-            np.ascontiguousarray(nrm, dtype=np.float32))
-
-
-# === Raster (native, or the numpy stand-in)
-
-def _rasterize_numpy(uvs, positions, normals, width, height, max_candidates=1 << 22):
-    """Texel-centre coverage in numpy. Lowest triangle id wins a texel; texels whose centre is
-    strictly inside two or more triangles count as overlapping."""
-    m = len(uvs) // 3
-    tri_uv = uvs.reshape(m, 3, 2).astype(np.float64) * (width, height)
-    a, b, c = tri_uv[:, 0], tri_uv[:, 1], tri_uv[:, 2]
-    e1, e2 = b - a, c - a
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    finite = np.all(np.isfinite(tri_uv.reshape(m, 6)), axis=1)
-    ok = finite & (np.abs(det) > 1e-12)
-    lo = np.where(ok[:, None], np.ceil(tri_uv.min(axis=1) - 0.5), 0).astype(np.int64)
-    hi = np.where(ok[:, None], np.floor(tri_uv.max(axis=1) - 0.5), -1).astype(np.int64)
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, (width - 1, height - 1))
-    w = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
-    h = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
-    counts = w * h
-    counts[~ok] = 0
-    owner = np.full(width * height, -1, dtype=np.int64)
-    bary = np.zeros((width * height, 3), dtype=np.float64)
-    hits = np.zeros(width * height, dtype=np.int32)
-    safe_det = np.where(ok, det, 1.0)
-    cum = np.cumsum(counts)
-    start = 0
-    while start < m:
-        # triangles [start, stop) whose candidates fit the budget (at least one triangle)
-        base = cum[start - 1] if start else 0
-        stop = int(np.searchsorted(cum, base + max_candidates, side="right"))
-        stop = max(stop, start + 1)
-        t_idx = np.arange(start, stop)
-        cnt = counts[start:stop]
-        tot = int(cnt.sum())
-        start = stop
-        if tot == 0:
-            continue
-        t = np.repeat(t_idx, cnt)
-        k = np.arange(tot) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        i = lo[t, 0] + k % w[t]
-        j = lo[t, 1] + k // w[t]
-        px = i + 0.5 - a[t, 0]
-        py = j + 0.5 - a[t, 1]
-        l1 = (px * e2[t, 1] - py * e2[t, 0]) / safe_det[t]
-        l2 = (e1[t, 0] * py - e1[t, 1] * px) / safe_det[t]
-        l0 = 1.0 - l1 - l2
-        eps = 1e-9
-        inside = (l0 >= -eps) & (l1 >= -eps) & (l2 >= -eps)
-        strict = (l0 > 1e-4) & (l1 > 1e-4) & (l2 > 1e-4)
-        pix = (j * width + i)
-        np.add.at(hits, pix[strict], 1)
-        sel = np.flatnonzero(inside)
-        pix_in = pix[sel]
-        # first occurrence per pixel = lowest triangle (candidates are in triangle order)
-        uniq, first = np.unique(pix_in, return_index=True)
-        free = owner[uniq] < 0
-        uniq, first = uniq[free], first[free]
-        s = sel[first]
-        owner[uniq] = t[s]
-        bary[uniq] = np.stack([l0[s], l1[s], l2[s]], axis=1)
-    pixels = np.flatnonzero(owner >= 0).astype(np.int32)
-    tri = owner[pixels]
-    bc = bary[pixels]
-    corners = tri[:, None] * 3 + np.arange(3)
-    pos = np.einsum("tk,tkd->td", bc, positions[corners].astype(np.float64))
-    nrm = np.einsum("tk,tkd->td", bc, normals[corners].astype(np.float64))
-    ln = np.linalg.norm(nrm, axis=1, keepdims=True)
-    # where the corner normals cancel, the face normal (texel_raster.h does the same)
-    p3 = positions.reshape(m, 3, 3).astype(np.float64)[tri]
-    face = np.cross(p3[:, 1] - p3[:, 0], p3[:, 2] - p3[:, 0])
-    fl = np.linalg.norm(face, axis=1, keepdims=True)
-    face = np.where(fl > 1e-30, face / np.maximum(fl, 1e-30), 0.0)
-    nrm = np.where(ln > 1e-6, nrm / np.maximum(ln, 1e-30), face)
-    stats = {"triangles": m, "degenerate": int(np.count_nonzero(finite & ~ok)),
-             "invalid_uv": int(np.count_nonzero(~finite)), "exact_texels": int(len(pixels)),
-             "conservative_texels": 0,
-             "overlapping_texels": int(np.count_nonzero(hits >= 2)), "raster": "numpy"}
-    return (pixels, np.ascontiguousarray(pos, dtype=np.float32),
-            np.ascontiguousarray(nrm, dtype=np.float32), stats)
+    pos, nrm = mesh_io._to_world(co.reshape(n_verts, 3)[loop_vert[corner]], nor[corner],
+                                 obj.matrix_world)
+    return np.ascontiguousarray(uv.reshape(n_loops, 2)[corner]), pos, nrm
 
 
 def rasterize(uvs, positions, normals, width, height):
     """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict):
-    one receiver point per covered texel, ascending pixel index j * width + i.
-    Native: conservative coverage (islands thinner than a texel keep texels); the numpy
-    stand-in covers texel centres only."""
-    core = _core()
-    fn = getattr(core, "rasterize_uv", None) if core is not None else None
-    if fn is None:
-        return _rasterize_numpy(uvs, positions, normals, width, height)
-    ts = fn(uvs, positions, normals, resolution=(width, height), conservative=True)
-    # The TexelSet's arrays are read-only views of its own buffers: copy what ao_fn receives
-    # so nothing outlives or writes into it.
-    pixels = np.array(ts.pixels, dtype=np.int32)
-    pos = np.array(ts.positions, dtype=np.float32).reshape(-1, 3)
-    nrm = np.array(ts.normals, dtype=np.float32).reshape(-1, 3)
+    one receiver point per covered texel, ascending pixel index j * width + i, by the native
+    rasteriser (conservative coverage: islands thinner than a texel keep texels)."""
+    ts = _core.rasterize_uv(uvs, positions, normals, resolution=(width, height),
+                            conservative=True)
+    # The TexelSet's arrays are read-only views of its own buffers: copy what the bake keeps.
     stats = {k: int(v) for k, v in dict(ts.stats).items()}
-    stats["raster"] = "native"
-    return pixels, pos, nrm, stats
+    return (np.array(ts.pixels, dtype=np.int32),
+            np.array(ts.positions, dtype=np.float32).reshape(-1, 3),
+            np.array(ts.normals, dtype=np.float32).reshape(-1, 3), stats)
 
 
-def _dilate_numpy(img, mask, margin):
-    """Ring by ring: an empty texel with filled 8-neighbours takes their mean (texel_raster.h)."""
-    h, w = img.shape
-    for _ in range(int(margin)):
-        filled = mask > 0
-        if filled.all():
-            break
-        v = np.pad(np.where(filled, img, 0.0), 1)
-        f = np.pad(filled.astype(np.float32), 1)
-        s = np.zeros((h, w), dtype=np.float64)
-        n = np.zeros((h, w), dtype=np.float64)
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                if dx or dy:
-                    s += v[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
-                    n += f[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
-        grow = ~filled & (n > 0)
-        img[grow] = (s[grow] / n[grow]).astype(np.float32)
-        mask[grow] = 2
-    return img, mask
+@dataclass
+class TexelReceivers:
+    """One object's covered texels as receivers, and what the raster said about them."""
+
+    uv_map: str
+    resolution: int
+    margin: int
+    pixels: np.ndarray
+    positions: np.ndarray
+    normals: np.ndarray
+    stats: dict = field(default_factory=dict)  # raster counts, "warnings", "notes"
+
+
+def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
+    """The texels of obj's UV layout at resolution² as receivers. Raises CanopyAOError before
+    reading anything when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
+    if obj.type != "MESH":
+        raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
+                            "texel")
+    uv_map = resolve_uv_map(obj, uv_map)
+    res = int(resolution)
+    if not 1 <= res <= MAX_RESOLUTION:
+        raise CanopyAOError(f"Resolution {resolution} is out of range; use 1 to "
+                            f"{MAX_RESOLUTION} texels")
+    if margin < 0:
+        raise CanopyAOError(f"Margin must be >= 0 texels, not {margin}")
+    uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
+    pixels, tpos, tnrm, stats = rasterize(uvs, pos, nrm, res, res)
+    stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
+    if stats.get("overlapping_texels", 0) > 0:
+        stats["warnings"].append(
+            f"Object '{obj.name}': UV map '{uv_map}' overlaps ({stats['overlapping_texels']} "
+            "texels lie in two or more faces); those texels show one face's AO. Unwrap without "
+            "overlaps (UV > Smart UV Project) for a correct bake")
+    if len(pixels) == 0:
+        stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
+                                 f"map '{uv_map}' at {res}×{res}; raise the resolution or "
+                                 "check the UVs lie in the 0–1 square")
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):
     """(image float32 (H, W), mask uint8 (H, W): 0 empty, 1 covered, 2 margin)."""
-    core = _core()
-    fn = getattr(core, "splat_texels", None) if core is not None else None
-    values = np.ascontiguousarray(values, dtype=np.float32)
-    if fn is not None:
-        img, mask = fn(np.ascontiguousarray(pixels, dtype=np.int32), values, (width, height),
-                       margin=int(margin), background=float(background), return_mask=True)
-        return (np.asarray(img, dtype=np.float32).reshape(height, width),
-                np.asarray(mask, dtype=np.uint8).reshape(height, width))
-    img = np.full(width * height, background, dtype=np.float32)
-    mask = np.zeros(width * height, dtype=np.uint8)
-    img[pixels] = values
-    mask[pixels] = 1
-    img, mask = _dilate_numpy(img.reshape(height, width), mask.reshape(height, width), margin)
-    return img, mask
+    img, mask = _core.splat_texels(np.ascontiguousarray(pixels, dtype=np.int32),
+                                   np.ascontiguousarray(values, dtype=np.float32),
+                                   (width, height), margin=int(margin),
+                                   background=float(background), return_mask=True)
+    return (np.asarray(img, dtype=np.float32).reshape(height, width),
+            np.asarray(mask, dtype=np.uint8).reshape(height, width))
 
 
 # === Image file and Blender image
 
-def _image_path(obj, image_dir, notes):
+def image_path(obj, image_dir, notes):
+    """Where obj's EXR goes (the folder is made); a note says when it is a temporary one."""
     fname = bpy.path.clean_name(image_name(obj)) + ".exr"
     if image_dir:
         if image_dir.startswith("//") and not bpy.data.filepath:
@@ -267,9 +174,19 @@ def _image_path(obj, image_dir, notes):
     try:
         os.makedirs(d, exist_ok=True)
     except OSError as exc:
-        raise RuntimeError(f"Cannot create the image folder '{d}': {exc}; choose another "
-                           "Image Folder") from exc
+        raise CanopyAOError(f"Cannot create the image folder '{d}': {exc}; choose another "
+                            "Image Folder") from exc
     return os.path.join(d, fname)
+
+
+def write_exr(path, ao):
+    """Write a grey float image (H, W), row 0 = bottom: the writer flips rows so the file
+    shows v = 1 on top."""
+    try:
+        _core.write_image(path, np.ascontiguousarray(ao, dtype=np.float32), dtype="float",
+                          bottom_up=True)
+    except (OSError, RuntimeError) as exc:
+        raise CanopyAOError(f"Could not write '{path}': {exc}") from exc
 
 
 def _find_our_image(obj):
@@ -279,36 +196,15 @@ def _find_our_image(obj):
     return None
 
 
-def _write_exr(path, ao):
-    """Write a grey float image; the native writer when available, else Blender's."""
-    h, w = ao.shape
-    core = _core()
-    fn = getattr(core, "write_image", None) if core is not None else None
-    if fn is not None:
-        # grey (H, W), row 0 = bottom: the writer flips rows so the file shows v = 1 on top
-        fn(path, np.ascontiguousarray(ao, dtype=np.float32), dtype="float", bottom_up=True)
-        return "native"
-    tmp = bpy.data.images.new("_CanopyAO_write", w, h, alpha=True, float_buffer=True)
-    try:
-        # Non-Color before the pixels go in: a "Linear" float image was written sRGB-encoded
-        # (0.25 came back as 0.537) in 3.4.
-        tmp.colorspace_settings.name = "Non-Color"
-        rgba = np.ones((h, w, 4), dtype=np.float32)
-        rgba[:, :, :3] = ao[:, :, None]
-        tmp.pixels.foreach_set(rgba.ravel())
-        tmp.filepath_raw = path
-        tmp.file_format = "OPEN_EXR"
-        tmp.save()
-    except RuntimeError as exc:
-        raise RuntimeError(f"Could not write '{path}': {exc}") from exc
-    finally:
-        bpy.data.images.remove(tmp)
-    return "blender"
-
-
-def _load_image(obj, path):
+def load_image(obj, path):
+    """(image, undo): obj's image of ours, (re)loaded from path; undo() puts back what was."""
     img = _find_our_image(obj)
     if img is not None:
+        old = img.filepath
+
+        def undo():
+            img.filepath = old
+            img.reload()
         img.filepath = path
         img.reload()
     else:
@@ -318,91 +214,72 @@ def _load_image(obj, path):
         img.name = image_name(obj)
         img[TAG] = True
         img[OBJ_KEY] = obj.name
+
+        def undo():
+            bpy.data.images.remove(img)
     img.colorspace_settings.name = "Non-Color"  # AO is data, not a colour to convert
-    return img
+    return img, undo
 
-
-# === Entry points
 
 def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, image_dir=None,
                wire=True, aov_name="BakedAO"):
     """Bake AO per texel of obj's UV layout into an EXR and a Blender image, wired into obj's
-    materials (wire_texel_ao) unless wire=False.
+    materials (wire_texel_ao) unless wire=False: the bake's texel path with any AO function.
 
     ao_fn(positions float32 (T, 3), normals float32 (T, 3)) -> float32 (T,) AO in [0, 1].
     Returns (image, stats); stats holds the raster counts, "path", "texels", "warnings"
-    (e.g. overlapping UVs) and "notes". Raises ValueError before changing anything when obj is
-    not a mesh, has no (such) UV map, or the resolution is out of range.
+    (e.g. overlapping UVs) and "notes". Raises CanopyAOError (a ValueError) before changing
+    anything when obj is not a mesh, has no (such) UV map, or the resolution is out of range.
     """
-    if obj.type != "MESH":
-        raise ValueError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per texel")
-    uv_map = _resolve_uv_map(obj, uv_map)
-    res = int(resolution)
-    if not 1 <= res <= 16384:
-        raise ValueError(f"Resolution {resolution} is out of range; use 1 to 16384 texels")
-    if margin < 0:
-        raise ValueError(f"Margin must be >= 0 texels, not {margin}")
     if wire:
         materials.check_aov_name(aov_name)
-    depsgraph = context.evaluated_depsgraph_get()
-    uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
-    pixels, tpos, tnrm, stats = rasterize(uvs, pos, nrm, res, res)
-    stats = dict(stats)
-    stats["warnings"] = []
-    stats["notes"] = []
-    stats["uv_map"] = uv_map
-    stats["resolution"] = res
-    if stats.get("overlapping_texels", 0) > 0:
-        stats["warnings"].append(
-            f"Object '{obj.name}': UV map '{uv_map}' overlaps ({stats['overlapping_texels']} "
-            "texels lie in two or more faces); those texels show one face's AO. Unwrap without "
-            "overlaps (UV > Smart UV Project) for a correct bake")
-    if len(pixels) == 0:
-        stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
-                                 f"map '{uv_map}' at {res}×{res}; raise the resolution or "
-                                 "check the UVs lie in the 0–1 square")
-        ao = np.zeros(0, dtype=np.float32)
-    else:
-        ao = np.asarray(ao_fn(tpos, tnrm), dtype=np.float32)
-        if ao.shape != (len(pixels),) or not np.all(np.isfinite(ao)):
-            raise RuntimeError(f"Object '{obj.name}': the AO model returned "
-                               f"{ao.shape} values for {len(pixels)} texels or non-finite AO")
-        ao = np.clip(ao, 0.0, 1.0)
-    img_arr, mask = splat(pixels, ao, res, res, int(margin))
-    stats["texels"] = int(len(pixels))
-    stats["margin_texels"] = int(np.count_nonzero(mask == 2))
-    path = _image_path(obj, image_dir, stats["notes"])
-    stats["writer"] = _write_exr(path, img_arr)
-    stats["path"] = path
-    image = _load_image(obj, path)
-    if wire:
-        stats["nodes_added"] = materials.wire_texel_ao(obj, image, uv_map, aov_name)
+    rx = receivers(obj, context.evaluated_depsgraph_get(), uv_map, resolution, margin)
+    ao = np.asarray(ao_fn(rx.positions, rx.normals), dtype=np.float32)
+    if ao.shape != (len(rx.pixels),) or not np.all(np.isfinite(ao)):
+        raise CanopyAOError(f"Object '{obj.name}': the AO model returned {ao.shape} values "
+                            f"for {len(rx.pixels)} texels or non-finite AO")
+    from .commit import Transaction
+    txn = Transaction()
+    try:
+        image, stats = write_texels(obj, rx, np.clip(ao, 0.0, 1.0), image_dir, txn)
+        if wire:
+            stats["nodes_added"] = materials.wire_texel_ao(obj, image, rx.uv_map, aov_name)
+    except BaseException:
+        txn.rollback()
+        raise
+    txn.done()
     return image, stats
 
 
-def bake_objects(context, plan, targets, opts):
-    """The bake operator's per-texel step: one image per target item (engine SceneItems),
-    AO from the plan's model. Returns {object name: stats}."""
-    # Refuse before the first image is written: every target needs the UV map.
-    for it in targets:
-        obj = context.scene.objects[it.name]
-        if obj.type != "MESH":
-            raise ValueError(f"Object '{obj.name}' is not a mesh; only meshes can be baked "
-                             "per texel")
-        _resolve_uv_map(obj, opts.get("uv_map") or None)
-    out = {}
-    for it in targets:
-        obj = context.scene.objects[it.name]
+def write_texels(obj, rx, ao, image_dir, txn):
+    """Splat AO per texel into the image, write its EXR and (re)load it as obj's image, each
+    write recorded in txn (commit.Transaction; a replaced file is kept until txn.done()).
+    Returns (image, stats)."""
+    res = rx.resolution
+    img_arr, mask = splat(rx.pixels, ao, res, res, rx.margin)
+    stats = dict(rx.stats, margin_texels=int(np.count_nonzero(mask == 2)),
+                 notes=list(rx.stats["notes"]))
+    path = image_path(obj, image_dir, stats["notes"])
+    txn.add(keep_file(path))
+    write_exr(path, img_arr)
+    image, undo_image = load_image(obj, path)
+    txn.add(undo_image)
+    stats.update(path=path, writer="native", image=img_arr, mask=mask)
+    return image, stats
 
-        def ao_fn(p, n, it=it):
-            return lighting.evaluate_points(plan, it.role, it.tree, it.name, p, n,
-                                           plan.method, plan.tau)
 
-        _image, stats = bake_texel(
-            context, obj, ao_fn, uv_map=opts.get("uv_map") or None,
-            resolution=opts.get("resolution", 1024), margin=opts.get("margin", 4),
-            image_dir=opts.get("image_dir") or None,
-            wire=bool(opts.get("wire_material", True)),
-            aov_name=opts.get("aov_name", "BakedAO"))
-        out[obj.name] = stats
-    return out
+def keep_file(path):
+    """Move an existing file at path aside; returns undo() that puts it back (or removes what
+    was written there). undo.keep is the moved-aside copy's path, or None."""
+    backup = None
+    if os.path.exists(path):
+        backup = path + ".canopy_ao-previous"
+        os.replace(path, backup)
+
+    def undo():
+        if backup is not None:
+            os.replace(backup, path)
+        elif os.path.exists(path):
+            os.remove(path)
+    undo.keep = backup
+    return undo

@@ -13,7 +13,7 @@ tests all of it. One module per concern (docs/DESIGN.md, 'Architecture'):
 The names below are the public API.
 """
 
-from .bake import attach_forest, bake, evaluate_item, prepare, report
+from .bake import attach_forest, bake, evaluate_item, evaluate_receivers, prepare, report
 from .ladder import (ANALYTIC_METHODS, DEFAULT_TAU, METHODS, available_methods, calibrate,
                      triangles_needed)
 from .native import CanopyAOError, core_status

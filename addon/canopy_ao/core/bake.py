@@ -68,16 +68,26 @@ def prepare(items, settings: BakeSettings) -> Plan:
 
 
 @refusals_are_user_errors
-def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
-    """Bake one item with the plan's method and τ."""
-    t0 = time.perf_counter()
+def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals) -> np.ndarray:
+    """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
+    texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
+    and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
+    rung's ray pattern aside, which follows a point's index in the call)."""
+    p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
+    n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
-        ao = np.ones(len(item.positions), np.float32)
-    else:
-        ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, item.positions,
-                                      item.normals, plan.method, plan.tau)
-    if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
+        return np.ones(len(p), np.float32)
+    ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
+                                  plan.tau)
+    if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
+    return ao
+
+
+def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
+    """Bake one item's vertices with the plan's method and τ."""
+    t0 = time.perf_counter()
+    ao = evaluate_receivers(plan, item, item.positions, item.normals)
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,
                       time.perf_counter() - t0)
 

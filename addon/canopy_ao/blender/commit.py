@@ -1,0 +1,77 @@
+"""Everything or nothing: a bake's writes go through a Transaction, which records how to undo
+each one; a failure part-way undoes them all, in reverse (docs/DESIGN.md, 'Data flow')."""
+
+import os
+import sys
+import traceback
+
+import numpy as np
+
+from . import mesh_io
+
+# foreach_get key, values per element and dtype of each attribute type that can be restored.
+_LAYOUT = {'FLOAT': ("value", 1, np.float32), 'INT': ("value", 1, np.int32),
+           'INT8': ("value", 1, np.int32), 'BOOLEAN': ("value", 1, bool),
+           'FLOAT2': ("vector", 2, np.float32), 'FLOAT_VECTOR': ("vector", 3, np.float32),
+           'FLOAT_COLOR': ("color", 4, np.float32), 'BYTE_COLOR': ("color", 4, np.float32)}
+
+
+class Transaction:
+    def __init__(self):
+        self._undo = []
+
+    def add(self, undo):
+        """Record undo() for a write just made (or about to be)."""
+        self._undo.append(undo)
+
+    def attribute(self, obj, name):
+        """Record obj's attribute ``name`` (or its absence) and its ownership marks, before a
+        write replaces them."""
+        mesh = obj.data
+        marks = [(idb, idb.get(mesh_io.OWNED_PROP)) for idb in (obj, mesh)]
+        attr = mesh.attributes.get(name)
+        old = None
+        if attr is not None and attr.data_type in _LAYOUT:
+            key, width, dtype = _LAYOUT[attr.data_type]
+            buf = np.empty(len(attr.data) * width, dtype=dtype)
+            attr.data.foreach_get(key, buf)
+            old = (attr.data_type, attr.domain, key, buf)
+
+        def undo():
+            cur = mesh.attributes.get(name)
+            if old is None:
+                if cur is not None:
+                    mesh.attributes.remove(cur)
+            else:
+                kind, domain, key, buf = old
+                if cur is None or cur.data_type != kind or cur.domain != domain:
+                    if cur is not None:
+                        mesh.attributes.remove(cur)
+                    cur = mesh.attributes.new(name, kind, domain)
+                cur.data.foreach_set(key, buf)
+            for idb, raw in marks:
+                if raw is None:
+                    idb.pop(mesh_io.OWNED_PROP, None)
+                else:
+                    idb[mesh_io.OWNED_PROP] = raw
+            mesh.update_tag()
+        self.add(undo)
+
+    def rollback(self):
+        """Undo every recorded write, newest first; an undo that fails is printed and the
+        others still run."""
+        for undo in reversed(self._undo):
+            try:
+                undo()
+            except Exception:  # noqa: BLE001 - the rest must still be undone
+                print("Canopy AO: could not undo a write:", file=sys.stderr)
+                traceback.print_exc()
+        self._undo.clear()
+
+    def done(self):
+        """The writes stand: drop the files kept to undo them."""
+        for undo in self._undo:
+            keep = getattr(undo, "keep", None)
+            if keep and os.path.exists(keep):
+                os.remove(keep)
+        self._undo.clear()
