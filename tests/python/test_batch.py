@@ -13,9 +13,11 @@ import json
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 
 import pytest
 
@@ -188,6 +190,44 @@ def test_bad_batch_arguments_exit_2_before_any_bake(tmp_path, env, scenes):
     code, log = batch(env, srcs[0], "--output", str(tmp_path / "in"))
     assert code == 2 and "would overwrite it" in log
     assert not os.path.exists(tmp_path / "o")
+
+
+def test_ctrl_c_stops_every_blender_and_starts_no_retry(tmp_path, env):
+    """A cancelled batch leaves no Blender running (they run in their own sessions, out of a
+    terminal's reach) and exits 130."""
+    for i in range(3):
+        (tmp_path / "in").mkdir(exist_ok=True)
+        (tmp_path / "in" / f"s{i}.blend").write_bytes(b"stand-in")
+    pids = tmp_path / "pids"
+    fake = tmp_path / "blender"
+    fake.write_text(f"#!/bin/sh\necho $$ >> {pids}\nexec sleep 120\n")
+    fake.chmod(0o755)
+    proc = subprocess.Popen([sys.executable, "-m", "canopy_ao.batch", str(tmp_path / "in"),
+                             "--output", str(tmp_path / "out"), "-j", "2", "--blender",
+                             str(fake), "--", *BAKE], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        for _ in range(300):  # both slots busy
+            if pids.exists() and len(pids.read_text().split()) == 2:
+                break
+            time.sleep(0.1)
+        started = [int(x) for x in pids.read_text().split()]
+        assert len(started) == 2
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        survivors = []
+        for pid in (int(x) for x in pids.read_text().split()) if pids.exists() else ():
+            try:
+                os.kill(pid, signal.SIGKILL)  # the test never leaves one behind
+                survivors.append(pid)
+            except ProcessLookupError:
+                pass
+    assert not survivors, f"Blender processes outlived the cancelled batch: {survivors}"
+    assert proc.returncode == 130 and "cancelled" in out, out
+    assert [int(x) for x in pids.read_text().split()] == started  # nothing started after
 
 
 @pytest.mark.skipif(shutil.which("parallel") is None, reason="GNU parallel is not installed "

@@ -85,6 +85,10 @@ def main(argv=None):
     except plan.BatchError as exc:
         print(f"canopy_ao.batch: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("canopy_ao.batch: cancelled; rerun the same command to resume (finished files "
+              "are kept)", file=sys.stderr)
+        return 130
 
 
 def run(args, bake_args):
@@ -151,8 +155,14 @@ def run_local(p, args):
         print(f"canopy_ao.batch: task {i + 1}/{len(p['tasks'])} done"
               + (f", {len(failed)} failed" if failed else ""), flush=True)
 
-    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+    pool = ThreadPoolExecutor(max_workers=args.jobs)
+    try:
         list(pool.map(one, range(len(p["tasks"]))))
+    except BaseException:  # Ctrl-C: stop every Blender, start no other
+        runner.stop_all()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _addon_parent():
@@ -215,15 +225,20 @@ def run_slurm(p, args):
         raise plan.BatchError(f"sbatch refused the job: {out.stderr.strip()}")
     job = out.stdout.strip().split(";")[0]
     print(f"canopy_ao.batch: submitted Slurm job {job} ({shlex.join(cmd)})", flush=True)
-    while True:
-        q = subprocess.run(["squeue", "-h", "-j", job, "-o", "%i %T"], capture_output=True,
-                           text=True, check=False)
-        if q.returncode != 0 and "Invalid job id" not in q.stderr:
-            raise plan.BatchError(f"squeue failed while waiting for job {job}: "
-                                  f"{q.stderr.strip()}")
-        if not q.stdout.strip():
-            return job
-        time.sleep(args.poll)
+    try:
+        while True:
+            q = subprocess.run(["squeue", "-h", "-j", job, "-o", "%i %T"], capture_output=True,
+                               text=True, check=False)
+            if q.returncode != 0 and "Invalid job id" not in q.stderr:
+                raise plan.BatchError(f"squeue failed while waiting for job {job}: "
+                                      f"{q.stderr.strip()}")
+            if not q.stdout.strip():
+                return job
+            time.sleep(args.poll)
+    except KeyboardInterrupt:  # the job is ours: cancelling the batch cancels it
+        subprocess.run(["scancel", job], check=False)
+        print(f"canopy_ao.batch: cancelled Slurm job {job}", file=sys.stderr)
+        raise
 
 
 BACKENDS = {"local": run_local, "parallel": run_parallel, "slurm": run_slurm}

@@ -14,11 +14,18 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from . import plan
 
 PLAN_DIR = ".canopy_ao_batch"
+
+# Blender processes this process is running, and whether the run was cancelled (stop_all):
+# a cancelled run starts no new Blender, retries included.
+_LIVE = set()
+_LIVE_LOCK = threading.Lock()
+CANCELLED = threading.Event()
 
 
 def make_plan(sources, root, out_dir, bake_args, tasks, *, blender="blender", threads=0,
@@ -55,17 +62,42 @@ def _run_blender(p, sources, log_path):
     with open(log_path, "wb") as log:
         log.write(("$ " + " ".join(command(p, sources)) + "\n").encode())
         log.flush()
-        proc = subprocess.Popen(command(p, sources), stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
+        with _LIVE_LOCK:
+            if CANCELLED.is_set():
+                return "the run was cancelled"
+            # Its own session, so a terminal's Ctrl-C reaches only the driver, which then
+            # stops each Blender itself (stop_all) instead of leaving some half-saved.
+            proc = subprocess.Popen(command(p, sources), stdout=log, stderr=subprocess.STDOUT,
+                                    stdin=subprocess.DEVNULL, start_new_session=True)
+            _LIVE.add(proc)
         try:
             code = proc.wait(timeout=limit)
         except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+            _kill(proc)
             return f"Blender was stopped after {limit:.0f} s (--timeout)"
+        finally:
+            with _LIVE_LOCK:
+                _LIVE.discard(proc)
     if code < 0:
         return f"Blender was killed by signal {-code}"
     return f"Blender exited with code {code}"
+
+
+def _kill(proc):
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait()
+
+
+def stop_all():
+    """Cancels the run: no new Blender starts, and every running one is killed."""
+    with _LIVE_LOCK:
+        CANCELLED.set()
+        live = list(_LIVE)
+    for proc in live:
+        _kill(proc)
 
 
 def _log_tail(path, lines=6):
