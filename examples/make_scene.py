@@ -14,10 +14,26 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 
+def build(scene):
+    """The scene's objects in the current Blender scene, with the World's AO distance set to
+    the scene's diagonal, so nothing in it is out of reach (as the benchmark's references
+    use): the add-on and Cycles both take it from the World. Returns {part name: object}."""
+    import bpy
+    import numpy as np
+    from blender_scene import build_blender
+
+    objs = build_blender(scene)
+    pts = np.concatenate([p.vertices for p in scene]) if len(scene) else np.zeros((1, 3))
+    diagonal = float(np.linalg.norm(pts.max(0) - pts.min(0)))
+    world = bpy.context.scene.world or bpy.data.worlds.new("World")
+    bpy.context.scene.world = world
+    world.light_settings.distance = max(diagonal, 1e-3)
+    return objs
+
+
 def main(argv):
     import bpy
     from canopy_scenes import SCENES, make_scene
-    from blender_scene import build_blender
 
     ap = argparse.ArgumentParser(prog="make_scene.py")
     ap.add_argument("--scene", default="round_tree", choices=sorted(SCENES))
@@ -37,15 +53,8 @@ def main(argv):
     t0 = time.perf_counter()
     scene = make_scene(a.scene, seed=a.seed, quick=a.quick)
     t1 = time.perf_counter()
-    objs = build_blender(scene)
-    # AO distance = the scene's size, so nothing in it is out of reach (as the benchmark's
-    # references use): the add-on and Cycles both take it from the World.
-    import numpy as np
-    pts = np.concatenate([p.vertices for p in scene]) if len(scene) else np.zeros((1, 3))
-    diagonal = float(np.linalg.norm(pts.max(0) - pts.min(0)))
-    world = bpy.context.scene.world or bpy.data.worlds.new("World")
-    bpy.context.scene.world = world
-    world.light_settings.distance = max(diagonal, 1e-3)
+    objs = build(scene)
+    world = bpy.context.scene.world
     t2 = time.perf_counter()
     print(scene.summary())
     print(f"make_scene: World AO distance {world.light_settings.distance:.3g} (the scene's diagonal)")

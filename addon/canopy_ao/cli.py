@@ -27,6 +27,10 @@ def _arg_type(option):
     return convert
 
 
+class BakeFailed(Exception):
+    """A bake that could not be done; the message says why (printed as canopy_ao: error:)."""
+
+
 def _add_option(p, o):
     """One option's argument; dest is the option's name, None when not given."""
     default = o.cli_default or ("auto" if o.none_prop else o.default)
@@ -59,6 +63,9 @@ def build_parser():
             _add_option(p, o)
     p.add_argument("--report", metavar="FILE.json", help="write a JSON report here")
     p.add_argument("--save", action="store_true", help="save the .blend after baking")
+    p.add_argument("--threads", type=int, default=0, metavar="N",
+                   help="cap the native core's worker threads (0 = every core; results do "
+                        "not depend on it), so several bakes can share a machine")
     return p
 
 
@@ -90,9 +97,15 @@ def _fail(message, code=1):
 
 def main(argv=None):
     """Parse the args after ``--``, bake, report; sys.exit with 0 on success."""
-    args = build_parser().parse_args(_argv(argv))  # exits 2 with usage on bad arguments
+    parser = build_parser()
+    args = parser.parse_args(_argv(argv))  # exits 2 with usage on bad arguments
+    if args.threads < 0:
+        parser.error(f"--threads must be >= 0, got {args.threads}")
     try:
-        code = _run(args)
+        run(args)
+        code = 0
+    except BakeFailed as exc:
+        _fail(str(exc))
     except SystemExit:
         raise
     except Exception as exc:  # an unexpected failure must still fail the process
@@ -103,7 +116,9 @@ def main(argv=None):
     sys.exit(code)
 
 
-def _run(args):
+def run(args):
+    """Bake the open file as ``args`` (from build_parser) say, print one line per object, and
+    return the report; raises BakeFailed with a message when the bake cannot be done."""
     import addon_utils
     import bpy
 
@@ -115,15 +130,17 @@ def _run(args):
         pkg.__time__ = os.path.getmtime(pkg.__file__)
         addon_utils.enable(__package__, default_set=False, handle_error=None)
         if not hasattr(bpy.types.Scene, "canopy_ao"):
-            _fail("the canopy_ao add-on could not be enabled (see the messages above)")
+            raise BakeFailed("the canopy_ao add-on could not be enabled (see the messages "
+                             "above)")
     from .blender import gather, job
-    from .core.native import CanopyAOError, core_status
+    from .core.native import CanopyAOError, core_status, require
 
     ok, msg = core_status()
     if not ok:
-        _fail(msg)
+        raise BakeFailed(msg)
+    require().set_max_threads(args.threads)  # 0 also lifts a cap an earlier bake here set
     if args.save and not bpy.data.filepath:
-        _fail("--save needs a saved .blend (give the .blend before --python-expr)")
+        raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
     opts = options_from_args(args, gather.world_ao_distance(bpy.context.scene))
     context = bpy.context
     if args.objects is None:
@@ -133,7 +150,7 @@ def _run(args):
     try:
         bake_job, rep = job.run_bake(context, args.objects or [], opts)
     except CanopyAOError as exc:
-        _fail(str(exc))
+        raise BakeFailed(str(exc)) from None
     for r in bake_job.results:
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
@@ -156,8 +173,8 @@ def _run(args):
             with open(bpy.path.abspath(args.report), "w") as f:
                 json.dump(rep, f, indent=1, default=float)
         except OSError as exc:
-            _fail(f"cannot write the report: {exc}")
+            raise BakeFailed(f"cannot write the report: {exc}") from None
     if args.save:
         bpy.ops.wm.save_mainfile()
         print(f"canopy_ao: saved {bpy.data.filepath}", flush=True)
-    return 0
+    return rep

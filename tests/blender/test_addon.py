@@ -352,6 +352,32 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
     assert capsys.readouterr().out.startswith("Ground: role GROUND, method sphere")
 
 
+def test_cli_threads_caps_the_native_core_and_leaves_the_result_alone(tree_scene_objects,
+                                                                        capsys):
+    """--threads N (what the batch passes per bake) caps the core's worker threads; the AO
+    does not depend on it."""
+    from canopy_ao import cli
+    from canopy_ao.core.native import require
+    core = require()
+    before = core.set_max_threads(0)
+    every_core = core.max_threads()
+    try:
+        means = []
+        for threads in ("1", "0"):
+            with pytest.raises(SystemExit) as exc:
+                cli.main(["--objects", "Leaves", "--method", "sphere", "--tau", "2",
+                          "--no-proxies", "--overwrite", "--threads", threads])
+            assert exc.value.code == 0
+            assert core.max_threads() == (1 if threads == "1" else every_core)
+            means.append(capsys.readouterr().out.split("mean AO ")[1].split()[0])
+        assert means[0] == means[1]
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["--threads", "-1"])
+        assert exc.value.code == 2 and "must be >= 0" in capsys.readouterr().err
+    finally:
+        core.set_max_threads(before)
+
+
 
 @pytest.mark.parametrize("args, message", [
     (["--samples", "99999999999"], "samples must be an integer in [1, 65536]"),
