@@ -47,8 +47,7 @@ inline float in_shell_unit(float ux, float uy, float uz, float nx, float ny, flo
   const float d2 = std::max(uu - c * c, 0.0f);            // off-centre distance² (Eq. 5)
   const float h2 = h * h;
   const float f = h2 / std::max(h2 + d2, 1e-30f);
-  // Vcap / Vhemi = h²(3 − h)/2 (docs/DESIGN.md, 'The method ladder')
-  const float cap = 0.5f * h2 * (3.0f - h);
+  const float cap = 0.5f * h2 * (3.0f - h);  // Vcap / Vhemi = h²(3 − h)/2 (DESIGN 3.1)
   return fast_exp(-tau * f * cap);           // Eq. 6 with k = τ / Vhemi
 }
 
@@ -99,8 +98,7 @@ struct SphereMap {
 #endif
 };
 
-// World → unit frame of an ellipsoid (docs/DESIGN.md, 'The method ladder'): u = diag(1/r) Qᵀ(p −
-// C),
+// World → unit frame of an ellipsoid (DESIGN 3.2): u = diag(1/r) Qᵀ(p − C),
 // n' = diag(r) Qᵀ n (inverse transpose; normalised in in_shell_unit).
 struct EllipsoidMap {
   float c[3];

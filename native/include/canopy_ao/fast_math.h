@@ -1,8 +1,7 @@
 // Canopy AO — elementary functions that GCC auto-vectorises.
 //
 // libm's expf is a call GCC cannot vectorise (without -ffast-math and libmvec), which costs the
-// one-sphere model a factor ~8 (docs/DESIGN.md, 'Facts measured in Blender': 170 M vs 1.3 G
-// vertices/s per core). These versions
+// one-sphere model a factor ~8 (DESIGN 9: 170 M vs 1.3 G vertices/s per core). These versions
 // are branch-free straight-line code: inlined into a simple loop they become AVX2/FMA code.
 //
 // GCC 12 caveat: with the default -ftrapping-math a clamp against a constant followed by
