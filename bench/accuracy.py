@@ -1,4 +1,4 @@
-"""Speed against accuracy of every AO method on every benchmark scene (issue 5, items 2-3).
+"""Speed against accuracy of every AO method on every benchmark scene (bench/README.md).
 
     /usr/bin/python3 bench/accuracy.py [--quick] [--scenes round_tree grove ...] [--no-cycles]
 
@@ -280,7 +280,8 @@ def _fit_proxies(prep, kind, k):
 
 
 def _calibration_sample(prep, n=256, rays=128, seed=0):
-    """The engine's recipe (DESIGN 5): trace a few hundred random receivers; (idx, ao, seconds)."""
+    """The engine's recipe (docs/DESIGN.md, 'Auto mode'): trace a few hundred random receivers;
+    (idx, ao, seconds)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     idx = np.sort(rng.choice(len(prep.V), size=min(n, len(prep.V)), replace=False))
@@ -383,7 +384,7 @@ def metric_rows(prep, ao, ref, base):
     for role in ROLES + ("all", "unburied"):
         if role == "all":
             mask = np.ones(len(ref), bool)
-        elif role == "unburied":   # DESIGN 9: vertices inside other geometry read AO ~ 0
+        elif role == "unburied":   # vertices inside other geometry read AO ~ 0
             mask = ref > BURIED
         else:
             mask = prep.role == role

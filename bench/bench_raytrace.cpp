@@ -4,10 +4,10 @@
 // of radius 5; receivers at 20k leaf centroids with the leaf normal, 64 rays each.
 // "bare_occluded1" is the loop anyone would write first (one rtcOccluded1 per ray, fixed local
 // directions, no per-point rotation); "bare_1M" the same rays as one 64-ray stream per point
-// (second argument 1 = coherent flag); "bare_packet8" as rtcOccluded8 packets. Target:
-// RayTracer ≥ 80% of the fastest bare loop (DESIGN 9 measured 2.5–4 M incoherent AO rays/s
-// per core). rays/cpu_s divides by the CPU time of the whole process: a per-core figure that
-// survives other processes sharing the cores; rays/s is wall-clock.
+// (second argument 1 = coherent flag); "bare_packet8" as rtcOccluded8 packets. Target: RayTracer ≥
+// 80% of the fastest bare loop (docs/DESIGN.md, 'Facts measured in Blender': 2.5–4 M incoherent AO
+// rays/s per core). rays/cpu_s divides by the CPU time of the whole process: a per-core figure
+// that survives other processes sharing the cores; rays/s is wall-clock.
 //
 //   build-rt/canopy_ao_bench --benchmark_filter=RayTrace
 #include <benchmark/benchmark.h>

@@ -87,8 +87,8 @@ void BM_Texel_splat_margin16(benchmark::State& state) {
   state.counters["texels"] = double(t.size());
 }
 
-// Issue 4's figure: a whole 2048² bake with the sphere model — raster, one AO value per texel,
-// splat with a 16-texel margin — of the 100k-triangle mesh. Target: under 1 s.
+// The per-texel figure: a whole 2048² bake with the sphere model — raster, one AO value per
+// texel, splat with a 16-texel margin — of the 100k-triangle mesh. Target: under 1 s.
 void BM_Texel_bake_sphere(benchmark::State& state) {
   const Sheet& s = sheet();
   const Sphere shell = fit_min_sphere(PointsView{s.pos.data(), s.pos.size() / 3});

@@ -1,4 +1,4 @@
-"""Cycles' per-vertex AO bake of a benchmark scene, cached on disk (issue 5, item 2).
+"""Cycles' per-vertex AO bake of a benchmark scene, cached on disk (bench/README.md).
 
 Run inside Blender:
 
@@ -8,7 +8,8 @@ Run inside Blender:
 For each sample count it builds the scene (examples/canopy_scenes.py, identical arrays to the
 native bench), bakes Cycles AO into a FLOAT_COLOR POINT attribute of every object with denoising
 and adaptive sampling off and world.light_settings.distance = the scene's AO distance (its bbox
-diagonal: DESIGN 9), and saves bench/out/cache/cycles_<scene>[_quick]_<samples>.npz with:
+diagonal: docs/DESIGN.md, 'Facts measured in Blender'), and saves
+bench/out/cache/cycles_<scene>[_quick]_<samples>.npz with:
 
     ao/<part name>   float32 (V,)  baked AO per vertex
     seconds          wall time of the bake call (scene sync + BVH + samples)
@@ -45,8 +46,8 @@ def _bake_minimal(context, objects, distance, samples):
     cy = scene.cycles
     cy.device = "CPU"
     cy.samples = int(samples)
-    cy.use_denoising = False          # DESIGN 9: no OIDN in Debian's build → zeros
-    cy.use_adaptive_sampling = False  # DESIGN 9: stops early on vertex bakes
+    cy.use_denoising = False          # no OIDN in Debian's build → zeros
+    cy.use_adaptive_sampling = False  # stops early on vertex bakes
     if scene.world is None:
         scene.world = bpy.data.worlds.new("World")
     scene.world.light_settings.distance = float(distance)

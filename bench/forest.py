@@ -1,4 +1,5 @@
-"""Forest: ground AO cost per vertex against the number of instanced trees (issue 6, item 6).
+"""Forest: ground AO cost per vertex against the number of instanced trees (docs/DESIGN.md,
+'The method ladder': large occluders).
 
     /usr/bin/python3 bench/forest.py [--vertices 1e6] [--counts 10,100,1000,10000]
                                      [--epsilon 1e-2] [--side 1000]

@@ -1,4 +1,4 @@
-"""Time against vertex count per method, 1e4 … 1e7 vertices (issue 5, item 6).
+"""Time against vertex count per method, 1e4 … 1e7 vertices (bench/README.md).
 
     /usr/bin/python3 bench/scaling.py [--max 1e7] [--quick]
 

@@ -1,4 +1,5 @@
-"""Where methods fail: every AO method against inputs that break naive code (issue 5, item 5).
+"""Where methods fail: every AO method against inputs that break naive code (docs/DESIGN.md,
+'How we check ourselves').
 
     /usr/bin/python3 bench/stability.py [--timeout 30] [--out bench/out/stability.md]
 

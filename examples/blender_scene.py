@@ -4,7 +4,8 @@ One object per MeshPart, named after it, with the custom property ``canopy_ao_ro
 part's role ("canopy", "trunk", "ground", "grass") and ``canopy_ao_tree`` to its tree. Each tree
 gets its own collection inside the scene's collection, and its leaves object is parented to its
 trunk object (identity transforms: vertices are in world space). Smooth shading everywhere, so a
-vertex has one normal (DESIGN 9: a POINT-domain Cycles bake averages the corners' normals).
+vertex has one normal (docs/DESIGN.md, 'Facts measured in Blender': a POINT-domain Cycles bake
+averages the corners' normals).
 
 Mesh data goes in through ``foreach_set`` on flat numpy buffers, never per-vertex Python loops.
 """

@@ -1,4 +1,4 @@
-"""Procedural vegetation scenes for Canopy AO tests and benchmarks (issue 5).
+"""Procedural vegetation scenes for Canopy AO tests and benchmarks.
 
 Pure numpy, no ``bpy``: the same arrays feed the native core directly (bench/accuracy.py) and
 Blender (examples/blender_scene.py, examples/make_scene.py), so both see identical geometry.

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Regenerates the speed-against-accuracy study (issue 5): builds the core, runs every method on
-# every scene against the Embree reference (and Cycles' bake, when cached or with --cycles),
-# draws the chart, tabulates the stability study and the scaling, and copies the figures and
-# tables the README shows into bench/results/.
+# Regenerates the speed-against-accuracy study (bench/README.md): builds the core, runs every
+# method on every scene against the Embree reference (and Cycles' bake, when cached or with
+# --cycles), draws the chart, tabulates the stability study and the scaling, and copies the
+# figures and tables the README shows into bench/results/.
 #
 # Usage: scripts/bench.sh [--full] [--cycles] [--scaling] [--no-build]
 #   --full      realistic scene sizes (20k-60k leaves per tree) instead of the quick ones

@@ -516,8 +516,9 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
 
 
 def test_ao_distance_follows_the_world_unless_typed():
-    """The default AO distance is the World's, the one Cycles' AO bake applies (DESIGN 9), so a
-    bake and its Cycles check agree at any scene scale; typing one needs 'From World' off."""
+    """The default AO distance is the World's, the one Cycles' AO bake applies (docs/DESIGN.md,
+    'Facts measured in Blender'), so a bake and its Cycles check agree at any scene scale; typing
+    one needs 'From World' off."""
     from canopy_ao.blender import properties
     scene = bpy.context.scene
     s = scene.canopy_ao

@@ -1,4 +1,5 @@
-"""The AOV written by wire_vertex_ao reaches the compositor with the baked values (DESIGN 9).
+"""The AOV written by wire_vertex_ao reaches the compositor with the baked values (docs/DESIGN.md,
+'Facts measured in Blender').
 
 Headless, Render Result / Viewer pixels cannot be read; a compositor File Output node writes the
 pass to EXR and we load it back.

@@ -92,7 +92,8 @@ def test_check_objects_metrics_and_restore(scene):
 
 def test_vertex_bake_values_in_range_despite_denoise_default(scene):
     ground, _sphere = _canopy_scene()
-    scene.cycles.use_denoising = True  # would make the bake write zeros (DESIGN 9)
+    # would make the bake write zeros (docs/DESIGN.md, 'Facts measured in Blender')
+    scene.cycles.use_denoising = True
     ao = cc.bake_cycles_vertex_ao(bpy.context, [ground], 10.0, 16)["Ground"]
     assert ao.shape == (144,) and np.all((ao >= 0) & (ao <= 1))
     assert ao.max() > 0.9          # open ground at the rim

@@ -1,6 +1,6 @@
-"""Instanced trees in Blender (issue 6, item 6): a tree collection instanced over a plane by
-collection-instance empties and by a particle system. Known answers: the ground under an
-instance is darker than open ground (by ≥ 0.05, as for a real tree in test_addon.py); the
+"""Instanced trees in Blender (docs/DESIGN.md, 'How each role is lit'): a tree collection instanced
+over a plane by collection-instance empties and by a particle system. Known answers: the ground
+under an instance is darker than open ground (by ≥ 0.05, as for a real tree in test_addon.py); the
 prototype's meshes get the attribute once (one mesh, shared by every instance) and the report
 counts the instances."""
 

@@ -1,4 +1,5 @@
-// Canopy shell model (Hegeman Eq. 4–6, DESIGN 3.1–3.3), Reeves–Blau baseline and fast_exp.
+// Canopy shell model (Hegeman Eq. 4–6, docs/DESIGN.md, 'The method ladder'), Reeves–Blau
+// baseline and fast_exp.
 #include <gtest/gtest.h>
 
 #include <cmath>

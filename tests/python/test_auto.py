@@ -1,6 +1,6 @@
-"""Auto mode models no more than a scene needs (DESIGN 5, issue 6): it stops at the sphere where
-the sphere is good enough, climbs on an irregular tree, and never takes a rung its predicted
-time rules out. The scenes are the fixed-seed generators of examples/canopy_scenes.py."""
+"""Auto mode models no more than a scene needs (docs/DESIGN.md, 'Auto mode'): it stops at the
+sphere where the sphere is good enough, climbs on an irregular tree, and never takes a rung its
+predicted time rules out. The scenes are the fixed-seed generators of examples/canopy_scenes.py."""
 import canopy_scenes as cs
 import numpy as np
 import pytest

@@ -72,7 +72,7 @@ def test_counts(name, kw, leaves):
 
 
 def test_default_sizes_are_realistic():
-    # issue 5: tens of thousands to a million vertices; the large variant has ≥ 1M
+    # benchmark sizes: tens of thousands to a million vertices; the large variant has ≥ 1M
     for name in ("round_tree", "columnar_tree", "weeping_tree", "conifer", "grove"):
         n = sum(p.n_vertices for p in cs.make_scene(name).parts_by_role("canopy"))
         assert 20_000 <= n <= 1_000_000, (name, n)

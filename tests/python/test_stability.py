@@ -1,6 +1,6 @@
-"""Where methods fail (issue 5, item 5): every method on every degenerate case must give a finite
-result in [0, 1] of the right length, or raise a ValueError / RuntimeError with a message.
-Never NaN, never out of range, never a crash. The cases and method adapters live in
+"""Where methods fail (docs/DESIGN.md, 'How we check ourselves'): every method on every degenerate
+case must give a finite result in [0, 1] of the right length, or raise a ValueError / RuntimeError
+with a message. Never NaN, never out of range, never a crash. The cases and method adapters live in
 bench/stability.py (which also tabulates the results: bench/out/stability.md).
 
 Methods this build lacks are skipped, so the tests tighten as the core grows.

@@ -1,10 +1,10 @@
-"""Check our AO against Cycles' own AO bake (DESIGN 3.7, 8, 9).
+"""Check our AO against Cycles' own AO bake (docs/DESIGN.md, 'How we check ourselves').
 
 Every setting a bake touches (engine, samples, denoising, adaptive sampling, device, AO distance,
 bake settings, active colour attribute / UV map / image node, selection, active object) is
 snapshotted first and restored in a ``finally``, also when the bake fails.
 
-Facts this relies on (DESIGN 9, Blender 3.4.1):
+Facts this relies on (docs/DESIGN.md, 'Facts measured in Blender'):
 - Cycles' AO bake is cosine-weighted, 1 = open sky, and ``world.light_settings.distance`` is a
   hard cut-off on ray length, used even with the world's AO checkbox off.
 - Denoising (no OpenImageDenoise in Debian's build: the bake writes zeros) and adaptive sampling
@@ -280,9 +280,9 @@ def check_objects(context, objects, ours, distance, samples, write_errors=False,
                   buried_threshold=1e-3):
     """Bake Cycles AO for `objects` (one bake call) and compare with ours[name] per vertex.
 
-    Returns {name: metrics.compare(...) dict + "time_cycles" (s, shared bake time) +
-    "n_buried" and "mae_unburied"/"rmse_unburied"/"corr_unburied" (vertices Cycles sees as
-    fully blocked, e.g. leaf bases inside a branch, left out; DESIGN 9)}.
+    Returns {name: metrics.compare(...) dict + "time_cycles" (s, shared bake time) + "n_buried" and
+    "mae_unburied"/"rmse_unburied"/"corr_unburied" (vertices Cycles sees as fully blocked, e.g.
+    leaf bases inside a branch, left out; docs/DESIGN.md, 'Facts measured in Blender')}.
     """
     objects = list(objects)
     for o in objects:

@@ -1,5 +1,6 @@
 """Instanced trees in Blender: find them, bake each prototype once, let every instance occlude
-(issue 6, item 6; the math is in forest.py, which needs no bpy).
+(docs/DESIGN.md, 'How each role is lit'; the math is in core/forest.py, which needs no
+bpy).
 
 Instances come from the evaluated depsgraph (``depsgraph.object_instances``), which covers
 particle systems, collection-instance empties and geometry-nodes instances alike. Each instance

@@ -1,4 +1,4 @@
-"""Wire baked AO into materials and render passes (DESIGN 1, 9).
+"""Wire baked AO into materials and render passes (docs/DESIGN.md, 'The product').
 
 Every node we add carries ``node["canopy_ao"] = <role>`` so wiring is idempotent (a second call
 reuses the nodes) and ``unwire`` removes exactly what we added. The original Base Color link is
@@ -20,7 +20,7 @@ OWN_MATERIAL_TAG = "canopy_ao"
 OBJ_MATERIAL_KEY = "canopy_ao_material"
 
 # Render Layers output sockets that Cycles/Eevee already use. A view-layer AOV with one of these
-# names collides with the built-in socket (DESIGN 9 measured it for "AO").
+# names collides with the built-in socket (docs/DESIGN.md, 'Facts measured in Blender': "AO" does).
 RESERVED_PASS_NAMES = frozenset({
     "Image", "Alpha", "Depth", "Mist", "Normal", "Vector", "UV", "Position", "AO", "Shadow",
     "Emit", "Env", "IndexOB", "IndexMA", "Noisy Image", "Noisy Shadow Catcher",
@@ -112,7 +112,8 @@ def _new_mix(nt, location):
 
 def _set_aov_target(node, aov_name):
     # 3.4: the AOV Output node's RNA has two `name` properties and Python reaches the node's
-    # own one, the AOV it writes (the node keeps its tree name "AOV Output"; DESIGN 9).
+    # own one, the AOV it writes (the node keeps its tree name "AOV Output"; docs/DESIGN.md,
+    # 'Facts measured in Blender').
     # 4.x: `aov_name`.
     if hasattr(node, "aov_name"):
         node.aov_name = aov_name

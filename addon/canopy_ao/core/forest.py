@@ -1,4 +1,5 @@
-"""Forests: instanced trees as occluders of the ground (issue 6, item 6; DESIGN 3.4). No bpy.
+"""Forests: instanced trees as occluders of the ground (docs/DESIGN.md, 'The method ladder').
+No bpy.
 
 A forest is a few unique tree prototypes, each with its fitted shells in the prototype's own
 space, and many instances, each a 4×4 world matrix (rotation, translation, any scale, even

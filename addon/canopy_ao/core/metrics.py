@@ -1,4 +1,5 @@
-"""Error metrics between our AO and a reference (Cycles or Embree), DESIGN 8.
+"""Error metrics between our AO and a reference (Cycles or Embree): docs/DESIGN.md,
+'How we check ourselves'.
 
 Pure numpy, no bpy: plain pytest tests it and the add-on, the CLI and the charts share it.
 """

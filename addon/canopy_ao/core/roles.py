@@ -1,6 +1,6 @@
 """Guess what part a mesh plays in a vegetation scene from its geometry alone (no bpy).
 
-Roles (DESIGN 1, issue 3 item 2):
+Roles (docs/DESIGN.md, 'How each role is lit'):
 - ``CANOPY``: leaves; its points fit the proxies, and it receives.
 - ``TRUNK``: receives, and occludes the ground as a solid.
 - ``GROUND``: a flat, wide surface; receives only.
@@ -241,7 +241,8 @@ def blade_heights(positions: np.ndarray, triangles: np.ndarray, up=(0.0, 0.0, 1.
     """Ground level and blade height of a grass mesh, from its connected components.
 
     Returns (ground_height, blade_height): the median lowest point and the median height of the
-    blades along ``up`` (Hegeman Eq. 9 needs both; DESIGN 3.5 says find them, do not ask).
+    blades along ``up`` (Hegeman Eq. 9 needs both; found, not asked for: docs/DESIGN.md, 'The method
+    ladder').
     """
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     if len(p) == 0:
