@@ -1,6 +1,5 @@
 """What a rung costs, predicted from counted work (no clock), so "auto" makes the same choice
-on a quiet machine and under load (docs/DESIGN.md, 'Auto: the cheapest rung that is good
-enough').
+on a quiet machine and under load (docs/DESIGN.md, 'Auto mode').
 
 Work per receiver, counted from the plan:
 - sphere, ellipsoid, reeves_blau: 1 in-shell evaluation + one per occluder (every other
