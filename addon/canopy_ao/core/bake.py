@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import ladder, lighting, native, proxies, trees
+from . import cost, ladder, lighting, native, proxies, trees
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import ItemResult, Plan, SceneItem, split_trees
 from .ladder import DEFAULT_TAU
@@ -174,9 +174,18 @@ def report(plan: Plan, results) -> dict:
         "objects": {r.name: {"role": r.role, "tree": r.tree, "tree_source": r.tree_source,
                              "tree_why": r.tree_why, "method": r.method,
                              "vertices": r.vertices, "seconds": r.seconds,
+                             "predicted_seconds": _predicted(plan, r),
                              "ao_mean": float(r.ao.mean()) if r.vertices else None}
                     for r in results},
     }
+
+
+def _predicted(plan: Plan, r: ItemResult):
+    """The cost model's seconds for this result's receivers (cost.py), None off the model."""
+    try:
+        return cost.predict(plan, r.method, r.vertices)["seconds"]
+    except (ValueError, KeyError):
+        return None
 
 
 def bake(items, settings: BakeSettings, progress=None):

@@ -1,6 +1,5 @@
 """What a rung costs, predicted from counted work (no clock), so "auto" makes the same choice
-on a quiet machine and under load (docs/DESIGN.md, 'Auto: the cheapest rung that is good
-enough').
+on a quiet machine and under load (docs/DESIGN.md, 'Auto mode').
 
 Work per receiver, counted from the plan:
 - sphere, ellipsoid, reeves_blau: 1 in-shell evaluation + one per occluder (every other
@@ -21,16 +20,20 @@ import math
 
 from .native import _core
 
-# Seconds per unit of work on one core, measured with
+# Seconds per unit of work on one core. Ratios measured with
 #   nice /usr/bin/python3 bench/cost_constants.py
-# (round tree, quick size: 25,872 receivers, each rung's evaluation of every receiver timed
-# best of 5 on one thread, divided by the units counted below; 2-core shared machine,
-# 2026-12-01: 1.6e-8, 8.1e-8, 7.1e-8, 4.6e-8). Re-measure when a kernel changes speed by 2×.
+# (round tree, 90,372 receivers, 64 rays, each rung's evaluation of every receiver timed best
+# of 3 on one thread, divided by the units counted below): 1.2e-8-2.6e-8 per shell (sphere to
+# shells), 4.7e-8 per medium shell, 4.9e-8 per voxel step, 4.8e-8 per BVH step, 2026-12-01 on
+# the shared 2-core machine at load average 10. Scaled by 0.36 to a quiet machine: the same
+# tree's rays took 0.70 s for 80,000 vertices × 64 rays on 2 threads quiet (the README's
+# example bake), 1.74e-8 per BVH step against 4.8e-8 under that load. Re-measure when a kernel
+# changes speed by 2×.
 SECONDS_PER_UNIT = {
-    "shell": 1.6e-8,         # one analytic shell evaluation (in-shell model or occluder)
-    "medium": 8.0e-8,        # one medium-table shell evaluation
-    "voxel_step": 7.0e-8,    # one step of a density-grid line integral
-    "bvh_step": 4.5e-8,      # one BVH level of one Embree ray (rays: samples × log2 M)
+    "shell": 6.0e-9,         # one analytic shell evaluation (in-shell model or occluder)
+    "medium": 1.7e-8,        # one medium-table shell evaluation
+    "voxel_step": 1.8e-8,    # one step of a density-grid line integral
+    "bvh_step": 1.75e-8,     # one BVH level of one Embree ray (rays: samples × log2 M)
 }
 FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: analytic 1 + "
            "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "

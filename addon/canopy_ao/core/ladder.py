@@ -148,8 +148,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         groups.append((it, p, n))
     ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
     # Buried points (a leaf's base inside its twig): kept out of the fit, which they would
-    # darken everything else to match (docs/DESIGN.md, 'Auto: the cheapest rung that is good
-    # enough').
+    # darken everything else to match (docs/DESIGN.md, 'Auto mode').
     keep = ~np.concatenate([buried(plan, it, p, n) for it, p, n in groups]) if groups \
         else np.zeros(0, bool)
     t_trace = time.perf_counter() - t0
