@@ -7,10 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$PWD
 
-version=$(blender -b --factory-startup --python-expr \
-  'import bpy; print("CANOPY_AO_BV=%d.%d" % bpy.app.version[:2])' 2>/dev/null |
-  sed -n 's/^CANOPY_AO_BV=//p')
-[[ -n $version ]] || { echo "test_extension.sh: could not ask Blender for its version" >&2; exit 1; }
+version=$(scripts/blender_version.sh)
 if [[ $(printf '%s\n' "$version" 4.2 | sort -V | head -n1) != 4.2 ]]; then
   echo "== Extension test skipped: Blender $version has no extensions (4.2+)"
   exit 0
