@@ -409,6 +409,30 @@ def c_write_read(g, core, tmp):
     return call, check_image
 
 
+def c_properties(g, core, tmp):
+    """The remaining methods and properties: volume, pickling, repr, the objects' sizes."""
+    import pickle
+
+    def call():
+        e, sph = g.ellipsoid(core), g.sphere(core)
+        assert np.isfinite(e.volume()) and e.volume() > 0
+        for obj in (e, sph):  # unpickling re-orthonormalises the axes: equal to ~1 ulp
+            back = pickle.loads(pickle.dumps(obj))
+            for field in ("center", "radius", "radii", "axes"):
+                if hasattr(obj, field):
+                    assert np.allclose(getattr(back, field), getattr(obj, field), rtol=1e-6,
+                                       atol=1e-6), f"pickled {field} differs"
+        v, t = g.mesh()
+        grid, tracer = core.DensityGrid(v, t, g.integer(1, 16)), core.RayTracer(v, t)
+        field = core.OccluderField(g.shells(core), g.tau())
+        assert np.isfinite(grid.voxel_size) and grid.levels >= 1 and len(grid.shape) == 3
+        assert np.all(np.isfinite(grid.origin)) and np.isfinite(grid.total_area)
+        assert tracer.vertex_count == len(v) and np.isfinite(tracer.auto_offset)
+        assert field.max_candidates <= len(field)
+        return [repr(x) for x in (grid, tracer)]
+    return call, None
+
+
 def c_threads(g, core, tmp):
     def call():
         previous = core.set_max_threads(g.integer(0, 4))
