@@ -32,7 +32,7 @@ blender -b --factory-startup --python examples/make_scene.py -- \
   --scene round_tree --quick --out "$tmp/scene.blend" >"$tmp/scene.log" 2>&1 ||
   { cat "$tmp/scene.log" >&2; exit 1; }
 cd "$tmp"  # nothing of the repository on sys.path
-blender -b --factory-startup "$tmp/scene.blend" --python-expr \
+blender -b --factory-startup "$tmp/scene.blend" --python-exit-code 1 --python-expr \
   "import bl_ext.user_default.canopy_ao.cli as cli; cli.main()" -- \
   --all --method sphere --report "$tmp/report.json" >"$tmp/bake.log" 2>&1 ||
   { cat "$tmp/bake.log" >&2; echo "bake through the extension failed" >&2; exit 1; }
