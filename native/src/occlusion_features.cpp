@@ -1,0 +1,304 @@
+// Canopy AO — per-vertex occlusion features and their linear model (occlusion_features.h).
+#include "canopy_ao/occlusion_features.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "canopy_ao/parallel.h"
+
+namespace canopy_ao {
+
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+constexpr int kGridAO = 1;  // the feature the products pair with (grid AO at s = 1)
+
+// Golden-angle spiral over the sphere: K nearly uniform directions, fixed (deterministic).
+std::vector<Vec3> sphere_directions(int k) {
+  std::vector<Vec3> d;
+  const float golden = kPi * (3.0f - std::sqrt(5.0f));
+  for (int i = 0; i < k; ++i) {
+    const float z = 1.0f - (2.0f * i + 1.0f) / k;
+    const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    d.push_back({r * std::cos(golden * i), r * std::sin(golden * i), z});
+  }
+  return d;
+}
+
+std::array<int, 3> level_dims(const DensityGrid& g, int level) {
+  std::array<int, 3> d = {g.nx(), g.ny(), g.nz()};
+  for (int l = 0; l < level; ++l) d = {(d[0] + 1) / 2, (d[1] + 1) / 2, (d[2] + 1) / 2};
+  return d;
+}
+
+inline std::size_t vidx(const int* n, int i, int j, int k) {
+  return (static_cast<std::size_t>(k) * n[1] + j) * n[0] + i;
+}
+
+// Lattice coordinates (voxel-centre units) of p.
+inline Vec3 lattice(Vec3 origin, float h, Vec3 p) { return (p - origin) / h; }
+
+inline bool inside_box(const int* n, Vec3 g) {
+  return g.x >= -0.5f && g.y >= -0.5f && g.z >= -0.5f && g.x <= n[0] - 0.5f &&
+         g.y <= n[1] - 0.5f && g.z <= n[2] - 0.5f;
+}
+
+}  // namespace
+
+// --- Precomputation ----------------------------------------------------------------------------
+
+OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int level,
+                                                   const std::vector<Vec3>& dirs) {
+  Field f;
+  const std::array<int, 3> d = level_dims(g, level);
+  f.n[0] = d[0], f.n[1] = d[1], f.n[2] = d[2];
+  f.h = g.voxel_size() * static_cast<float>(1 << level);
+  f.origin = g.origin() + Vec3{0.5f * f.h, 0.5f * f.h, 0.5f * f.h};
+  f.sigma = g.sigma_level(level);
+  f.tau.assign(dirs.size(), std::vector<float>(f.sigma.size(), 0.0f));
+  const int* n = f.n;
+  parallel_for_blocks(dirs.size(), 1, [&](std::size_t b, std::size_t e) {
+    for (std::size_t k = b; k < e; ++k) {
+      const Vec3 dk = dirs[k];
+      int m = 0;
+      for (int a = 1; a < 3; ++a)
+        if (std::fabs(dk[a]) > std::fabs(dk[m])) m = a;
+      const int a1 = (m + 1) % 3, a2 = (m + 2) % 3;
+      const int s = dk[m] > 0 ? 1 : -1;
+      const float am = std::fabs(dk[m]);
+      const float step = f.h / am;                  // path length between slices
+      const float da = dk[a1] / am, db = dk[a2] / am;  // lateral shift in voxels per slice
+      std::vector<float>& tau = f.tau[k];
+      const std::vector<float>& sg = f.sigma;
+      auto at = [&](int im, int ia, int ib) {
+        int c[3];
+        c[m] = im, c[a1] = ia, c[a2] = ib;
+        return vidx(n, c[0], c[1], c[2]);
+      };
+      // INV: every slice upstream of `im` (in the direction d_k points to) is final.
+      for (int t = 0; t < n[m]; ++t) {
+        const int im = s > 0 ? n[m] - 1 - t : t;
+        const int up = im + s;
+        const bool boundary = up < 0 || up >= n[m];
+        for (int ib = 0; ib < n[a2]; ++ib) {
+          for (int ia = 0; ia < n[a1]; ++ia) {
+            const std::size_t c = at(im, ia, ib);
+            if (boundary) {
+              tau[c] = 0.5f * step * sg[c];
+              continue;
+            }
+            // Bilinear in the upstream slice, zero outside the grid.
+            const float ua = ia + da, ub = ib + db;
+            const int a0 = static_cast<int>(std::floor(ua)), b0 = static_cast<int>(std::floor(ub));
+            const float fa = ua - a0, fb = ub - b0;
+            float tu = 0, su = 0;
+            for (int q = 0; q < 4; ++q) {
+              const int ja = a0 + (q & 1), jb = b0 + (q >> 1);
+              if (ja < 0 || jb < 0 || ja >= n[a1] || jb >= n[a2]) continue;
+              const float w = ((q & 1) ? fa : 1 - fa) * ((q >> 1) ? fb : 1 - fb);
+              const std::size_t u = at(up, ja, jb);
+              tu += w * tau[u];
+              su += w * sg[u];
+            }
+            tau[c] = tu + 0.5f * step * (sg[c] + su);
+          }
+        }
+      }
+    }
+  });
+  return f;
+}
+
+OcclusionFeatures::OcclusionFeatures(const DensityGrid& occluders,
+                                     const OcclusionFeatureOptions& options) {
+  if (options.directions < 6 || options.directions > 256) {
+    throw std::invalid_argument("directions must be in [6, 256], got " +
+                                std::to_string(options.directions));
+  }
+  dirs_ = sphere_directions(options.directions);
+  fine_ = sweep(occluders, 0, dirs_);
+}
+
+// --- Lookups -----------------------------------------------------------------------------------
+
+float OcclusionFeatures::lerp3(const Field& f, const std::vector<float>& v, Vec3 g) {
+  int i0[3];
+  float fr[3];
+  for (int a = 0; a < 3; ++a) {
+    const float x = std::clamp(g[a], 0.0f, static_cast<float>(f.n[a] - 1));
+    i0[a] = std::min(static_cast<int>(x), std::max(f.n[a] - 2, 0));
+    fr[a] = f.n[a] > 1 ? x - i0[a] : 0.0f;
+  }
+  float acc = 0;
+  for (int q = 0; q < 8; ++q) {
+    int c[3];
+    float w = 1;
+    for (int a = 0; a < 3; ++a) {
+      const int bit = (q >> a) & 1;
+      c[a] = std::min(i0[a] + bit, f.n[a] - 1);
+      w *= bit ? fr[a] : 1 - fr[a];
+    }
+    if (w > 0) acc += w * v[vidx(f.n, c[0], c[1], c[2])];
+  }
+  return acc;
+}
+
+float OcclusionFeatures::tau_at(const Field& f, int k, Vec3 p) const {
+  Vec3 g = lattice(f.origin, f.h, p);
+  if (!inside_box(f.n, g)) {
+    // Outside: the optical depth from where the direction enters the grid (slab test).
+    const Vec3 d = dirs_[k];
+    float t0 = 0, t1 = std::numeric_limits<float>::infinity();
+    for (int a = 0; a < 3; ++a) {
+      const float lo = -0.5f, hi = f.n[a] - 0.5f;
+      if (std::fabs(d[a]) < 1e-12f) {
+        if (g[a] < lo || g[a] > hi) return 0.0f;
+        continue;
+      }
+      float ta = (lo - g[a]) / d[a], tb = (hi - g[a]) / d[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    if (t0 > t1) return 0.0f;
+    g = g + d * t0;
+  }
+  return lerp3(f, f.tau[k], g);
+}
+
+void OcclusionFeatures::compute(PointsView positions, PointsView normals, const TreeFrame& frame,
+                                float* out) const {
+  if (positions.size != normals.size)
+    throw std::invalid_argument("positions and normals must have the same number of rows");
+  if (!(frame.radius > 0) || !std::isfinite(frame.radius) || !is_finite(frame.center) ||
+      !std::isfinite(frame.z_min) || !std::isfinite(frame.z_max) || frame.z_max < frame.z_min)
+    throw std::invalid_argument("frame needs a finite radius > 0 and z_min <= z_max");
+  for (std::size_t i = 0; i < positions.size; ++i)
+    if (!is_finite(positions[i]) || !is_finite(normals[i]))
+      throw std::invalid_argument("positions and normals must be finite (row " +
+                                  std::to_string(i) + ")");
+  const int K = directions();
+  const float height = std::max(frame.z_max - frame.z_min, 1e-12f);
+  const Vec3 mid = {frame.center.x, frame.center.y, 0.5f * (frame.z_min + frame.z_max)};
+  const float half_diag = std::max(0.5f * std::sqrt(4 * frame.radius * frame.radius +
+                                                    height * height), 1e-12f);
+  parallel_for_blocks(positions.size, 256, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const Vec3 p = positions[i];
+      const Vec3 nn = normalize(normals[i]);
+      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
+      float w_opp = 0, ao_opp = 0, w_sky = 0, sky = 0;
+      for (int k = 0; k < K; ++k) {
+        const Vec3 d = dirs_[k];
+        const float t = tau_at(fine_, k, p);
+        const float tr = std::exp(-t);
+        if (d.z > 0) {
+          sky += d.z * tr;
+          w_sky += d.z;
+        }
+        const float w = dot(nn, d);
+        if (w > 0) {
+          w_sum += w;
+          const float sq = std::sqrt(tr);
+          ao_s[0] += w * sq;
+          ao_s[1] += w * tr;
+          ao_s[2] += w * tr * tr;
+          mean_tau += w * t;
+        } else if (w < 0) {
+          w_opp -= w;
+          ao_opp -= w * tr;
+        }
+      }
+      float* o = out + i * kCount;
+      if (w_sum > 0) {
+        for (int s = 0; s < 3; ++s) o[s] = ao_s[s] / w_sum;
+        o[4] = std::log1p(mean_tau / w_sum);
+      } else {  // zero normal: an open receiver
+        o[0] = o[1] = o[2] = 1.0f;
+        o[4] = 0.0f;
+      }
+      o[3] = w_sky > 0 ? sky / w_sky : 1.0f;
+      const Vec3 gf = lattice(fine_.origin, fine_.h, p);
+      const float sf = lerp3(fine_, fine_.sigma, gf) * fine_.h;
+      o[5] = std::log1p(inside_box(fine_.n, gf) ? sf : 0.0f);
+      const Vec3 r = {p.x - frame.center.x, p.y - frame.center.y, 0.0f};
+      const float rl = length(r);
+      o[6] = nn.z;
+      o[7] = rl > 0 ? dot(nn, r) / rl : 0.0f;
+      o[8] = std::clamp((p.z - frame.z_min) / height, -0.5f, 1.5f);
+      o[9] = std::min(rl / frame.radius, 2.0f);
+      const Vec3 q = p - mid;
+      const float ql = length(q);
+      o[10] = ql > 0 ? dot(nn, q) / ql : 0.0f;
+      o[11] = std::min(ql / half_diag, 2.0f);
+      o[12] = o[1] - (w_opp > 0 ? ao_opp / w_opp : 1.0f);
+    }
+  });
+}
+
+const char* OcclusionFeatures::feature_name(int f) {
+  static const char* names[kCount] = {
+      "grid_ao_half", "grid_ao", "grid_ao_double", "sky_view", "log_depth", "density",
+      "normal_up", "normal_radial", "height", "radial", "normal_out", "centre_distance",
+      "open_side"};
+  if (f < 0 || f >= kCount) throw std::invalid_argument("feature index out of range");
+  return names[f];
+}
+
+// --- The linear model --------------------------------------------------------------------------
+
+int expanded_size(int features) { return 3 * features; }
+
+namespace {
+void check_model(int f, const float* scale) {
+  if (f < 1) throw std::invalid_argument("at least one feature is needed");
+  for (int j = 0; j < f; ++j)
+    if (!(scale[j] > 0) || !std::isfinite(scale[j]))
+      throw std::invalid_argument("scale must be finite and > 0 (feature " + std::to_string(j) +
+                                  ")");
+}
+
+inline void expand_row(const float* x, int f, const float* mean, const float* scale, float* z,
+                       float* phi) {
+  for (int j = 0; j < f; ++j) z[j] = (x[j] - mean[j]) / scale[j];
+  const int g = std::min(kGridAO, f - 1);
+  int p = 0;
+  phi[p++] = 1.0f;
+  for (int j = 0; j < f; ++j) phi[p++] = z[j];
+  for (int j = 0; j < f; ++j) phi[p++] = z[j] * z[j];
+  for (int j = 0; j < f; ++j)
+    if (j != g) phi[p++] = z[g] * z[j];
+}
+}  // namespace
+
+void expand_features(const float* features, std::size_t n, int f, const float* mean,
+                     const float* scale, float* out) {
+  check_model(f, scale);
+  const int P = expanded_size(f);
+  parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
+    std::vector<float> z(f);
+    for (std::size_t i = b; i < e; ++i)
+      expand_row(features + i * f, f, mean, scale, z.data(), out + i * P);
+  });
+}
+
+void predict_features(const float* features, std::size_t n, int f, const float* mean,
+                      const float* scale, const float* weights, float* out) {
+  check_model(f, scale);
+  const int P = expanded_size(f);
+  parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
+    std::vector<float> z(f), phi(P);
+    for (std::size_t i = b; i < e; ++i) {
+      expand_row(features + i * f, f, mean, scale, z.data(), phi.data());
+      double acc = 0;
+      for (int p = 0; p < P; ++p) acc += static_cast<double>(weights[p]) * phi[p];
+      out[i] = std::isfinite(acc) ? static_cast<float>(std::clamp(acc, 0.0, 1.0)) : 1.0f;
+    }
+  });
+}
+
+}  // namespace canopy_ao
