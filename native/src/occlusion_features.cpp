@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -59,56 +60,88 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
   f.h = g.voxel_size() * static_cast<float>(1 << level);
   f.origin = g.origin() + Vec3{0.5f * f.h, 0.5f * f.h, 0.5f * f.h};
   f.sigma = g.sigma_level(level);
-  f.tau.assign(dirs.size(), std::vector<float>(f.sigma.size(), 0.0f));
+  const std::size_t V = f.sigma.size(), K = dirs.size();
   const int* n = f.n;
-  parallel_for_blocks(dirs.size(), 1, [&](std::size_t b, std::size_t e) {
+  const std::size_t stride[3] = {1, static_cast<std::size_t>(n[0]),
+                                 static_cast<std::size_t>(n[0]) * n[1]};
+  std::vector<std::vector<float>> per_dir(K);
+  parallel_for_blocks(K, 1, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
       const Vec3 dk = dirs[k];
       int m = 0;
       for (int a = 1; a < 3; ++a)
         if (std::fabs(dk[a]) > std::fabs(dk[m])) m = a;
-      const int a1 = (m + 1) % 3, a2 = (m + 2) % 3;
+      // Lateral axes, the one with the smaller stride innermost (x whenever it is lateral).
+      const int a1 = m == 0 ? 1 : 0, a2 = m == 2 ? 1 : 2;
       const int s = dk[m] > 0 ? 1 : -1;
       const float am = std::fabs(dk[m]);
-      const float step = f.h / am;                  // path length between slices
-      const float da = dk[a1] / am, db = dk[a2] / am;  // lateral shift in voxels per slice
-      std::vector<float>& tau = f.tau[k];
-      const std::vector<float>& sg = f.sigma;
-      auto at = [&](int im, int ia, int ib) {
-        int c[3];
-        c[m] = im, c[a1] = ia, c[a2] = ib;
-        return vidx(n, c[0], c[1], c[2]);
-      };
-      // INV: every slice upstream of `im` (in the direction d_k points to) is final.
+      const float step = f.h / am;  // path length between slices
+      // The upstream point sits one slice away, shifted laterally by a constant (da, db) voxels
+      // (|da|, |db| <= 1): the same bilinear stencil for every voxel of the sweep.
+      const float da = dk[a1] / am, db = dk[a2] / am;
+      const int oa = static_cast<int>(std::floor(da)), ob = static_cast<int>(std::floor(db));
+      const float fa = da - oa, fb = db - ob;
+      const float wq[4] = {(1 - fa) * (1 - fb), fa * (1 - fb), (1 - fa) * fb, fa * fb};
+      const std::size_t sa = stride[a1], sb = stride[a2];
+      std::vector<float>& tau = per_dir[k];
+      tau.assign(V, 0.0f);
+      const float* sg = f.sigma.data();
+      float* tp = tau.data();
+      // Columns ia whose four upstream corners all lie inside the slice: no bounds checks.
+      const int ia_lo = std::max(0, -oa), ia_hi = std::min(n[a1] - 1, n[a1] - 2 - oa);
+      // INV: every slice upstream of `im` (the side d_k points to) is final.
       for (int t = 0; t < n[m]; ++t) {
         const int im = s > 0 ? n[m] - 1 - t : t;
         const int up = im + s;
-        const bool boundary = up < 0 || up >= n[m];
+        const std::size_t base = im * stride[m];
+        if (up < 0 || up >= n[m]) {  // the exit slice: half a step to the boundary
+          for (int ib = 0; ib < n[a2]; ++ib)
+            for (int ia = 0; ia < n[a1]; ++ia) {
+              const std::size_t c = base + ia * sa + ib * sb;
+              tp[c] = 0.5f * step * sg[c];
+            }
+          continue;
+        }
+        const std::size_t ubase = up * stride[m];
         for (int ib = 0; ib < n[a2]; ++ib) {
-          for (int ia = 0; ia < n[a1]; ++ia) {
-            const std::size_t c = at(im, ia, ib);
-            if (boundary) {
-              tau[c] = 0.5f * step * sg[c];
-              continue;
-            }
-            // Bilinear in the upstream slice, zero outside the grid.
-            const float ua = ia + da, ub = ib + db;
-            const int a0 = static_cast<int>(std::floor(ua)), b0 = static_cast<int>(std::floor(ub));
-            const float fa = ua - a0, fb = ub - b0;
-            float tu = 0, su = 0;
+          auto checked = [&](int ia) {
+            const std::size_t c = base + ia * sa + ib * sb;
+            float tu = 0, su = 0;  // bilinear in the upstream slice, zero outside the grid
             for (int q = 0; q < 4; ++q) {
-              const int ja = a0 + (q & 1), jb = b0 + (q >> 1);
+              const int ja = ia + oa + (q & 1), jb = ib + ob + (q >> 1);
               if (ja < 0 || jb < 0 || ja >= n[a1] || jb >= n[a2]) continue;
-              const float w = ((q & 1) ? fa : 1 - fa) * ((q >> 1) ? fb : 1 - fb);
-              const std::size_t u = at(up, ja, jb);
-              tu += w * tau[u];
-              su += w * sg[u];
+              const std::size_t u = ubase + ja * sa + jb * sb;
+              tu += wq[q] * tp[u];
+              su += wq[q] * sg[u];
             }
-            tau[c] = tu + 0.5f * step * (sg[c] + su);
+            tp[c] = tu + 0.5f * step * (sg[c] + su);
+          };
+          const bool row_inside = ib + ob >= 0 && ib + ob + 1 < n[a2];
+          if (!row_inside || ia_lo > ia_hi) {
+            for (int ia = 0; ia < n[a1]; ++ia) checked(ia);
+            continue;
           }
+          for (int ia = 0; ia < ia_lo; ++ia) checked(ia);
+          const std::ptrdiff_t u0 = static_cast<std::ptrdiff_t>(ubase + (ib + ob) * sb) +
+                                    static_cast<std::ptrdiff_t>(oa) * static_cast<std::ptrdiff_t>(sa);
+          for (int ia = ia_lo; ia <= ia_hi; ++ia) {
+            const std::size_t c = base + ia * sa + ib * sb;
+            const std::size_t u = static_cast<std::size_t>(u0 + ia * static_cast<std::ptrdiff_t>(sa));
+            const float tu = wq[0] * tp[u] + wq[1] * tp[u + sa] + wq[2] * tp[u + sb] +
+                             wq[3] * tp[u + sa + sb];
+            const float su = wq[0] * sg[u] + wq[1] * sg[u + sa] + wq[2] * sg[u + sb] +
+                             wq[3] * sg[u + sa + sb];
+            tp[c] = tu + 0.5f * step * (sg[c] + su);
+          }
+          for (int ia = ia_hi + 1; ia < n[a1]; ++ia) checked(ia);
         }
       }
     }
+  });
+  f.tau.resize(V * K);
+  parallel_for_blocks(V, 4096, [&](std::size_t b, std::size_t e) {
+    for (std::size_t v = b; v < e; ++v)
+      for (std::size_t k = 0; k < K; ++k) f.tau[v * K + k] = per_dir[k][v];
   });
   return f;
 }
@@ -147,16 +180,49 @@ float OcclusionFeatures::lerp3(const Field& f, const std::vector<float>& v, Vec3
   return acc;
 }
 
-float OcclusionFeatures::tau_at(const Field& f, int k, Vec3 p) const {
-  Vec3 g = lattice(f.origin, f.h, p);
-  if (!inside_box(f.n, g)) {
-    // Outside: the optical depth from where the direction enters the grid (slab test).
+void OcclusionFeatures::taus_at(Vec3 p, float* tau) const {
+  const Field& f = fine_;
+  const int K = directions();
+  const Vec3 g = lattice(f.origin, f.h, p);
+  auto stencil = [&](Vec3 q, std::size_t* idx, float* w) {
+    int i0[3];
+    float fr[3];
+    for (int a = 0; a < 3; ++a) {
+      const float x = std::clamp(q[a], 0.0f, static_cast<float>(f.n[a] - 1));
+      i0[a] = std::min(static_cast<int>(x), std::max(f.n[a] - 2, 0));
+      fr[a] = f.n[a] > 1 ? x - i0[a] : 0.0f;
+    }
+    for (int c = 0; c < 8; ++c) {
+      int v[3];
+      w[c] = 1;
+      for (int a = 0; a < 3; ++a) {
+        const int bit = (c >> a) & 1;
+        v[a] = std::min(i0[a] + bit, f.n[a] - 1);
+        w[c] *= bit ? fr[a] : 1 - fr[a];
+      }
+      idx[c] = vidx(f.n, v[0], v[1], v[2]) * K;
+    }
+  };
+  std::size_t idx[8];
+  float w[8];
+  if (inside_box(f.n, g)) {
+    stencil(g, idx, w);
+    for (int k = 0; k < K; ++k) tau[k] = 0;
+    for (int c = 0; c < 8; ++c) {
+      const float* src = f.tau.data() + idx[c];
+      for (int k = 0; k < K; ++k) tau[k] += w[c] * src[k];
+    }
+    return;
+  }
+  // Outside: the optical depth from where each direction enters the grid (slab test).
+  for (int k = 0; k < K; ++k) {
     const Vec3 d = dirs_[k];
     float t0 = 0, t1 = std::numeric_limits<float>::infinity();
-    for (int a = 0; a < 3; ++a) {
+    bool miss = false;
+    for (int a = 0; a < 3 && !miss; ++a) {
       const float lo = -0.5f, hi = f.n[a] - 0.5f;
       if (std::fabs(d[a]) < 1e-12f) {
-        if (g[a] < lo || g[a] > hi) return 0.0f;
+        miss = g[a] < lo || g[a] > hi;
         continue;
       }
       float ta = (lo - g[a]) / d[a], tb = (hi - g[a]) / d[a];
@@ -164,10 +230,11 @@ float OcclusionFeatures::tau_at(const Field& f, int k, Vec3 p) const {
       t0 = std::max(t0, ta);
       t1 = std::min(t1, tb);
     }
-    if (t0 > t1) return 0.0f;
-    g = g + d * t0;
+    tau[k] = 0;
+    if (miss || t0 > t1) continue;
+    stencil(g + d * t0, idx, w);
+    for (int c = 0; c < 8; ++c) tau[k] += w[c] * f.tau[idx[c] + k];
   }
-  return lerp3(f, f.tau[k], g);
 }
 
 void OcclusionFeatures::compute(PointsView positions, PointsView normals, const TreeFrame& frame,
@@ -187,14 +254,16 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
   const float half_diag = std::max(0.5f * std::sqrt(4 * frame.radius * frame.radius +
                                                     height * height), 1e-12f);
   parallel_for_blocks(positions.size, 256, [&](std::size_t b, std::size_t e) {
+    std::vector<float> taus(K);
     for (std::size_t i = b; i < e; ++i) {
       const Vec3 p = positions[i];
       const Vec3 nn = normalize(normals[i]);
       float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
       float w_opp = 0, ao_opp = 0, w_sky = 0, sky = 0;
+      taus_at(p, taus.data());
       for (int k = 0; k < K; ++k) {
         const Vec3 d = dirs_[k];
-        const float t = tau_at(fine_, k, p);
+        const float t = taus[k];
         const float tr = std::exp(-t);
         if (d.z > 0) {
           sky += d.z * tr;

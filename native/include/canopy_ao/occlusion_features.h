@@ -84,11 +84,13 @@ class OcclusionFeatures {
     float h = 1;
     int n[3] = {0, 0, 0};
     std::vector<float> sigma;
-    std::vector<std::vector<float>> tau;  // [direction][voxel]
+    std::vector<float> tau;  // [voxel][direction]: a lookup reads K contiguous values per corner
   };
   static Field sweep(const DensityGrid& g, int level, const std::vector<Vec3>& dirs);
   static float lerp3(const Field& f, const std::vector<float>& v, Vec3 p);
-  float tau_at(const Field& f, int k, Vec3 p) const;
+  // τ_k for every direction at p into tau (K values): one trilinear stencil for all directions
+  // inside the grid; outside, each direction reads where it enters the grid.
+  void taus_at(Vec3 p, float* tau) const;
 
   std::vector<Vec3> dirs_;
   Field fine_;
