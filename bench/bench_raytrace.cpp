@@ -4,14 +4,14 @@
 // of radius 5; receivers at 20k leaf centroids with the leaf normal, 64 rays each.
 // "bare_occluded1" is the loop anyone would write first (one rtcOccluded1 per ray, fixed local
 // directions, no per-point rotation); "bare_1M" the same rays as one 64-ray stream per point
-// (second argument 1 = coherent flag); "bare_packet8" as rtcOccluded8 packets. Target:
+// (second argument 1 = coherent flag; Embree 3 only: Embree 4 has no streams); "bare_packet8"
+// as rtcOccluded8 packets (what RayTracer uses on Embree 4). Target:
 // RayTracer ≥ 80% of the fastest bare loop (DESIGN 9 measured 2.5–4 M incoherent AO rays/s
 // per core). rays/cpu_s divides by the CPU time of the whole process: a per-core figure that
 // survives other processes sharing the cores; rays/s is wall-clock.
 //
 //   build-rt/canopy_ao_bench --benchmark_filter=RayTrace
 #include <benchmark/benchmark.h>
-#include <embree3/rtcore.h>
 
 #include <time.h>
 
@@ -22,6 +22,7 @@
 
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/raytrace.h"
+#include "../native/src/embree_compat.h"
 
 using namespace canopy_ao;
 
@@ -127,6 +128,30 @@ inline RTCRay make_ray(Vec3 o, Vec3 d) {
   return r;
 }
 
+// The per-query arguments of the bare loops, in either Embree's spelling.
+#if RTC_VERSION_MAJOR >= 4
+struct BareQuery {
+  RTCOccludedArguments args;
+  explicit BareQuery(bool coherent) {
+    rtcInitOccludedArguments(&args);
+    if (coherent) args.flags = RTC_RAY_QUERY_FLAG_COHERENT;
+  }
+  void occluded1(RTCScene s, RTCRay* r) { rtcOccluded1(s, r, &args); }
+  void occluded8(const int* valid, RTCScene s, RTCRay8* r) { rtcOccluded8(valid, s, r, &args); }
+};
+#else
+struct BareQuery {
+  RTCIntersectContext ctx;
+  explicit BareQuery(bool coherent) {
+    rtcInitIntersectContext(&ctx);
+    if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  }
+  void occluded1(RTCScene s, RTCRay* r) { rtcOccluded1(s, &ctx, r); }
+  void occluded8(const int* valid, RTCScene s, RTCRay8* r) { rtcOccluded8(valid, s, &ctx, r); }
+  void occluded1M(RTCScene s, RTCRay* r, unsigned n) { rtcOccluded1M(s, &ctx, r, n, sizeof(RTCRay)); }
+};
+#endif
+
 double process_cpu_seconds() {
   timespec ts;
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
@@ -141,15 +166,21 @@ void report(benchmark::State& state, double rays, double open_fraction, double c
   state.counters["mean_AO"] = open_fraction;
 }
 
+// Second argument 1: each receiver names its own triangle (leaf k), so its rays skip it by the
+// occlusion filter and start on the leaf (the add-on's texel path); 0: the normal offset.
 void BM_RayTracer_ao(benchmark::State& state) {
   const RayTracer& rt = tracer();
   const int prev = set_max_threads(static_cast<int>(state.range(0)));
   RayTraceOptions o;
   o.samples = kSamples;
   std::vector<float> out(canopy().points().size);
+  std::vector<std::int32_t> leaf(out.size());
+  for (std::size_t k = 0; k < leaf.size(); ++k) leaf[k] = static_cast<std::int32_t>(k);
+  OwnPrimitives own;
+  if (state.range(1)) own.triangle_ids = leaf.data();
   const double cpu0 = process_cpu_seconds();
   for (auto _ : state) {
-    rt.ao(canopy().points(), canopy().normals(), o, out.data());
+    rt.ao(canopy().points(), canopy().normals(), own, o, out.data());
     benchmark::ClobberMemory();
   }
   const double cpu1 = process_cpu_seconds();
@@ -172,14 +203,12 @@ void run_bare(benchmark::State& state, Trace trace) {
   const double cpu0 = process_cpu_seconds();
   for (auto _ : state) {
     parallel_for_blocks(kReceivers, 64, [&](std::size_t begin, std::size_t end) {
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      if (state.range(1)) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+      BareQuery query(state.range(1) != 0);
       for (std::size_t i = begin; i < end; ++i) {
         const Vec3 n = c.normals()[i], o = c.points()[i] + n * sc.offset;
         Vec3 t, b;
         basis(n, &t, &b);
-        open[i] = trace(sc.scene, &ctx, o, n, t, b);
+        open[i] = trace(sc.scene, &query, o, n, t, b);
       }
     });
   }
@@ -194,38 +223,40 @@ void run_bare(benchmark::State& state, Trace trace) {
 // One rtcOccluded1 per ray.
 void BM_RayTrace_bare_occluded1(benchmark::State& state) {
   const auto dirs = local_directions();
-  run_bare(state, [&](RTCScene scene, RTCIntersectContext* ctx, Vec3 o, Vec3 n, Vec3 t, Vec3 b) {
+  run_bare(state, [&](RTCScene scene, BareQuery* q, Vec3 o, Vec3 n, Vec3 t, Vec3 b) {
     int k = 0;
     for (const Vec3& d : dirs) {
       RTCRay r = make_ray(o, t * d.x + b * d.y + n * d.z);
-      rtcOccluded1(scene, ctx, &r);
+      q->occluded1(scene, &r);
       k += r.tfar >= 0;
     }
     return k;
   });
 }
 
+#if RTC_VERSION_MAJOR < 4
 // The same rays as one rtcOccluded1M stream per point; second argument 1 =
 // RTC_INTERSECT_CONTEXT_FLAG_COHERENT (a point's rays share their origin).
 void BM_RayTrace_bare_1M(benchmark::State& state) {
   const auto dirs = local_directions();
-  run_bare(state, [&](RTCScene scene, RTCIntersectContext* ctx, Vec3 o, Vec3 n, Vec3 t, Vec3 b) {
+  run_bare(state, [&](RTCScene scene, BareQuery* q, Vec3 o, Vec3 n, Vec3 t, Vec3 b) {
     alignas(64) RTCRay rays[kSamples];
     for (int s = 0; s < kSamples; ++s) {
       const Vec3& d = dirs[s];
       rays[s] = make_ray(o, t * d.x + b * d.y + n * d.z);
     }
-    rtcOccluded1M(scene, ctx, rays, kSamples, sizeof(RTCRay));
+    q->occluded1M(scene, rays, kSamples);
     int k = 0;
     for (const RTCRay& r : rays) k += r.tfar >= 0;
     return k;
   });
 }
+#endif
 
 // The same rays as 8-wide packets (rtcOccluded8, AVX2), 8 packets per point.
 void BM_RayTrace_bare_packet8(benchmark::State& state) {
   const auto dirs = local_directions();
-  run_bare(state, [&](RTCScene scene, RTCIntersectContext* ctx, Vec3 o, Vec3 n, Vec3 t, Vec3 b) {
+  run_bare(state, [&](RTCScene scene, BareQuery* q, Vec3 o, Vec3 n, Vec3 t, Vec3 b) {
     alignas(32) const int valid[8] = {-1, -1, -1, -1, -1, -1, -1, -1};
     int k = 0;
     for (int s0 = 0; s0 < kSamples; s0 += 8) {
@@ -237,7 +268,7 @@ void BM_RayTrace_bare_packet8(benchmark::State& state) {
         r.dir_x[l] = w.x, r.dir_y[l] = w.y, r.dir_z[l] = w.z, r.time[l] = 0;
         r.tfar[l] = INFINITY, r.mask[l] = 0xffffffffu, r.id[l] = 0, r.flags[l] = 0;
       }
-      rtcOccluded8(valid, scene, ctx, &r);
+      q->occluded8(valid, scene, &r);
       for (int l = 0; l < 8; ++l) k += r.tfar[l] >= 0;
     }
     return k;
@@ -261,12 +292,14 @@ void BM_RayTracer_build(benchmark::State& state) {
 }  // namespace
 
 // Real time: the work runs on TBB workers, not on the benchmark's thread.
-BENCHMARK(BM_RayTracer_ao)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime()
-    ->MinTime(1.0);
+BENCHMARK(BM_RayTracer_ao)->Args({1, 0})->Args({2, 0})->Args({1, 1})->Args({2, 1})
+    ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
 BENCHMARK(BM_RayTrace_bare_occluded1)->Args({1, 0})->Args({2, 0})->Unit(benchmark::kMillisecond)
     ->UseRealTime()->MinTime(1.0);
+#if RTC_VERSION_MAJOR < 4
 BENCHMARK(BM_RayTrace_bare_1M)->Args({1, 0})->Args({2, 0})->Args({1, 1})->Args({2, 1})
     ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
+#endif
 BENCHMARK(BM_RayTrace_bare_packet8)->Args({1, 0})->Args({2, 0})->Unit(benchmark::kMillisecond)
     ->UseRealTime()->MinTime(1.0);
 BENCHMARK(BM_RayTracer_build)->Args({1, 0})->Args({2, 0})->Args({2, 1})
