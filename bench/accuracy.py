@@ -51,8 +51,8 @@ import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core  # noqa: E402
-from canopy_ao import engine  # noqa: E402
-from canopy_ao.metrics import compare  # noqa: E402
+from canopy_ao import core  # noqa: E402
+from canopy_ao.core.metrics import compare  # noqa: E402
 
 OUT = os.path.join(HERE, "out")
 CACHE = os.path.join(OUT, "cache")
@@ -63,11 +63,6 @@ DEFAULT_SCENES = [n for n in cs.SCENES if n != "large_tree"]
 FIELDS = ["scene", "vertices", "family", "method", "setting", "tau", "tau_mode", "reference",
           "role", "mae", "rmse", "p95", "corr", "bias", "n", "t_prepare", "t_eval", "t_total",
           "note"]
-
-
-def FALLBACKS():
-    """Native functions the engine replaced with numpy stand-ins (older engines only)."""
-    return getattr(engine, "FALLBACKS_USED", set())
 
 
 def log(*a):
@@ -86,7 +81,7 @@ class Prepared:
         self.hash = cs.geometry_hash(scene)
         self.distance = scene.ao_distance()
         self.normals = [cs.vertex_normals(p.vertices, p.triangles) for p in scene]
-        self.items = [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices, n,
+        self.items = [core.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices, n,
                                        p.triangles) for p, n in zip(scene, self.normals)]
         self.V, self.T, self.part = scene.merged()
         self.N = np.concatenate(self.normals)
@@ -164,12 +159,12 @@ def timed(fn, repeats, stop_after=2.0):
 def run_engine(prep, settings, repeats):
     """Bake every item with the engine; (ao all vertices, t_prepare, t_eval, plan)."""
     def prepare():
-        return engine.prepare(prep.items, settings)
+        return core.prepare(prep.items, settings)
 
     plan, t_prep = timed(prepare, repeats)
 
     def evaluate():
-        return {it.name: engine.evaluate_item(plan, it).ao for it in prep.items}
+        return {it.name: core.evaluate_item(plan, it).ao for it in prep.items}
 
     per, t_eval = timed(evaluate, repeats)
     return prep.join(per), t_prep, t_eval, plan
@@ -183,16 +178,16 @@ def best_tau(prep, plan, ref, n_sample=4000, seed=1):
     for it, a, b in zip(prep.items, prep.offsets[:-1], prep.offsets[1:]):
         k = idx[(idx >= a) & (idx < b)] - a
         if len(k):
-            sub.append(engine.SceneItem(it.name, it.role, it.tree, it.positions[k],
+            sub.append(core.SceneItem(it.name, it.role, it.tree, it.positions[k],
                                         it.normals[k], it.triangles))
     r = ref[idx]
 
     def err(log_tau):
         plan.tau = math.exp(log_tau)
-        got = np.concatenate([engine.evaluate_item(plan, it).ao for it in sub])
+        got = np.concatenate([core.evaluate_item(plan, it).ao for it in sub])
         return float(np.mean((got - r) ** 2))
 
-    lt, _ = engine._golden_min(err, math.log(0.02), math.log(50.0), iters=20)
+    lt, _ = core.ladder.golden_min(err, math.log(0.02), math.log(50.0), iters=20)
     plan.tau = math.exp(lt)
     return plan.tau
 
@@ -211,13 +206,13 @@ def analytic_methods():
 def method_runs(prep, ref, args):
     """Yield (family, method, setting, tau, tau_mode, ao, t_prepare, t_eval, note)."""
     D = prep.distance
-    avail = engine.available_methods()
+    avail = core.available_methods()
     for family, method, setting, kw in analytic_methods():
         if method not in avail:
             continue
         # product path: τ calibrated by the engine against ray-traced samples
         try:
-            s = engine.BakeSettings(method=method, tau=None, distance=D, seed=0, **kw)
+            s = core.BakeSettings(method=method, tau=None, distance=D, seed=0, **kw)
             ao, tp, te, plan = run_engine(prep, s, args.repeats)
             yield family, method, setting, plan.tau, "calibrated", ao, tp, te, "; ".join(plan.notes)
         except Exception as exc:  # a missing native function, a bad fit: tabulate, go on
@@ -227,8 +222,8 @@ def method_runs(prep, ref, args):
         # best τ against the reference (upper bound on calibration)
         if ref is not None:
             try:
-                s = engine.BakeSettings(method=method, tau=1.0, distance=D, seed=0, **kw)
-                plan = engine.prepare(prep.items, s)
+                s = core.BakeSettings(method=method, tau=1.0, distance=D, seed=0, **kw)
+                plan = core.prepare(prep.items, s)
                 tau = best_tau(prep, plan, ref)
                 s.tau = tau
                 ao, tp, te, plan = run_engine(prep, s, args.repeats)
@@ -238,7 +233,7 @@ def method_runs(prep, ref, args):
                     f"{type(exc).__name__}: {exc}"
     # the engine's own choice
     try:
-        s = engine.BakeSettings(method="auto", tau=None, distance=D, seed=0)
+        s = core.BakeSettings(method="auto", tau=None, distance=D, seed=0)
         ao, tp, te, plan = run_engine(prep, s, args.repeats)
         yield "auto", "auto", plan.method, plan.tau, "calibrated", ao, tp, te, \
             (plan.calibration or {}).get("why", "")
@@ -247,7 +242,7 @@ def method_runs(prep, ref, args):
             f"{type(exc).__name__}: {exc}"
     if "grid" in avail:
         try:
-            s = engine.BakeSettings(method="grid", tau=None, distance=D, seed=0)
+            s = core.BakeSettings(method="grid", tau=None, distance=D, seed=0)
             ao, tp, te, plan = run_engine(prep, s, args.repeats)
             yield "grid", "grid", "engine", math.nan, "", ao, tp, te, "the engine's grid method"
         except Exception as exc:
@@ -275,9 +270,9 @@ def _fit_proxies(prep, kind, k):
     out = []
     for pts in _tree_points(prep).values():
         if kind == "sphere":
-            out.append(_core.Ellipsoid.from_sphere(engine._need("fit_sphere")(pts)))
+            out.append(_core.Ellipsoid.from_sphere(_core.fit_sphere(pts)))
         elif kind == "ellipsoid":
-            out.append(engine._need("fit_ellipsoid")(pts))
+            out.append(_core.fit_ellipsoid(pts))
         else:
             shells, _ = _core.fit_shells(pts, k, kind="ellipsoid", seed=0)
             out += list(shells)
@@ -296,7 +291,7 @@ def _calibration_sample(prep, n=256, rays=128, seed=0):
 
 def _fit_tau(f, idx, target):
     P, N = np.ascontiguousarray(PREP_CACHE["V"][idx]), np.ascontiguousarray(PREP_CACHE["N"][idx])
-    lt, _ = engine._golden_min(lambda x: float(np.mean((f(P, N, math.exp(x)) - target) ** 2)),
+    lt, _ = core.ladder.golden_min(lambda x: float(np.mean((f(P, N, math.exp(x)) - target) ** 2)),
                                math.log(0.02), math.log(50.0), iters=20)
     return math.exp(lt)
 
@@ -345,7 +340,7 @@ def raw_runs(prep, ref, args):
                 if gterm is not None and kind == "sphere":
                     gsub = gterm[calib[0]]
                     t0 = time.perf_counter()
-                    lt, _ = engine._golden_min(lambda x: float(np.mean(
+                    lt, _ = core.ladder.golden_min(lambda x: float(np.mean(
                         (f(prep.V[calib[0]], prep.N[calib[0]], math.exp(x)) * gsub - calib[1]) ** 2)),
                         math.log(0.02), math.log(50.0), iters=20)
                     tau_g = math.exp(lt)
@@ -437,9 +432,6 @@ def run_scene(name, args, writer, fh):
             writer.writerow({k: fmt(v) for k, v in dict(base, reference="", role="").items()})
             log(f"  {family:12s} {setting:8s} {tau_mode:10s} FAILED {note}")
             return
-        if FALLBACKS() and family not in ("raytrace", "cycles", "embree_ref"):
-            base["note"] = (base["note"] + "; numpy stand-ins for "
-                            + ",".join(sorted(FALLBACKS()))).strip("; ")
         bad = int(np.count_nonzero(~np.isfinite(ao)))
         if bad:
             base["note"] = (note + f"; {bad} non-finite values").strip("; ")
@@ -496,16 +488,13 @@ def main(argv=None):
     scenes = args.scenes or DEFAULT_SCENES
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     log(f"canopy_ao._core {getattr(_core, '__version__', '?')}, engine methods "
-        f"{engine.available_methods()}, threads {_core.max_threads()}")
+        f"{core.available_methods()}, threads {_core.max_threads()}")
     t0 = time.perf_counter()
     with open(args.out, "w", newline="") as fh:
         w = csv.DictWriter(fh, FIELDS)
         w.writeheader()
         for name in scenes:
             run_scene(name, args, w, fh)
-    if FALLBACKS():
-        log(f"NOTE: numpy stand-ins used for missing native functions: "
-            f"{sorted(FALLBACKS())}")
     log(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 

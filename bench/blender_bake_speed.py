@@ -11,7 +11,7 @@ tree of examples/canopy_scenes.py with ~``--vertices`` leaf vertices plus its tr
 (roles set explicitly too) — then:
 
 - times ``bpy.ops.canopy_ao.bake`` end to end: one warm-up, best of ``--repeats``;
-- prints the operator's own per-stage times for that best run (``operators.LAST_TIMINGS``);
+- prints the operator's own per-stage times for that best run (``job.LAST_TIMINGS``);
 - times each bpy / numpy / core primitive on its own, including the ones the operator skips
   for this method (loop triangles, role guessing), and one memfile undo push of the scene.
 
@@ -78,7 +78,9 @@ def _best(fn, repeats):
 def primitives(ob, method, tau, repeats):
     """Each stage on its own, best of ``repeats``: {stage: seconds}."""
     import bpy
-    from canopy_ao import engine, mesh_io, roles
+    from canopy_ao import core
+    from canopy_ao.core import roles
+    from canopy_ao.blender import mesh_io
 
     out = {}
     dg = bpy.context.evaluated_depsgraph_get()
@@ -115,17 +117,17 @@ def primitives(ob, method, tau, repeats):
     p = co.reshape(-1, 3)
     nv = nor.reshape(-1, 3)
     out["role guessing (not paid: role set)"] = _best(lambda: roles.guess_role(p, t), 1)
-    s = engine.BakeSettings(method=method, tau=tau)
-    item = engine.SceneItem(ob.name, "CANOPY", "Tree", p, nv, np.zeros((0, 3), np.int32))
+    s = core.BakeSettings(method=method, tau=tau)
+    item = core.SceneItem(ob.name, "CANOPY", "Tree", p, nv, np.zeros((0, 3), np.int32))
     plan = None
 
     def prep():
         nonlocal plan
-        plan = engine.prepare([item], s)
-    out["fit (engine.prepare)"] = _best(prep, repeats)
-    out["evaluate (engine.evaluate_item)"] = _best(lambda: engine.evaluate_item(plan, item),
+        plan = core.prepare([item], s)
+    out["fit (core.prepare)"] = _best(prep, repeats)
+    out["evaluate (core.evaluate_item)"] = _best(lambda: core.evaluate_item(plan, item),
                                                    repeats)
-    ao = engine.evaluate_item(plan, item).ao
+    ao = core.evaluate_item(plan, item).ao
     name = "CanopyAO_bench"
     out["attribute write (FLOAT_COLOR, float32)"] = _best(
         lambda: mesh_io.write_ao_attribute(ob, name, ao), repeats)
@@ -133,7 +135,7 @@ def primitives(ob, method, tau, repeats):
     rgba64 = np.ones(n * 4, np.float64)
     out["  same from float64 (avoided)"] = _best(lambda: attr.data.foreach_set("color", rgba64), 1)
     me.attributes.remove(me.attributes[name])
-    proxies = engine.proxy_dicts(plan)
+    proxies = core.proxy_dicts(plan)
     out["proxies (show_proxies)"] = _best(lambda: mesh_io.show_proxies(bpy.context.scene,
                                                                        proxies), repeats)
     def reeval():
@@ -173,9 +175,10 @@ def main(argv):
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
         raise RuntimeError("the canopy_ao add-on did not enable")
-    from canopy_ao import engine, operators
+    from canopy_ao import core
+    from canopy_ao.blender import job
 
-    ok, msg = engine.core_status()
+    ok, msg = core.core_status()
     if not ok:
         raise RuntimeError(msg)
     for ob in list(bpy.data.objects):
@@ -205,7 +208,7 @@ def main(argv):
     if a.tau != "auto":
         kw["tau"] = float(a.tau)
     else:
-        bpy.context.scene.canopy_ao.tau_auto = True
+        bpy.context.scene.canopy_ao.calibrate_tau = True
 
     def bake():
         r = bpy.ops.canopy_ao.bake(**kw)
@@ -218,7 +221,7 @@ def main(argv):
         t0 = time.perf_counter()
         bake()
         times.append(time.perf_counter() - t0)
-        stages.append(dict(getattr(operators, "LAST_TIMINGS", {}) or {}))
+        stages.append(dict(getattr(job, "LAST_TIMINGS", {}) or {}))
     best = int(np.argmin(times))
     load = os.getloadavg()
     print(f"\nbpy.ops.canopy_ao.bake, {n} vertices, method {a.method}, tau {a.tau}: "

@@ -15,7 +15,7 @@ diagonal: DESIGN 9), and saves bench/out/cache/cycles_<scene>[_quick]_<samples>.
     samples, distance, geometry (sha1 of the scene's vertex and triangle bytes), blender version
 
 Existing cache files with the same geometry hash are kept unless --force. Uses
-addon/canopy_ao/cycles_check.py's bake_cycles_vertex_ao when that module exists, else the
+addon/canopy_ao/blender/cycles_check.py's bake_cycles_vertex_ao when that module exists, else the
 minimal implementation below. Exits non-zero with a message on failure.
 """
 import argparse
@@ -78,8 +78,8 @@ def _bake_minimal(context, objects, distance, samples):
 
 def bake_function():
     try:
-        from canopy_ao.cycles_check import bake_cycles_vertex_ao
-        return bake_cycles_vertex_ao, "canopy_ao.cycles_check"
+        from canopy_ao.blender.cycles_check import bake_cycles_vertex_ao
+        return bake_cycles_vertex_ao, "canopy_ao.blender.cycles_check"
     except Exception:
         return _bake_minimal, "bench minimal"
 

@@ -38,17 +38,18 @@ sys.path.insert(0, os.path.join(REPO, "addon"))
 import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
-from canopy_ao import engine, forest  # noqa: E402
+from canopy_ao import core
+from canopy_ao.core import forest  # noqa: E402
 
 
 def prototype_plan():
     """The round tree fitted once by the engine, τ calibrated against Embree on the lone tree
     (as the add-on does for each prototype; not part of the timed evaluation)."""
     scene = cs.round_tree(seed=0, leaves=4000, ground=False)
-    items = [engine.SceneItem(p.name, p.role.upper(), "T", p.vertices,
+    items = [core.SceneItem(p.name, p.role.upper(), "T", p.vertices,
                               cs.vertex_normals(p.vertices, p.triangles), p.triangles)
              for p in scene]
-    return engine.prepare(items, engine.BakeSettings(method="shells", tau=None, shells=4))
+    return core.prepare(items, core.BakeSettings(method="shells", tau=None, shells=4))
 
 
 def instance_matrices(count, side, seed=0):
@@ -133,7 +134,7 @@ def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256)
             verts.append(v)
             tris.append(part.triangles + base)
             base += len(v)
-            items.append(engine.SceneItem(f"{part.name}{i}", part.role.upper(), f"T{i}", v,
+            items.append(core.SceneItem(f"{part.name}{i}", part.role.upper(), f"T{i}", v,
                                           cs.vertex_normals(v, part.triangles), part.triangles))
     rng = np.random.default_rng(0)
     p = np.c_[rng.uniform(-side / 2 + 5, side / 2 - 5, (points, 2)), np.zeros(points)]
@@ -149,10 +150,10 @@ def check_against_raytrace(proto, trees=36, side=60.0, points=3000, samples=256)
                               epsilon=eps, law="solid_opacity") *
            _core.ao_occluders(p, n, forest.instance_shells(pr.solids, mats), 1.0, epsilon=eps,
                               solid=True))
-    ground = engine.SceneItem("ground", "GROUND", "", p, n, np.zeros((0, 3), np.int32))
-    plan = engine.prepare(items + [ground], engine.BakeSettings(method=proto.method,
+    ground = core.SceneItem("ground", "GROUND", "", p, n, np.zeros((0, 3), np.int32))
+    plan = core.prepare(items + [ground], core.BakeSettings(method=proto.method,
                                                                   tau=proto.tau, shells=4))
-    real = engine.evaluate_item(plan, ground).ao
+    real = core.evaluate_item(plan, ground).ao
     print(f"\nAgainst Embree ({samples} rays, {points} ground points, {trees} real round trees "
           f"on {side:g} m, τ {proto.tau:.3g}, {proto.method}):")
     for name, a in (("instances", inst), ("real objects", real), ("solid_opacity", old)):

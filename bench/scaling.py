@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.join(REPO, "addon"))
 import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
-from canopy_ao import _core, engine  # noqa: E402
+from canopy_ao import _core, core  # noqa: E402
 
 import accuracy  # noqa: E402  (bench/, the script's own folder)
 
@@ -45,7 +45,7 @@ def main(argv=None):
     top = 1e6 if a.quick else a.max
     sizes = [n for n in (1e4, 3e4, 1e5, 3e5, 1e6, 3e6, 1e7) if n <= top * 1.001]
     methods = [m for m in ("reeves_blau", "sphere", "ellipsoid", "shells", "medium", "grid")
-               if m in engine.available_methods()]
+               if m in core.available_methods()]
     rows = []
     os.makedirs(OUT, exist_ok=True)
     for n in sizes:
@@ -54,18 +54,16 @@ def main(argv=None):
                               leaf_size=cs.area_preserving_leaf_size(leaves))
         V, T, _ = scene.merged()
         N = np.concatenate([cs.vertex_normals(p.vertices, p.triangles) for p in scene])
-        items = [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
+        items = [core.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
                                   N[o:o + p.n_vertices], p.triangles)
                  for p, o in zip(scene, np.cumsum([0] + [q.n_vertices for q in scene])[:-1])]
         nv = len(V)
         for m in methods:
-            used = getattr(engine, "FALLBACKS_USED", set())
-            used.clear()
             try:
-                s = engine.BakeSettings(method=m, tau=1.5, shells=4)
-                plan, tp = timed(lambda: engine.prepare(items, s))
-                _, te = timed(lambda: [engine.evaluate_item(plan, it) for it in items])
-                note = ("numpy stand-ins: " + ",".join(sorted(used)) if used else "")
+                s = core.BakeSettings(method=m, tau=1.5, shells=4)
+                plan, tp = timed(lambda: core.prepare(items, s))
+                _, te = timed(lambda: [core.evaluate_item(plan, it) for it in items])
+                note = ""
             except Exception as exc:
                 tp = te = math.nan
                 note = f"{type(exc).__name__}: {exc}"

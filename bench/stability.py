@@ -258,8 +258,8 @@ def m_medium_shells(c):
 
 def _engine_method(method):
     def run(c):
-        from canopy_ao import engine
-        items = [engine.SceneItem("leaves", "CANOPY", "t", c["vertices"],
+        from canopy_ao import core
+        items = [core.SceneItem("leaves", "CANOPY", "t", c["vertices"],
                                   cs.vertex_normals(np.nan_to_num(c["vertices"]), c["triangles"])
                                   if len(c["vertices"]) else np.zeros((0, 3), np.float32),
                                   c["triangles"])]
@@ -268,11 +268,11 @@ def _engine_method(method):
         if same:
             items[0].normals = c["normals"]
         else:
-            items.append(engine.SceneItem("receivers", "GROUND", "", c["points"], c["normals"],
+            items.append(core.SceneItem("receivers", "GROUND", "", c["points"], c["normals"],
                                           np.zeros((0, 3), np.int32)))
-        s = engine.BakeSettings(method=method, tau=None if method == "auto" else TAU,
+        s = core.BakeSettings(method=method, tau=None if method == "auto" else TAU,
                                 calibration_points=64, calibration_samples=32, samples=32)
-        results, _ = engine.bake(items, s)
+        results, _ = core.bake(items, s)
         return results[0].ao if same else results[1].ao
     return run
 

@@ -2,7 +2,7 @@
 
     blender -b --factory-startup --python examples/forest_scene.py -- \
         [--trees 10000] [--ground-vertices 1e6] [--side 1000] [--method ellipsoid] \
-        [--tau 0 (calibrate)] [--epsilon 1e-2] [--save /tmp/forest.blend]
+        [--tau auto|T] [--epsilon 1e-2] [--save /tmp/forest.blend]
 
 (with the add-on installed, or BLENDER_USER_SCRIPTS pointing at a folder whose addons/ links
 addon/canopy_ao, as in the README). Two prototype trees from examples/canopy_scenes.py (the
@@ -88,7 +88,8 @@ def main(argv):
     ap.add_argument("--ground-vertices", type=float, default=1e6)
     ap.add_argument("--side", type=float, default=1000.0, help="ground side, m")
     ap.add_argument("--method", default="ellipsoid")
-    ap.add_argument("--tau", type=float, default=0.0, help="0 = calibrate per prototype")
+    ap.add_argument("--tau", default="auto", help="optical depth, or auto = calibrate τ per "
+                                                  "prototype (default)")
     ap.add_argument("--epsilon", type=float, default=1e-2, help="forest cut-off ε")
     ap.add_argument("--save", default="")
     args = ap.parse_args(argv)
@@ -96,7 +97,8 @@ def main(argv):
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True) is None:
         raise SystemExit("the canopy_ao add-on could not be enabled")
-    from canopy_ao import mesh_io, operators
+    from canopy_ao.blender import mesh_io, properties
+    from canopy_ao.blender.job import run_bake
 
     t0 = time.perf_counter()
     for ob in list(bpy.data.objects):
@@ -120,11 +122,12 @@ def main(argv):
           f"({args.trees - half} round, {half} conifer) on {args.side:g} m, built in "
           f"{t_build:.1f} s", flush=True)
 
-    opts = operators.scene_settings_opts(bpy.context.scene)
-    opts.update(method=args.method, tau=args.tau if args.tau > 0 else None, distance=0.0,
+    opts = properties.scene_options(bpy.context.scene)
+    from canopy_ao.core.settings import BY_NAME
+    opts.update(method=args.method, tau=BY_NAME["tau"].parse(args.tau), distance=0.0,
                 show_proxies=False, forest_epsilon=args.epsilon, overwrite=True)
     t0 = time.perf_counter()
-    job, rep = operators.run_bake(bpy.context, ["Ground"], opts)
+    job, rep = run_bake(bpy.context, ["Ground"], opts)
     total = time.perf_counter() - t0
     for line in job.lines:
         print(line)

@@ -1,7 +1,8 @@
 """Canopy AO: approximate ambient occlusion for trees, grass and ground from fitted proxies.
 
-Importing this package does not import bpy (plain pytest imports ``canopy_ao._core`` and the
-pure modules ``roles`` and ``engine``); the Blender parts load in register().
+Two packages: ``core`` (the bake's math and data; imports no bpy, so plain pytest tests it) and
+``blender`` (everything that touches bpy), which loads in register(). ``cli`` is the headless
+entry point. Importing this package does not import bpy.
 """
 
 bl_info = {
@@ -15,7 +16,7 @@ bl_info = {
     "category": "Render",
 }
 
-_MODULES = ("properties", "operators", "panels")
+_MODULES = ("blender.properties", "blender.operators", "blender.panels")
 
 
 def _modules():
@@ -25,7 +26,7 @@ def _modules():
 
 def register():
     # Registers even when the native module is missing: the panel then says why and how to
-    # fix it, and the bake operator's poll explains itself (engine.core_status()).
+    # fix it, and the bake operator's poll explains itself (core.native.core_status()).
     for mod in _modules():
         mod.register()
 

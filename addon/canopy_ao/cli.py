@@ -1,47 +1,52 @@
-"""Headless bake (issue 3, item 7).
+"""Headless bake.
 
     blender -b scene.blend --python-expr "import canopy_ao.cli; canopy_ao.cli.main()" -- \
         --objects Tree Leaves Ground --method auto --save --report out.json
 
 Prints one line per object (role, method, vertices, seconds, and the error against Cycles when
-asked), writes a JSON report, and exits non-zero with the message on stderr on bad arguments,
-missing objects or a failed bake. Run ``... -- --help`` for every option.
+asked), writes a JSON report, and exits non-zero with the message on stderr: 2 on bad arguments
+(every number is checked against its option's range, core/settings.py), 1 on missing objects
+or a failed bake. Run ``... -- --help`` for every option.
 """
 
 import argparse
 import json
 import sys
 
-
-def _tau(text):
-    if text.lower() == "auto":
-        return None
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0 or 'auto', got {text!r}")
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"tau must be > 0, got {v}")
-    return v
+from .core.settings import OPTIONS
 
 
-def _nonneg(text):
-    v = float(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
-    return v
+def _arg_type(option):
+    """argparse's type for an option: its checked value, or a clean usage error (exit 2)."""
+    def convert(text):
+        try:
+            return option.parse(text)
+        except ValueError as exc:  # CanopyAOError
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = option.name  # argparse names the type in some messages
+    return convert
 
 
-def _positive_int(text):
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
+def _add_option(p, o):
+    """One option's argument; dest is the option's name, None when not given."""
+    default = o.cli_default or ("auto" if o.none_prop else o.default)
+    text = f"{o.help} (default: {default})"
+    if o.kind == "bool":
+        p.add_argument(o.flag, dest=o.name, action="store_false" if o.default else "store_true",
+                       default=None, help=o.help)
+    elif o.kind == "enum":
+        ids = [i[0].lower() for i in o.items]
+        p.add_argument(o.flag, dest=o.name, type=_arg_type(o), default=None,
+                       metavar="{" + ",".join(ids) + "}", help=text)
+    else:
+        p.add_argument(o.flag, dest=o.name, type=_arg_type(o), default=None,
+                       metavar="auto|N" if o.none_prop else o.flag.lstrip("-").upper(),
+                       help=text)
 
 
 def build_parser():
-    from . import engine
-
+    """The command line: object selection and output switches, then one argument per option
+    of core/settings.py's OPTIONS."""
     p = argparse.ArgumentParser(
         prog="blender -b scene.blend --python-expr 'import canopy_ao.cli; canopy_ao.cli.main()' --",
         description="Bake Canopy AO into a color attribute of mesh objects.")
@@ -49,39 +54,26 @@ def build_parser():
     which.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake")
     which.add_argument("--all", action="store_true",
                        help="bake every visible mesh (the default when --objects is not given)")
-    p.add_argument("--method", default="auto", choices=engine.METHODS,
-                   help="model to use (default: auto)")
-    p.add_argument("--tau", type=_tau, default=None,
-                   help="optical depth, or 'auto' to calibrate (default: auto)")
-    p.add_argument("--distance", type=_nonneg, default=None,
-                   help="AO distance, 0 = unlimited (default: the World's AO distance, as "
-                        "Cycles uses it; unlimited without a world)")
-    p.add_argument("--samples", type=_positive_int, default=64,
-                   help="rays per vertex for --method raytrace (default: 64)")
-    p.add_argument("--time-budget", type=_nonneg, default=2.0,
-                   help="auto: seconds the bake may take; richer models predicted to take "
-                        "longer are not chosen (0 = no limit; default 2)")
-    p.add_argument("--target-error", type=_nonneg, default=0.06,
-                   help="auto: stop climbing the ladder once a rung's RMSE on the ray-traced "
-                        "sample is below this (default 0.06, about an MAE of 0.05)")
-    p.add_argument("--attribute", default="CanopyAO", help="color attribute name")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace a same-named attribute Canopy AO did not make")
-    p.add_argument("--mode", choices=("vertex", "texel"), default="vertex")
-    p.add_argument("--resolution", type=_positive_int, default=1024, help="texel mode: image size")
-    p.add_argument("--uv", default="", help="texel mode: UV map (default: active)")
-    p.add_argument("--image-dir", default="//canopy_ao", help="texel mode: output folder")
-    p.add_argument("--no-proxies", action="store_true", help="do not add proxy empties")
-    p.add_argument("--wire-material", action="store_true",
-                   help="connect the attribute into the objects' materials")
-    p.add_argument("--aov", metavar="NAME", default=None,
-                   help="also add a shader + view-layer AOV of this name (not 'AO')")
-    p.add_argument("--check-cycles", action="store_true",
-                   help="also bake Cycles AO and report the error per object (slow)")
-    p.add_argument("--cycles-samples", type=_positive_int, default=64)
+    for o in OPTIONS:
+        if o.cli is not None:
+            _add_option(p, o)
     p.add_argument("--report", metavar="FILE.json", help="write a JSON report here")
     p.add_argument("--save", action="store_true", help="save the .blend after baking")
     return p
+
+
+def options_from_args(args, world_distance):
+    """Every option's value: the argument when given, else its default. An omitted --distance
+    is the World's AO distance (``world_distance``), as Cycles' AO bake uses it."""
+    opts = {}
+    for o in OPTIONS:
+        given = getattr(args, o.name, None)
+        opts[o.name] = o.default if given is None else given
+        if given is not None and o.cli_enables:
+            opts[o.cli_enables] = True
+    if args.distance is None:
+        opts["distance"] = world_distance
+    return opts
 
 
 def _argv(argv):
@@ -124,33 +116,25 @@ def _run(args):
         addon_utils.enable(__package__, default_set=False, handle_error=None)
         if not hasattr(bpy.types.Scene, "canopy_ao"):
             _fail("the canopy_ao add-on could not be enabled (see the messages above)")
-    from . import engine, operators
+    from .blender import gather, job
+    from .core.native import CanopyAOError, core_status
 
-    ok, msg = engine.core_status()
+    ok, msg = core_status()
     if not ok:
         _fail(msg)
     if args.save and not bpy.data.filepath:
         _fail("--save needs a saved .blend (give the .blend before --python-expr)")
-    distance = (args.distance if args.distance is not None
-                else operators.world_ao_distance(bpy.context.scene))
-    opts = dict(method=args.method, tau=args.tau, distance=distance, samples=args.samples,
-                time_budget=args.time_budget, target_rmse=args.target_error,
-                attribute=args.attribute, overwrite=args.overwrite,
-                wire_material=args.wire_material, add_aov=args.aov is not None,
-                aov_name=args.aov or "BakedAO", mode=args.mode.upper(), uv_map=args.uv,
-                resolution=args.resolution, image_dir=args.image_dir,
-                show_proxies=not args.no_proxies, check_cycles=args.check_cycles,
-                cycles_samples=args.cycles_samples)
+    opts = options_from_args(args, gather.world_ao_distance(bpy.context.scene))
     context = bpy.context
     if args.objects is None:
         # Headless: "the selection" means nothing here, so bake every visible mesh.
         for ob in context.view_layer.objects:
             ob.select_set(False)
     try:
-        job, rep = operators.run_bake(context, args.objects or [], opts)
-    except operators.BakeError as exc:
+        bake_job, rep = job.run_bake(context, args.objects or [], opts)
+    except CanopyAOError as exc:
         _fail(str(exc))
-    for r in job.results:
+    for r in bake_job.results:
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
                 f"{e['seconds']:.3f} s, mean AO {e['ao_mean']:.3f}")
@@ -163,7 +147,7 @@ def _run(args):
         print(line, flush=True)
     # τ means nothing to the exact rung or the density grid (physical density).
     tau = "" if rep["method"] in ("raytrace", "grid") else f" tau {rep['tau']:.4g}"
-    print(f"canopy_ao: {rep['method']}{tau}, {len(job.results)} object(s), "
+    print(f"canopy_ao: {rep['method']}{tau}, {len(bake_job.results)} object(s), "
           f"{rep['seconds']:.2f} s", flush=True)
     for note in rep["notes"]:
         print(f"canopy_ao: note: {note}", flush=True)

@@ -84,6 +84,6 @@ def tree_scene_objects():
     for ob in bpy.context.scene.objects:
         ob.select_set(False)
     bpy.context.view_layer.update()
-    bpy.context.scene.canopy_ao.tau_auto = True
+    bpy.context.scene.canopy_ao.calibrate_tau = True
     yield obs
     _clear_scene()

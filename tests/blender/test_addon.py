@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 import pytest
 
-from canopy_ao import mesh_io
+from canopy_ao.blender import mesh_io
 
 ATTR = "CanopyAO"
 
@@ -45,27 +45,27 @@ def test_bl_info_and_manifest():
 
 
 def test_roles_guessed_and_tree_by_parent(tree_scene_objects):
-    from canopy_ao import operators
+    from canopy_ao.blender import gather
     obs = tree_scene_objects
     dg = bpy.context.evaluated_depsgraph_get()
     got = {}
     for name, ob in obs.items():
         pos, _n, tris = mesh_io.evaluated_arrays(ob, dg)
-        got[name] = operators.role_of(ob, pos, tris)[0]
+        got[name] = gather.role_of(ob, pos, tris)[0]
     assert got == {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
     obs["Leaves"].parent = obs["Trunk"]
-    assert operators.tree_of(obs["Leaves"]) == operators.tree_of(obs["Trunk"]) == "Trunk"
+    assert gather.tree_of(obs["Leaves"]) == gather.tree_of(obs["Trunk"]) == "Trunk"
     obs["Leaves"].parent = None
     coll = bpy.data.collections.new("Oak")
     bpy.context.scene.collection.children.link(coll)
     for name in ("Trunk", "Leaves"):
         bpy.context.scene.collection.objects.unlink(obs[name])
         coll.objects.link(obs[name])
-    assert operators.tree_of(obs["Leaves"]) == operators.tree_of(obs["Trunk"]) == "Oak"
+    assert gather.tree_of(obs["Leaves"]) == gather.tree_of(obs["Trunk"]) == "Oak"
     obs["Trunk"].canopy_ao.tree = "Elm"
-    assert operators.tree_of(obs["Trunk"]) == "Elm"
+    assert gather.tree_of(obs["Trunk"]) == "Elm"
     obs["Ground"].canopy_ao.role = "IGNORE"
-    assert operators.role_of(obs["Ground"], pos, tris)[0] == "IGNORE"
+    assert gather.role_of(obs["Ground"], pos, tris)[0] == "IGNORE"
 
 
 def test_bake_values(tree_scene_objects):
@@ -92,10 +92,11 @@ def test_bake_values(tree_scene_objects):
 
 
 def test_auto_method_reports_choice(tree_scene_objects):
-    from canopy_ao import operators
-    opts = operators.scene_settings_opts(bpy.context.scene)
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import run_bake
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="auto", tau=None, distance=0.0)
-    job, rep = operators.run_bake(bpy.context, ["Leaves", "Ground"], opts)
+    job, rep = run_bake(bpy.context, ["Leaves", "Ground"], opts)
     assert rep["method"] in ("sphere", "ellipsoid", "shells", "medium", "grid", "raytrace")
     assert rep["tau"] > 0
     if rep["calibration"]:
@@ -187,7 +188,7 @@ def test_undo_is_declared():
     # bpy.ops.ed.undo needs a window: its poll fails in background mode (checked on 3.4.1), so
     # here we check the operator asks for an undo step; test_modal_bake_escape_and_undo undoes
     # a bake for real in a window when xvfb-run exists.
-    from canopy_ao.operators import CANOPY_AO_OT_bake
+    from canopy_ao.blender.operators import CANOPY_AO_OT_bake
     assert {'REGISTER', 'UNDO'} <= set(CANOPY_AO_OT_bake.bl_options)
     assert not bpy.ops.ed.undo.poll()
 
@@ -196,7 +197,7 @@ def test_texel_mode_without_uvs_errors_clearly(tree_scene_objects):
     import importlib.util
     bpy.context.scene.canopy_ao.mode = 'TEXEL'
     try:
-        if importlib.util.find_spec("canopy_ao.texel") is None:
+        if importlib.util.find_spec("canopy_ao.blender.texel_io") is None:
             with pytest.raises(RuntimeError, match="texel"):
                 bake(objects="Ground")
         else:  # the generated meshes have no UV map
@@ -209,12 +210,13 @@ def test_texel_mode_without_uvs_errors_clearly(tree_scene_objects):
 
 def test_check_against_cycles(tree_scene_objects):
     """The operator's Cycles check: a per-object error in the report (16 samples: ~2 s)."""
-    from canopy_ao import operators
-    pytest.importorskip("canopy_ao.cycles_check")
-    opts = operators.scene_settings_opts(bpy.context.scene)
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import run_bake
+    pytest.importorskip("canopy_ao.blender.cycles_check")
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="ellipsoid", tau=2.0, distance=0.0, check_cycles=True,
                 cycles_samples=16, show_proxies=False)
-    _job, rep = operators.run_bake(bpy.context, ["Ground"], opts)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
     c = rep["objects"]["Ground"]["cycles"]
     assert 0.0 <= c["mae"] < 0.2, c
     assert "vs Cycles MAE" in bpy.data.objects["Ground"].canopy_ao.last_result
@@ -249,7 +251,7 @@ class FakeLayout:
 def draw_panels():
     from types import SimpleNamespace
 
-    from canopy_ao import panels
+    from canopy_ao.blender import panels
     log = []
     panels.CANOPY_AO_PT_main.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
     if panels.CANOPY_AO_PT_object.poll(bpy.context):
@@ -262,7 +264,7 @@ def test_panels_draw(tree_scene_objects):
     bpy.context.view_layer.objects.active = bpy.data.objects["Leaves"]
     log = draw_panels()
     props = {name for kind, name in log if kind == "prop"}
-    assert {"method", "tau", "distance", "attribute_name", "role", "tree"} <= props
+    assert {"method", "tau", "distance", "attribute", "role", "tree"} <= props
     assert ("operator", "canopy_ao.bake") in log
     assert any(kind == "label" and text.startswith("CANOPY") for kind, text in log)
 
@@ -282,8 +284,8 @@ def test_module_missing_path(monkeypatch):
         sys.modules["canopy_ao._core"] = None  # makes `from . import _core` raise ImportError
         addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
         assert hasattr(bpy.types.Scene, "canopy_ao")
-        from canopy_ao import engine
-        ok, msg = engine.core_status()
+        from canopy_ao import core
+        ok, msg = core.core_status()
         assert not ok and "cmake" in msg and "build-addon" in msg
         assert not bpy.ops.canopy_ao.bake.poll()
         text = " ".join(t for kind, t in draw_panels() if kind == "label")
@@ -299,8 +301,8 @@ def test_module_missing_path(monkeypatch):
             if v is not None:
                 setattr(canopy_ao, k.split(".", 1)[1], v)
         addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
-    from canopy_ao import engine
-    assert engine.core_status()[0]
+    from canopy_ao import core
+    assert core.core_status()[0]
 
 
 def _run_cli(user_scripts, blend, *args):
@@ -339,7 +341,7 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
     from canopy_ao import cli
     with pytest.raises(SystemExit) as exc:
         cli.main(["--tau", "-1"])
-    assert exc.value.code == 2 and "tau must be > 0" in capsys.readouterr().err
+    assert exc.value.code == 2 and "tau must be a finite number > 0" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
         cli.main(["--objects", "Ground", "--aov", "AO", "--method", "sphere"])
     assert exc.value.code == 1 and "collides" in capsys.readouterr().err
@@ -350,10 +352,103 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
     assert capsys.readouterr().out.startswith("Ground: role GROUND, method sphere")
 
 
+
+@pytest.mark.parametrize("args, message", [
+    (["--samples", "99999999999"], "samples must be an integer in [1, 65536]"),
+    (["--tau", "inf"], "tau must be a finite number > 0"),
+    (["--tau", "1e400"], "tau must be a finite number > 0"),
+    (["--distance", "nan"], "distance must be a finite number >= 0"),
+    (["--time-budget", "nan"], "time_budget must be a finite number >= 0"),
+    (["--target-error", "nan"], "target_rmse must be a finite number in [0, 1]"),
+    (["--resolution", "0"], "resolution must be an integer in [1, 16384]"),
+    (["--cycles-samples", "-3"], "cycles_samples must be an integer in [1, 65536]"),
+])
+def test_cli_numbers_out_of_range_exit_2_with_a_message(tree_scene_objects, capsys, args,
+                                                          message):
+    """Every number is checked against its option's range before the bake starts, and nothing
+    in the scene changes."""
+    from canopy_ao import cli
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere"] + args)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and message in err and "Traceback" not in err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
+def test_every_option_reachable_from_panel_operator_and_cli():
+    """One declaration per option (core/settings.py) gives a scene property the panel draws,
+    an operator property and a command-line argument."""
+    from canopy_ao import cli
+    from canopy_ao.blender import panels
+    from canopy_ao.core.settings import OPTIONS
+    from types import SimpleNamespace
+    s = bpy.context.scene.canopy_ao
+    old = (s.method, s.mode)
+    try:
+        drawn = set()
+        for method, mode in (("raytrace", "TEXEL"), ("auto", "VERTEX")):
+            s.method, s.mode = method, mode
+            log = []
+            for panel in (panels.CANOPY_AO_PT_main, panels.CANOPY_AO_PT_advanced):
+                panel.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+            drawn |= {name for kind, name in log if kind == "prop"}
+    finally:
+        s.method, s.mode = old
+    op = bpy.ops.canopy_ao.bake.get_rna_type().properties.keys()
+    flags = {a.dest for a in cli.build_parser()._actions}
+    for o in OPTIONS:
+        assert o.name in drawn and o.name in op, o.name
+        assert o.name in flags or o.cli is None or o.cli_enables, o.name
+        if o.none_prop:
+            assert o.none_prop in drawn and o.none_prop in op
+    assert "calibrate_tau" in op and "tau_auto" not in op
+
+
+def test_operator_number_without_its_switch_is_used(tree_scene_objects):
+    """bpy.ops.canopy_ao.bake(tau=2) bakes with τ 2 although the panel says Calibrate τ; tau=0
+    is refused with how to calibrate instead of silently meaning something else."""
+    s = bpy.context.scene.canopy_ao
+    s.calibrate_tau = True
+    assert bake(objects="Ground,Leaves", method="sphere", tau=2.0) == {'FINISHED'}
+    assert "τ 2" in s.last_report
+    with pytest.raises(RuntimeError, match="calibrate_tau"):
+        bpy.ops.canopy_ao.bake(objects="Ground,Leaves", method="sphere", tau=0.0)
+
+
+
+def _break_evaluation(monkeypatch):
+    from canopy_ao.core import lighting
+
+    def broken(*a, **k):
+        raise RuntimeError("boom: a bug in the evaluation")
+
+    monkeypatch.setattr(lighting, "evaluate_points", broken)
+
+
+def test_a_bug_is_reported_as_one_and_changes_nothing(tree_scene_objects, monkeypatch, capfd):
+    """A bug is not dressed up as 'bake failed': the operator says it is an internal error,
+    prints the traceback, and nothing is written."""
+    _break_evaluation(monkeypatch)
+    with pytest.raises(RuntimeError, match="internal error.*boom"):
+        bake(objects="Ground,Leaves", method="sphere", tau=2.0)
+    assert "Traceback" in capfd.readouterr().err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
+def test_cli_shows_a_bug_with_its_traceback(tree_scene_objects, monkeypatch, capsys):
+    from canopy_ao import cli
+    _break_evaluation(monkeypatch)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere", "--tau", "2"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 1 and "Traceback" in err and "RuntimeError: boom" in err
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
 def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     """With nothing changing the geometry the mesh is read in place (no to_mesh copy): same
     positions, normals and triangles as the evaluated copy, in world space, unit normals."""
-    from canopy_ao import mesh_io as mio
+    from canopy_ao.blender import mesh_io as mio
     ob = bpy.data.objects["Leaves"]
     ob.location = (1.0, -2.0, 0.5)
     ob.rotation_euler = (0.3, 0.0, 1.1)
@@ -391,7 +486,7 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     """Set roles and a given τ with an analytic model: no object's triangles are fetched, and
     the bake equals the one that fetched them (grass keeps its blades)."""
-    from canopy_ao import mesh_io as mio, operators
+    from canopy_ao.blender import job, mesh_io as mio
     roles = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
     for name, role in roles.items():
         bpy.data.objects[name].canopy_ao.role = role
@@ -409,9 +504,9 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     assert asked == {"Trunk": False, "Leaves": False, "Ground": False, "Grass": True}
     for n in roles:
         np.testing.assert_array_equal(ao_of(n), before[n])
-    assert set(operators.LAST_TIMINGS) >= {"positions", "normals", "evaluate", "write"}
+    assert set(job.LAST_TIMINGS) >= {"positions", "normals", "evaluate", "write"}
     asked.clear()
-    bpy.context.scene.canopy_ao.tau_auto = True  # calibration traces every triangle
+    bpy.context.scene.canopy_ao.calibrate_tau = True  # calibration traces every triangle
     assert bake(method="sphere") == {'FINISHED'}
     assert all(asked.values())
 
@@ -419,7 +514,7 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
 def test_ao_distance_follows_the_world_unless_typed():
     """The default AO distance is the World's, the one Cycles' AO bake applies (DESIGN 9), so a
     bake and its Cycles check agree at any scene scale; typing one needs 'From World' off."""
-    from canopy_ao import operators
+    from canopy_ao.blender import properties
     scene = bpy.context.scene
     s = scene.canopy_ao
     world = scene.world or bpy.data.worlds.new("DistanceTestWorld")
@@ -428,12 +523,12 @@ def test_ao_distance_follows_the_world_unless_typed():
     try:
         world.light_settings.distance = 37.5
         s.use_world_distance, s.distance = True, 4.0
-        assert operators.scene_settings_opts(scene)["distance"] == pytest.approx(37.5)
+        assert properties.scene_options(scene)["distance"] == pytest.approx(37.5)
         s.use_world_distance = False
-        assert operators.scene_settings_opts(scene)["distance"] == pytest.approx(4.0)
+        assert properties.scene_options(scene)["distance"] == pytest.approx(4.0)
         s.use_world_distance = True
         scene.world = None
-        assert operators.scene_settings_opts(scene)["distance"] == 0.0  # unlimited
+        assert properties.scene_options(scene)["distance"] == 0.0  # unlimited
     finally:
         scene.world = old_world
         world.light_settings.distance, s.use_world_distance, s.distance = old

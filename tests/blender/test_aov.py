@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import helpers_materials as H
-from canopy_ao import materials
+from canopy_ao.blender import materials
 
 AO_VALUE = 0.37
 

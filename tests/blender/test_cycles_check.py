@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import helpers_materials as H
-from canopy_ao import cycles_check as cc
+from canopy_ao.blender import cycles_check as cc
 
 
 @pytest.fixture

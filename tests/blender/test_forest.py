@@ -10,7 +10,8 @@ import pytest
 
 import tree_scene
 from conftest import _clear_scene, add_mesh
-from canopy_ao import mesh_io, operators
+from canopy_ao.blender import mesh_io, properties
+from canopy_ao.blender.job import run_bake
 
 ATTR = "CanopyAO"
 PLACES = [((-5.0, -5.0, 0.0), 0.0, 1.0), ((5.0, -4.0, 0.0), 0.8, 1.2), ((0.0, 5.0, 0.0), 2.0, 0.9)]
@@ -29,7 +30,7 @@ def proto():
     p, t = tree_scene.plane(size=24.0, cuts=48)
     add_mesh("Ground", p, t)
     bpy.context.view_layer.layer_collection.children["TreeProto"].exclude = True
-    bpy.context.scene.canopy_ao.tau_auto = True
+    bpy.context.scene.canopy_ao.calibrate_tau = True
     yield coll
     _clear_scene()
 
@@ -42,9 +43,9 @@ def ground_xy():
 
 
 def bake_all():
-    opts = operators.scene_settings_opts(bpy.context.scene)
+    opts = properties.scene_options(bpy.context.scene)
     opts.update(method="ellipsoid", tau=2.0, distance=0.0, show_proxies=False)
-    return operators.run_bake(bpy.context, ["Ground"], opts)
+    return run_bake(bpy.context, ["Ground"], opts)
 
 
 def check(rep, places):

@@ -3,7 +3,7 @@ import bpy
 import pytest
 
 import helpers_materials as H
-from canopy_ao import materials
+from canopy_ao.blender import materials
 
 
 @pytest.fixture

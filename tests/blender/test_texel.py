@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import helpers_materials as H
-from canopy_ao import texel
+from canopy_ao.blender import texel_io as texel
 
 
 @pytest.fixture
@@ -139,7 +139,7 @@ def test_numpy_raster_counts_shared_edges_once():
 
 def test_texel_bake_checks_against_cycles(scene, tmp_path):
     """A plane under a disk: our texels from the exact disk formula vs Cycles' texel bake."""
-    from canopy_ao import cycles_check
+    from canopy_ao.blender import cycles_check
 
     obj = H.add_plane(size=2.0)
     bpy.ops.mesh.primitive_circle_add(vertices=64, radius=2.0, fill_type="NGON",

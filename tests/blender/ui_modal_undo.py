@@ -36,7 +36,7 @@ def ground():
 
 def steps():
     import addon_utils
-    from canopy_ao import mesh_io
+    from canopy_ao.blender import mesh_io
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
     for ob in list(bpy.data.objects):
         bpy.data.objects.remove(ob)
@@ -69,6 +69,34 @@ def steps():
     win.event_simulate(type='ESC', value='RELEASE')
     yield 2.0
     check("Cancelled" not in ground(), "Esc did not cancel the bake (or it wrote anyway)")
+
+    # A bug in the middle of a modal bake: the modal ends, its timer and status text go
+    # (_stop), and nothing is written.
+    from canopy_ao.blender import operators
+    from canopy_ao.core import lighting
+    stops, real_stop, real_eval = [], operators.CANOPY_AO_OT_bake._stop, lighting.evaluate_points
+
+    def counting_stop(self, context):
+        stops.append(1)
+        return real_stop(self, context)
+
+    def broken(*a, **k):
+        raise RuntimeError("a bug in the evaluation")
+
+    operators.CANOPY_AO_OT_bake._stop, lighting.evaluate_points = counting_stop, broken
+    try:
+        with bpy.context.temp_override(**window_ctx()):
+            r = bpy.ops.canopy_ao.bake('INVOKE_DEFAULT', objects="Ground,Leaves",
+                                       method="ellipsoid", tau=2.0, attribute="Broken")
+        check(r == {'RUNNING_MODAL'}, f"invoke gave {r}")
+        for _ in range(40):
+            if stops:
+                break
+            yield 0.1
+    finally:
+        operators.CANOPY_AO_OT_bake._stop, lighting.evaluate_points = real_stop, real_eval
+    check(stops == [1], f"the modal did not clean up after a bug (stop called {len(stops)}x)")
+    check("Broken" not in ground(), "a failed bake wrote its attribute")
     print("UI-OK", flush=True)
     os._exit(0)
 

@@ -5,17 +5,17 @@ import canopy_scenes as cs
 import numpy as np
 import pytest
 
-from canopy_ao import engine
+from canopy_ao import core
 
 
 def items(scene):
-    return [engine.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
+    return [core.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
                              cs.vertex_normals(p.vertices, p.triangles), p.triangles)
             for p in scene]
 
 
 def auto(scene, **kw):
-    plan = engine.prepare(items(scene), engine.BakeSettings(method="auto", tau=None, **kw))
+    plan = core.prepare(items(scene), core.BakeSettings(method="auto", tau=None, **kw))
     return plan.method, plan.calibration
 
 

@@ -16,13 +16,14 @@ HERE = os.path.dirname(__file__)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, HERE)
 
-from canopy_ao import engine, forest  # noqa: E402
+from canopy_ao import core  # noqa: E402
+from canopy_ao.core import forest  # noqa: E402
+from canopy_ao.core.native import _core  # noqa: E402
 import tree_scene as ts  # noqa: E402
 
-if not engine.core_status()[0]:
-    pytest.skip(engine.core_status()[1], allow_module_level=True)
+if not core.core_status()[0]:
+    pytest.skip(core.core_status()[1], allow_module_level=True)
 
-_core = engine._core
 
 
 def rot_z(a):
@@ -109,23 +110,23 @@ def items(offset=(0.0, 0.0, 0.0), ground=True, tree=True):
             continue
         if name != "Ground":
             p = p + np.float32(offset)
-        out.append(engine.SceneItem(name, role[name], "" if name == "Ground" else "T", p,
+        out.append(core.SceneItem(name, role[name], "" if name == "Ground" else "T", p,
                                     ts.vertex_normals(p, t), t))
     return out
 
 
 def test_ground_under_an_instance_equals_a_real_tree():
-    settings = engine.BakeSettings(method="ellipsoid", tau=2.0)
+    settings = core.BakeSettings(method="ellipsoid", tau=2.0)
     offset = (3.0, 1.5, 0.0)
-    real = engine.bake(items(offset), settings)[0]
+    real = core.bake(items(offset), settings)[0]
     want = {r.name: r.ao for r in real}["Ground"]
-    proto = engine.prepare(items(ground=False), settings)  # the tree at the origin, baked once
-    plan = engine.prepare(items(tree=False), settings)
+    proto = core.prepare(items(ground=False), settings)  # the tree at the origin, baked once
+    plan = core.prepare(items(tree=False), settings)
     # ε as the scene's own occluders use it (the core's default), to compare one law.
-    engine.attach_forest(plan, [forest.prototype_from_plan(proto, "T", affine(t=offset)[None])],
+    core.attach_forest(plan, [forest.prototype_from_plan(proto, "T", affine(t=offset)[None])],
                          epsilon=forest.DEFAULT_EPSILON)
     (ground,) = [it for it in items(tree=False)]
-    got = engine.evaluate_item(plan, ground).ao
+    got = core.evaluate_item(plan, ground).ao
     assert want.min() < 0.8  # the tree does shade the ground
     np.testing.assert_allclose(got, want, atol=1e-4)
     assert any("forest: 1 instance" in n for n in plan.notes)

@@ -7,7 +7,7 @@ import pytest
 
 # Load the module by path: importing the canopy_ao package is fine too, but this keeps the test
 # independent of whether the compiled _core is built.
-_PATH = pathlib.Path(__file__).resolve().parents[2] / "addon" / "canopy_ao" / "metrics.py"
+_PATH = pathlib.Path(__file__).resolve().parents[2] / "addon" / "canopy_ao" / "core" / "metrics.py"
 _spec = importlib.util.spec_from_file_location("canopy_ao_metrics", _PATH)
 metrics = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(metrics)

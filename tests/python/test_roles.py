@@ -10,7 +10,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, os.path.join(HERE, "..", "..", "examples"))
 sys.path.insert(0, HERE)
 
-from canopy_ao import roles  # noqa: E402
+from canopy_ao.core import roles  # noqa: E402
 import tree_scene as ts  # noqa: E402
 
 

@@ -2,7 +2,9 @@
 
 import bpy
 
-from . import engine
+from .gather import world_ao_distance
+from ..core.native import core_status
+from ..core.settings import OPTIONS
 
 
 class _Sidebar:
@@ -17,7 +19,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        ok, msg = engine.core_status()
+        ok, msg = core_status()
         if not ok:
             box = layout.box()
             box.alert = True
@@ -37,9 +39,9 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         col = layout.column()
         col.prop(s, "method")
         row = col.row(align=True)
-        row.prop(s, "tau_auto", toggle=True)
+        row.prop(s, "calibrate_tau", toggle=True)
         sub = row.row(align=True)
-        sub.enabled = not s.tau_auto
+        sub.enabled = not s.calibrate_tau
         sub.prop(s, "tau")
         row = col.row(align=True)
         row.prop(s, "use_world_distance", toggle=True)
@@ -47,14 +49,16 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         sub.enabled = not s.use_world_distance
         sub.prop(s, "distance")
         if s.use_world_distance:
-            from .operators import world_ao_distance
             d = world_ao_distance(context.scene)
             col.label(text=f"World AO distance: {d:g}" if d > 0 else "No world: unlimited")
         if s.method == "raytrace":
             col.prop(s, "samples")
+        if s.method == "auto":
+            col.prop(s, "time_budget")
+            col.prop(s, "target_rmse")
         col.separator()
         col.prop(s, "mode")
-        col.prop(s, "attribute_name")
+        col.prop(s, "attribute")
         col.prop(s, "overwrite")
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
@@ -82,6 +86,28 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
             col.label(text=f"Last: {s.last_report}", icon='INFO')
 
 
+# Options the main panel lays out by hand; every other one is in Advanced, so each option of
+# core/settings.py is reachable from the panel.
+MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
+        "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
+        "image_dir", "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles",
+        "cycles_samples"}
+
+
+class CANOPY_AO_PT_advanced(_Sidebar, bpy.types.Panel):
+    bl_idname = "CANOPY_AO_PT_advanced"
+    bl_label = "Advanced"
+    bl_parent_id = "CANOPY_AO_PT_main"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        col = self.layout.column()
+        s = context.scene.canopy_ao
+        for o in OPTIONS:
+            if o.name not in MAIN:
+                col.prop(s, o.name)
+
+
 class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
     bl_idname = "CANOPY_AO_PT_object"
     bl_label = "Object Role"
@@ -104,6 +130,6 @@ class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
                 box.label(text=part)
 
 
-classes = (CANOPY_AO_PT_main, CANOPY_AO_PT_object)
+classes = (CANOPY_AO_PT_main, CANOPY_AO_PT_advanced, CANOPY_AO_PT_object)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

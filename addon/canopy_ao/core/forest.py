@@ -20,10 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-try:
-    from . import _core
-except Exception:  # the caller reports a missing core (engine.core_status)
-    _core = None
+from .native import _core, require
 
 DEFAULT_EPSILON = 1e-3  # the core's default cut-off (occluders.h)
 
@@ -121,8 +118,7 @@ class Forest:
     for any number of receivers. V = Π (1 − occ), so the fields multiply."""
 
     def __init__(self, prototypes, epsilon=DEFAULT_EPSILON):
-        if _core is None:
-            raise RuntimeError("the native module is not loaded")
+        require()
         if not (0.0 <= epsilon < 1.0):
             raise ValueError(f"epsilon must be in [0, 1), got {epsilon}")
         self.epsilon = float(epsilon)

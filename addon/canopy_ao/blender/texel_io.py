@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from . import materials
+from ..core import lighting, native
 
 __all__ = ["bake_texel", "bake_objects", "gather_corner_triangles", "rasterize",
            "splat", "image_name"]
@@ -30,11 +31,7 @@ def image_name(obj):
 
 
 def _core():
-    try:
-        from . import _core as c
-    except ImportError:
-        return None
-    return c
+    return native._core
 
 
 # === Mesh → per-corner arrays
@@ -386,8 +383,6 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
 def bake_objects(context, plan, targets, opts):
     """The bake operator's per-texel step: one image per target item (engine SceneItems),
     AO from the plan's model. Returns {object name: stats}."""
-    from . import engine
-
     # Refuse before the first image is written: every target needs the UV map.
     for it in targets:
         obj = context.scene.objects[it.name]
@@ -400,7 +395,7 @@ def bake_objects(context, plan, targets, opts):
         obj = context.scene.objects[it.name]
 
         def ao_fn(p, n, it=it):
-            return engine._evaluate_points(plan, it.role, it.tree, it.name, p, n,
+            return lighting.evaluate_points(plan, it.role, it.tree, it.name, p, n,
                                            plan.method, plan.tau)
 
         _image, stats = bake_texel(

@@ -18,7 +18,7 @@ import time
 import bpy
 import numpy as np
 
-from . import metrics
+from ..core import metrics
 
 __all__ = ["bake_cycles_vertex_ao", "bake_cycles_texel_ao", "write_error_attribute",
            "check_objects", "check_texel", "render_settings_snapshot"]

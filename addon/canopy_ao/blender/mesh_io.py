@@ -11,13 +11,15 @@ import time
 import bpy
 import numpy as np
 
+from ..core.native import CanopyAOError
+
 # Object custom property listing the attributes Canopy AO made (a JSON list of names): only
 # those may be replaced without the user's say-so.
 OWNED_PROP = "canopy_ao_attributes"
 
 
-class MeshIOError(RuntimeError):
-    pass
+class MeshIOError(CanopyAOError):
+    """A mesh that cannot be read or written as asked (a user-facing error)."""
 
 
 def _vertex_normals(mesh, n):

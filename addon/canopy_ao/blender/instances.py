@@ -5,7 +5,7 @@ Instances come from the evaluated depsgraph (``depsgraph.object_instances``), wh
 particle systems, collection-instance empties and geometry-nodes instances alike. Each instance
 of mesh object O gives the matrix M = instance.matrix_world · O.matrix_world⁻¹, which maps O as
 it stands in the scene (the prototype's space) onto the instance. Prototype objects are grouped
-into trees as the bake groups real objects (operators.tree_of: usually the collection that is
+into trees as the bake groups real objects (gather.tree_of: usually the collection that is
 instanced), each tree is fitted and baked once with the engine (its self-AO, written to the
 prototype's mesh, which the instances share), and its shells and trunks, moved by every M, are
 occluders for everything the main bake evaluates.
@@ -18,7 +18,9 @@ instance).
 
 import numpy as np
 
-from . import engine, forest, mesh_io
+from . import gather, mesh_io
+from .. import core
+from ..core import forest
 
 
 def instance_matrices(depsgraph):
@@ -48,7 +50,7 @@ class Prototypes:
     """The instanced trees of a scene: gathered (nothing changed), prepared and baked with the
     main bake's settings, written at commit."""
 
-    def __init__(self, depsgraph, role_of, tree_of, vertex_mode=True):
+    def __init__(self, depsgraph, vertex_mode=True):
         self.items = {}  # tree -> [SceneItem] in the prototype's space
         self.matrices = {}  # tree -> [(N, 4, 4)] one array per object of the tree
         self.objects = {}  # item name -> original object
@@ -63,12 +65,12 @@ class Prototypes:
                     self.writable.add(name)
             except mesh_io.MeshIOError:
                 pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=False)
-            role, how = role_of(obj, pos, tris)
+            role, how = gather.role_of(obj, pos, tris)
             if role == "IGNORE":
                 continue
-            tree = tree_of(obj)
+            tree = gather.tree_of(obj)
             self.items.setdefault(tree, []).append(
-                engine.SceneItem(name, role, tree, pos, nor, tris))
+                core.SceneItem(name, role, tree, pos, nor, tris))
             self.matrices.setdefault(tree, []).append(mats)
             self.objects[name] = obj
             self.how[name] = how
@@ -96,17 +98,17 @@ class Prototypes:
         return None
 
     def bake(self, settings, skip=()):
-        """Fit and bake each tree once; returns forest.Prototype list for engine.attach_forest.
+        """Fit and bake each tree once; returns forest.Prototype list for core.attach_forest.
         Items named in ``skip`` (also baked by the main bake) are fitted but not evaluated."""
         protos = []
         for tree, items in self.items.items():
-            plan = engine.prepare(items, settings)
+            plan = core.prepare(items, settings)
             self.plans[tree] = plan
             mats = forest.unique_matrices(np.concatenate(self.matrices[tree]))
             protos.append(forest.prototype_from_plan(plan, tree, mats))
             for it in items:
                 if it.name in self.writable and it.name not in skip:
-                    self.results.append(engine.evaluate_item(plan, it))
+                    self.results.append(core.evaluate_item(plan, it))
         return protos
 
     def commit(self, attribute, overwrite):

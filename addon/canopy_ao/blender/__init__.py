@@ -1,0 +1,1 @@
+"""Blender glue: everything that touches bpy."""

@@ -1,0 +1,137 @@
+"""Scene → items: which objects a bake reads and writes, their role and tree, their world-space
+arrays (the core's SceneItems). Nothing here changes the scene."""
+
+import time
+
+import numpy as np
+
+from . import mesh_io
+from ..core import ladder, roles
+from ..core.native import CanopyAOError
+from ..core.scene import SceneItem
+
+
+def tree_of(obj):
+    """Which tree an object belongs to: the user's name (or a generator's ``canopy_ao_tree``
+    tag), else the root of its parent chain (a trunk parenting its leaves), else its first
+    collection (the scene's own collection makes one tree of everything loose in it)."""
+    if obj.canopy_ao.tree:
+        return obj.canopy_ao.tree
+    if isinstance(obj.get("canopy_ao_tree"), str) and obj["canopy_ao_tree"]:
+        return obj["canopy_ao_tree"]  # set by a scene generator (examples/blender_scene.py)
+    if obj.parent is not None or obj.children:
+        root = obj
+        while root.parent is not None:
+            root = root.parent
+        return root.canopy_ao.tree or root.name
+    if obj.users_collection:
+        return obj.users_collection[0].name
+    return "Scene"
+
+
+# Guesses of this session, keyed by a cheap signature of the geometry (the guess costs ~1 s
+# per million vertices; re-bakes of an unchanged scene should not pay it again).
+_GUESSES = {}
+
+
+def _signature(obj, positions, triangles):
+    step = max(1, len(positions) // 997)
+    return (obj.name, len(positions), len(triangles),
+            float(np.asarray(positions[::step], np.float64).sum()),
+            int(np.asarray(triangles[::step], np.int64).sum()))
+
+
+def declared_role(obj):
+    """(role, how) when the user set the role or a scene generator tagged it, else None (the
+    role must be guessed from the geometry, which needs its triangles)."""
+    if obj.canopy_ao.role != 'AUTO':
+        return obj.canopy_ao.role, "set"
+    tagged = obj.get("canopy_ao_role")  # set by a scene generator (examples/blender_scene.py)
+    if isinstance(tagged, str) and tagged.upper() in roles.ROLES:
+        return tagged.upper(), "tagged canopy_ao_role"
+    return None
+
+
+def role_of(obj, positions, triangles):
+    """(role, how) — the user's override, or a guess from the geometry."""
+    declared = declared_role(obj)
+    if declared is not None:
+        return declared
+    key = _signature(obj, positions, triangles)
+    if key not in _GUESSES:
+        if len(_GUESSES) > 4096:
+            _GUESSES.clear()
+        _GUESSES[key] = roles.guess_role(positions, triangles)
+    role, why = _GUESSES[key]
+    return role, f"guessed: {why}"
+
+
+def world_ao_distance(scene):
+    """The AO distance Cycles uses for this scene (World > Ambient Occlusion > Distance, applied
+    by the AO bake even with the checkbox off; docs/DESIGN.md, 'Facts measured in Blender');
+    0 (unlimited) without a world."""
+    return float(scene.world.light_settings.distance) if scene.world else 0.0
+
+
+def is_candidate(obj):
+    """A mesh that may take part in a bake (not one of our proxy displays)."""
+    return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
+
+
+def bake_targets(context, object_names):
+    """The objects a bake writes: the named ones, else the selected meshes, else every visible
+    mesh. Raises CanopyAOError when there are none or a name is wrong."""
+    scene = context.scene
+    if object_names:
+        missing = [n for n in object_names if n not in scene.objects]
+        if missing:
+            raise CanopyAOError(f"no object named {', '.join(missing)} in scene "
+                                f"'{scene.name}'")
+        targets = [scene.objects[n] for n in object_names]
+        bad = [o.name for o in targets if o.type != 'MESH']
+        if bad:
+            raise CanopyAOError(f"not a mesh: {', '.join(bad)}")
+    else:
+        targets = [o for o in context.selected_objects if is_candidate(o)]
+        if not targets:
+            targets = [o for o in scene.objects
+                       if is_candidate(o) and o.visible_get(view_layer=context.view_layer)]
+    if not targets:
+        raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
+    return targets
+
+
+def scene_items(context, depsgraph, targets, opts, timings):
+    """Every visible mesh (trees shade a selected ground) and every target as SceneItems.
+
+    Returns (items, objects {name: object}, how {name: why this role}); IGNORE objects are left
+    out. Triangles are fetched only where the bake or a role guess needs them."""
+    members = {o.name: o for o in context.scene.objects
+               if is_candidate(o) and o.visible_get(view_layer=context.view_layer)}
+    for o in targets:
+        members.setdefault(o.name, o)
+    target_names = {o.name for o in targets}
+    items, objects, how = [], {}, {}
+    for name, obj in members.items():
+        # A declared role costs nothing; a guess needs the triangles (connected components).
+        declared = declared_role(obj)
+        if declared is not None and declared[0] == "IGNORE":
+            continue
+        tris_needed = declared is None or ladder.triangles_needed(
+            opts["method"], opts["tau"], declared[0])
+        # Only a target's result goes back onto its mesh: a non-target may change its
+        # vertex count (it only occludes and shapes the proxies).
+        pos, nor, tris = mesh_io.evaluated_arrays(
+            obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
+            triangles=tris_needed, timings=timings)
+        t0 = time.perf_counter()
+        role, why = declared or role_of(obj, pos, tris)
+        if declared is None and not ladder.triangles_needed(opts["method"], opts["tau"], role):
+            tris = tris[:0]  # not part of this bake (kept only for the guess)
+        timings["roles"] = timings.get("roles", 0.0) + time.perf_counter() - t0
+        if role == "IGNORE":
+            continue
+        items.append(SceneItem(name, role, tree_of(obj), pos, nor, tris))
+        objects[name] = obj
+        how[name] = why
+    return items, objects, how

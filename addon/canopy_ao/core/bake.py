@@ -1,0 +1,136 @@
+"""The bake's entry points (no bpy): prepare a plan, evaluate items with it, report.
+
+Input: scene items (name, role, tree, world positions, world normals, triangles) and
+BakeSettings. Output: one float32 AO array per item (1 = open sky) and a report: fitted
+proxies per tree, τ, the method chosen and why, timings.
+
+The work is split so a modal operator can do one piece per tick: prepare() fits the proxies
+and calibrates; evaluate_item() bakes one item; bake() does both.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import ladder, lighting, native, proxies
+from .native import CanopyAOError, refusals_are_user_errors
+from .scene import ItemResult, Plan, SceneItem
+from .ladder import DEFAULT_TAU
+from .settings import BakeSettings, validate
+
+
+@refusals_are_user_errors
+def prepare(items, settings: BakeSettings) -> Plan:
+    """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError."""
+    native.require()
+    validate(settings)
+    items = list(items)
+    t_start = time.perf_counter()
+    plan = Plan(settings=settings, method=settings.method,
+                tau=settings.tau if settings.tau is not None else DEFAULT_TAU)
+    t0 = time.perf_counter()
+    proxies.fit_scene(plan, items)
+    plan.timings["fit"] = time.perf_counter() - t0
+
+    # Grass has no proxies to calibrate, but auto still weighs its law against rays.
+    grass_only_auto = (settings.method == "auto" and not plan.fits
+                       and any(it.role == "GRASS" for it in items))
+    needs_tracer = settings.method == "raytrace" or grass_only_auto or (
+        settings.method == "auto" or settings.tau is None) and bool(plan.fits)
+    if needs_tracer:
+        t0 = time.perf_counter()
+        try:
+            plan.tracer = lighting.build_tracer(items)
+        except CanopyAOError as exc:
+            if settings.method == "raytrace":
+                raise
+            plan.notes.append(f"calibration skipped: {exc}")
+        plan.timings["tracer"] = time.perf_counter() - t0
+
+    if settings.method == "grid":
+        t0 = time.perf_counter()
+        plan.grid = lighting.build_grid(items)
+        plan.timings["grid"] = time.perf_counter() - t0
+    elif settings.method == "auto" and plan.fits and plan.tracer is not None:
+        t0 = time.perf_counter()
+        try:  # the top rung of the ladder: only worth it if it beats the shells (calibrate)
+            plan.grid = lighting.build_grid(items)
+        except CanopyAOError as exc:
+            plan.notes.append(f"density grid not considered: {exc}")
+        plan.timings["grid"] = time.perf_counter() - t0
+
+    ladder.choose(plan, items, grass_only_auto)
+    plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
+    plan.timings["prepare"] = time.perf_counter() - t_start
+    return plan
+
+
+@refusals_are_user_errors
+def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
+    """Bake one item with the plan's method and τ."""
+    t0 = time.perf_counter()
+    if item.role == "IGNORE":
+        ao = np.ones(len(item.positions), np.float32)
+    else:
+        ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, item.positions,
+                                      item.normals, plan.method, plan.tau)
+    if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
+        raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
+    return ItemResult(item.name, item.role, item.tree, plan.method, ao,
+                      time.perf_counter() - t0)
+
+
+@refusals_are_user_errors
+def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
+    """Make instanced trees occlude every item evaluate_item() bakes with this plan.
+
+    prototypes: forest.Prototype list (shells in the prototype's space, instance matrices).
+    Attached after prepare(), so calibration (which traces only the real triangles) does not
+    see occluders its reference has not got."""
+    from . import forest as _forest
+    t0 = time.perf_counter()
+    eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
+    plan.forest = _forest.Forest(prototypes, epsilon=eps) if prototypes else None
+    plan.timings["forest"] = time.perf_counter() - t0
+    if plan.forest is not None:
+        # The scene's own trees may all be instances: then "no CANOPY object" is not news.
+        plan.notes = [n for n in plan.notes if not n.startswith("no CANOPY object")]
+        plan.notes.append(
+            f"forest: {plan.forest.instances} instance(s) of {len(plan.forest.prototypes)} "
+            f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
+            f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
+            "per receiver)")
+
+
+def report(plan: Plan, results) -> dict:
+    """A JSON-ready summary of a bake."""
+    return {
+        "method": plan.method,
+        "requested_method": plan.settings.method,
+        "tau": plan.tau,
+        "distance": plan.settings.distance,
+        "samples": plan.settings.samples,
+        "proxies": proxies.proxy_dicts(plan),
+        "calibration": plan.calibration,
+        "timings": dict(plan.timings),
+        "notes": list(plan.notes),
+        "objects": {r.name: {"role": r.role, "tree": r.tree, "method": r.method,
+                             "vertices": r.vertices, "seconds": r.seconds,
+                             "ao_mean": float(r.ao.mean()) if r.vertices else None}
+                    for r in results},
+    }
+
+
+def bake(items, settings: BakeSettings, progress=None):
+    """prepare + evaluate every item. progress(i, n, name) is called before each item.
+    Returns (list[ItemResult], report dict)."""
+    items = list(items)
+    plan = prepare(items, settings)
+    results = []
+    for i, it in enumerate(items):
+        if progress is not None:
+            progress(i, len(items), it.name)
+        results.append(evaluate_item(plan, it))
+    return results, report(plan, results)

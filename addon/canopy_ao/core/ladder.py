@@ -1,0 +1,200 @@
+"""The method ladder and how a rung is chosen: τ calibrated against ray-traced samples, and
+"auto" climbing from the cheapest rung while it pays (docs/DESIGN.md, 'The method ladder').
+
+Rungs, cheapest first: one sphere, one ellipsoid, k shells, the shells as a uniform random
+medium (exact expected AO, tabulated), the leaf-density grid; Reeves-Blau is the paper's
+baseline and ray tracing the reference.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from . import native
+from .lighting import evaluate_points, trace
+from .scene import RECEIVER_ROLES, Plan
+
+# (name, label, help) of each rung; settings.OPTIONS offers them in this order.
+RUNGS = (
+    ("auto", "Auto", "Calibrate tau and climb sphere / ellipsoid / shells / medium / grid / "
+                     "rays against a few hundred ray-traced points: the cheapest rung that is "
+                     "good enough within the time budget"),
+    ("sphere", "Sphere", "One fitted sphere per tree (Hegeman Eq. 4-6)"),
+    ("ellipsoid", "Ellipsoid", "One fitted ellipsoid per tree"),
+    ("shells", "Shells", "Several ellipsoid shells per tree (k-means clusters)"),
+    ("medium", "Leaf medium", "The shells filled with randomly oriented leaves: exact expected "
+                              "AO of a uniform medium (tabulated)"),
+    ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
+    ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
+    ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
+)
+METHODS = tuple(r[0] for r in RUNGS)
+ANALYTIC_METHODS = ("sphere", "ellipsoid", "shells")
+DEFAULT_TAU = 1.5  # τ when it is neither given nor calibrated
+# Rungs that take τ (the density grid has physical density; rays are exact).
+TAU_METHODS = ANALYTIC_METHODS + ("medium", "reeves_blau")
+
+
+def available_methods() -> tuple[str, ...]:
+    """Methods the loaded core can run: all of them, or none but "auto" without the module."""
+    return METHODS if native.core_status()[0] else ("auto",)
+
+
+def triangles_needed(method: str, tau, role: str) -> bool:
+    """Whether an item's triangles take part in a bake (the add-on skips fetching them
+    otherwise: Blender's loop triangulation costs more than positions and normals together).
+    They are rays' targets (method "raytrace", and the calibration of "auto" or of any method
+    with tau None), the density grid's input, and grass blades (connected components); the
+    analytic models with a given τ need positions and normals only."""
+    if role == "IGNORE":
+        return False
+    if method in ("raytrace", "grid", "auto") or tau is None:
+        return True
+    return role == "GRASS"
+
+
+def sample_receivers(items, count, seed):
+    """Up to ``count`` receiver points spread over the items in proportion to their size, at
+    least a few per item so small objects (a trunk) are represented."""
+    rng = np.random.default_rng(seed)
+    receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
+    total = sum(len(it.positions) for it in receivers)
+    picks = []
+    for it in receivers:
+        m = min(len(it.positions), max(16, int(round(count * len(it.positions) / max(total, 1)))))
+        idx = np.sort(rng.choice(len(it.positions), size=m, replace=False))
+        picks.append((it, idx))
+    return picks
+
+
+def golden_min(f, lo, hi, iters=16):
+    """Minimise a unimodal f on [lo, hi] by golden-section search; returns (x, f(x))."""
+    g = (math.sqrt(5) - 1) / 2
+    a, b = lo, hi
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(iters):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - g * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + g * (b - a)
+            fd = f(d)
+    return (c, fc) if fc < fd else (d, fd)
+
+
+def calibrate(plan: Plan, items, candidates, tau_fixed=None):
+    """Pick τ (unless fixed) and a method among ``candidates`` against ray-traced samples.
+
+    Traces a few hundred receiver points, then for each candidate finds the τ that minimises
+    the mean squared error (golden-section search on log τ in [0.02, 50]; the density grid has
+    no τ) and walks up the ladder while the RMSE drops by more than 10 %, stays above
+    ``target_rmse`` and the richer rung's predicted time (its cost per sample point times the
+    receivers) fits ``time_budget``. Returns (method, tau, info dict).
+    """
+    s = plan.settings
+    picks = sample_receivers(items, s.calibration_points, s.seed)
+    t0 = time.perf_counter()
+    refs, groups = [], []
+    for it, idx in picks:
+        p = np.ascontiguousarray(it.positions[idx])
+        n = np.ascontiguousarray(it.normals[idx])
+        refs.append(trace(plan, p, n, s.calibration_samples))
+        groups.append((it, p, n))
+    ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
+    t_trace = time.perf_counter() - t0
+
+    def err(method, tau):
+        if method == "raytrace":
+            # Its own noise, not the reference's: another seed than the reference traced with.
+            got = [trace(plan, p, n, s.samples, seed=s.seed + 7919) for _it, p, n in groups]
+        else:
+            got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
+                   for it, p, n in groups]
+        got = np.concatenate(got) if got else np.zeros(0, np.float32)
+        return float(np.mean((got - ref) ** 2)) if len(ref) else 0.0
+
+    n_receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
+    big = max((it for it, _p, _n in groups), key=lambda it: len(it.positions))
+    bp = np.ascontiguousarray(big.positions[:4096])
+    bn = np.ascontiguousarray(big.normals[:4096])
+    results, predicted = {}, {}
+    for m in candidates:
+        if m not in TAU_METHODS:  # physical density / exact: no τ to fit
+            tau = float(tau_fixed or DEFAULT_TAU)
+        elif tau_fixed is not None:
+            tau = float(tau_fixed)
+        else:
+            lt, _e = golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
+            tau = math.exp(lt)
+        results[m] = (tau, err(m, tau))
+        # Cost per point on one batch of the largest receiver, scaled to every receiver (a
+        # batch large enough that per-call overhead does not dominate).
+        t1 = time.perf_counter()
+        evaluate_points(plan, big.role, big.tree, big.name, bp, bn, m, tau)
+        predicted[m] = (time.perf_counter() - t1) / max(len(bp), 1) * n_receivers
+    # Walk up the ladder: a richer rung only if it cuts the error by > 10 %, the current one
+    # misses the target, and the richer one fits the time budget.
+    chosen, skipped = candidates[0], []
+    for m in candidates[1:]:
+        if math.sqrt(results[chosen][1]) <= s.target_rmse:
+            break
+        if results[m][1] < 0.81 * results[chosen][1]:  # RMSE down by more than 10 %
+            if s.time_budget > 0 and predicted[m] > s.time_budget:
+                skipped.append(m)
+                continue
+            chosen = m
+    rmse = math.sqrt(results[chosen][1])
+    why = (f"{chosen}: sample RMSE {rmse:.3f}; no richer rung cut it by more than 10 %"
+           if rmse > s.target_rmse else f"{chosen}: sample RMSE {rmse:.3f} meets the target "
+           f"{s.target_rmse}")
+    if skipped:
+        why += f" within the {s.time_budget:g} s budget (over it: {', '.join(skipped)})"
+    info = {
+        "points": int(len(ref)),
+        "reference_samples": s.calibration_samples,
+        "trace_seconds": t_trace,
+        "seconds": time.perf_counter() - t0,
+        "candidates": {m: {"tau": t, "rmse": math.sqrt(e), "predicted_seconds": predicted[m]}
+                       for m, (t, e) in results.items()},
+        "chosen": chosen,
+        "why": why,
+    }
+    return chosen, results[chosen][0], info
+
+
+def choose(plan: Plan, items, grass_only_auto: bool) -> None:
+    """Set plan.method and plan.tau for the requested method: calibrated when "auto" or τ is
+    not given and a tracer exists, else the requested rung (or "ellipsoid" for "auto")."""
+    settings = plan.settings
+    analytic = settings.method in TAU_METHODS + ("auto",)
+    plan.method = settings.method
+    if analytic and plan.fits:
+        candidates = list(ANALYTIC_METHODS) if settings.method == "auto" else [settings.method]
+        if settings.method == "auto":
+            candidates.append("medium")
+            if plan.grid is not None:
+                candidates.append("grid")
+            if plan.tracer is not None:
+                # The exact rung tops the ladder: on small or sparse scenes a few rays per vertex
+                # beat every proxy within the time budget; on big ones the budget rules it out.
+                candidates.append("raytrace")
+        if plan.tracer is not None and (settings.method == "auto" or settings.tau is None):
+            plan.method, plan.tau, plan.calibration = calibrate(plan, items, candidates,
+                                                                settings.tau)
+        else:
+            plan.method = "ellipsoid" if settings.method == "auto" else settings.method
+            if settings.tau is None:
+                plan.notes.append(f"tau not calibrated; using the default {DEFAULT_TAU}")
+    elif analytic:
+        plan.method = "ellipsoid" if settings.method == "auto" else settings.method
+        plan.notes.append("no CANOPY object: no proxies fitted")
+        if grass_only_auto and plan.tracer is not None:
+            # The grass law (Hegeman Eq. 9) against the exact rung, on the same sample.
+            plan.method, plan.tau, plan.calibration = calibrate(
+                plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)

@@ -1,0 +1,87 @@
+"""Fitted proxies per tree: the canopy's sphere, ellipsoid and k shells, and solid trunks
+(docs/DESIGN.md, 'The method ladder'). Trunk points are receivers, not shape."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import roles as _roles
+from .native import _core
+from .scene import Plan, SceneItem
+
+
+def fit_tree(points: np.ndarray, settings):
+    """Fitted canopy proxies for one tree: (sphere, ellipsoid, [k shells]). The k-means shells
+    cost most (1.2 s for 1M points), so only the methods that use them get them; the others
+    get [ellipsoid]."""
+    sphere = _core.fit_sphere(points, trim=settings.trim)
+    if settings.method == "sphere":
+        # The sphere model uses no ellipsoid: skip its fit (~40 ms per million points); the
+        # sphere is then also the crown a trunk's bole is cut from (bole), as it is the medium.
+        ell = _core.Ellipsoid.from_sphere(sphere)
+    else:
+        ell = _core.fit_ellipsoid(points, trim=settings.trim)
+    k = max(1, min(settings.shells, len(points) // 64))
+    if settings.method not in ("auto", "shells", "medium"):
+        k = 1
+    if k > 1:
+        shells, _labels = _core.fit_shells(points, k, kind="ellipsoid", trim=settings.trim,
+                                           seed=settings.seed)
+        shells = list(shells)
+    else:
+        shells = [ell]
+    return sphere, ell, shells
+
+
+def own_shells(plan: Plan, tree: str, method: str) -> list:
+    """The shells of ``tree`` that ``method`` lights with (and that occlude for it)."""
+    sphere, ell, shells = plan.fits[tree]
+    if method == "sphere":
+        return [_core.Ellipsoid.from_sphere(sphere)]
+    if method in ("ellipsoid", "reeves_blau"):
+        return [ell]
+    return list(shells)
+
+
+def bole(plan: Plan, item: SceneItem) -> np.ndarray:
+    """The trunk points a solid occluder should stand for: those outside the tree's crown.
+    Branches inside the crown are already in the canopy's medium; an ellipsoid fitted to them
+    too would be a solid as big as the crown (it darkened the ground by 0.1 on the grove)."""
+    p = item.positions
+    if item.tree not in plan.fits:
+        return p
+    _sphere, ell, shells = plan.fits[item.tree]
+    inside = np.asarray(ell.contains(p), bool)
+    for e in shells:
+        inside |= np.asarray(e.contains(p), bool)
+    return np.ascontiguousarray(p[~inside])
+
+
+def fit_scene(plan: Plan, items) -> None:
+    """Fill plan.fits (per tree, from its CANOPY points), plan.trunks (a solid ellipsoid per
+    trunk, fitted to its bole) and plan.grass (ground level and blade height per grass item)."""
+    trees = {}
+    for it in items:
+        if it.role == "CANOPY" and len(it.positions):
+            trees.setdefault(it.tree, []).append(it.positions)
+    for tree, pts in trees.items():
+        pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
+                                   dtype=np.float32)
+        plan.fits[tree] = fit_tree(pts, plan.settings)
+    for it in items:
+        if it.role == "TRUNK":
+            b = bole(plan, it)
+            if len(b) >= 8:
+                plan.trunks.setdefault(it.tree, []).append(_core.fit_ellipsoid(b))
+        if it.role == "GRASS":
+            plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
+
+
+def proxy_dicts(plan: Plan) -> dict:
+    """Proxies as plain data {tree: [{"center", "axes", "radii"}]} for display and JSON."""
+    out = {}
+    for tree, shells in plan.proxies.items():
+        out[tree] = [{"center": np.asarray(e.center, float).tolist(),
+                      "axes": np.asarray(e.axes, float).tolist(),
+                      "radii": np.asarray(e.radii, float).tolist()} for e in shells]
+    return out

@@ -1,0 +1,215 @@
+"""Every bake option, declared once (no bpy).
+
+Each :class:`Option` holds its type, default, range, label and help. From this one table come
+the core's :class:`BakeSettings`, the scene's property group and the bake operator's properties
+(blender/properties.py) and the command line's arguments (cli.py), and every interface checks
+a value with :meth:`Option.check` (docs/DESIGN.md, 'One settings schema'). Adding an option is
+one entry in OPTIONS.
+
+An optional number (``none_prop``) may also be None, which has its own meaning: τ None means
+"calibrate τ". Blender cannot hold None, so there the option is two properties, the number and
+a switch named ``none_prop`` ("calibrate_tau"); the command line spells None as ``auto``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from .ladder import DEFAULT_TAU, RUNGS
+from .native import CanopyAOError
+
+
+@dataclass(frozen=True)
+class Option:
+    name: str
+    kind: str  # "float", "int", "bool", "str" or "enum"
+    default: object
+    label: str
+    help: str
+    group: str = "bake"  # "bake": a BakeSettings field; "output": what Blender does with it
+    min: float | None = None
+    max: float | None = None
+    min_exclusive: bool = False
+    max_exclusive: bool = False
+    soft_max: float | None = None  # the UI slider's end; values up to max stay valid
+    items: tuple = ()  # enum: ((id, label, help), ...)
+    none_prop: str = ""  # optional number: the switch that stands for None ...
+    none_label: str = ""  # ... its label ...
+    none_help: str = ""  # ... and help
+    number_default: float | None = None  # optional number: the value when it is not None
+    cli: str | None = ""  # the flag; "" = --name-with-dashes; None = not on the command line
+    cli_enables: str = ""  # giving the flag also turns this bool option on (--aov NAME)
+    cli_default: str = ""  # the command line's default, when it is not ``default``
+    advanced: bool = False  # the panel's Advanced section
+    unit: str = "NONE"  # Blender's unit ('LENGTH', 'TIME')
+    subtype: str = "NONE"  # Blender's string subtype ('DIR_PATH')
+
+    @property
+    def flag(self) -> str:
+        return self.cli or "--" + self.name.replace("_", "-")
+
+    def range_text(self) -> str:
+        """'in [1, 65536]', '> 0', '>= 0' or '' (no bound)."""
+        if self.min is not None and self.max is not None:
+            return (f"in {'(' if self.min_exclusive else '['}{self.min:g}, {self.max:g}"
+                    f"{')' if self.max_exclusive else ']'}")
+        if self.min is not None:
+            return f"{'>' if self.min_exclusive else '>='} {self.min:g}"
+        if self.max is not None:
+            return f"{'<' if self.max_exclusive else '<='} {self.max:g}"
+        return ""
+
+    def check(self, value):
+        """The value, converted to the option's type; CanopyAOError names the option, the
+        range and the value when it is out of range, not finite or of the wrong type."""
+        if value is None and self.none_prop:
+            return None
+        if self.kind == "enum":
+            ids = [i[0] for i in self.items]
+            if value not in ids:
+                raise CanopyAOError(f"{self.name} must be one of {', '.join(ids)}, got {value!r}")
+            return value
+        if self.kind == "bool":
+            if not isinstance(value, (bool, int)):
+                raise CanopyAOError(f"{self.name} must be true or false, got {value!r}")
+            return bool(value)
+        if self.kind == "str":
+            if not isinstance(value, str):
+                raise CanopyAOError(f"{self.name} must be text, got {value!r}")
+            return value
+        try:
+            number = int(value) if self.kind == "int" else float(value)
+        except (TypeError, ValueError, OverflowError):
+            raise CanopyAOError(f"{self.name} must be a{'n integer' if self.kind == 'int' else ' number'}"
+                                f", got {value!r}") from None
+        if self.kind == "int" and number != value:
+            raise CanopyAOError(f"{self.name} must be an integer, got {value!r}")
+        ok = math.isfinite(number)
+        if ok and self.min is not None:
+            ok = number > self.min if self.min_exclusive else number >= self.min
+        if ok and self.max is not None:
+            ok = number < self.max if self.max_exclusive else number <= self.max
+        if not ok:
+            what = "an integer" if self.kind == "int" else "a finite number"
+            hint = (f" (to {self.none_label.lower()}: --{self.name} auto on the command line, "
+                    f"{self.none_prop} in Blender)" if self.none_prop else "")
+            raise CanopyAOError(f"{self.name} must be {what} {self.range_text()}, got "
+                                f"{value!r}{hint}".replace("  ", " "))
+        return number
+
+    def parse(self, text: str):
+        """A command-line word as a checked value ('auto' = None for an optional number)."""
+        if self.none_prop and text.strip().lower() == "auto":
+            return None
+        if self.kind == "enum":
+            return self.check(text.upper() if text.upper() in [i[0] for i in self.items]
+                              else text)
+        if self.kind in ("int", "float"):
+            try:
+                value = int(text) if self.kind == "int" else float(text)
+            except ValueError:
+                what = "an integer" if self.kind == "int" else "a number"
+                raise CanopyAOError(f"{self.name} must be {what}"
+                                    f"{' or auto' if self.none_prop else ''}, got {text!r}") from None
+            return self.check(value)
+        return self.check(text)
+
+
+def _enum(pairs):
+    return tuple((i, label, text) for i, label, text in pairs)
+
+
+OPTIONS = (
+    # --- how the AO is computed (BakeSettings) ---
+    Option("method", "enum", "auto", "Method", "How the AO is computed (the method ladder)",
+           items=_enum(RUNGS)),
+    Option("tau", "float", None, "τ", "Optical depth of a canopy: AO at its centre is exp(-τ)",
+           min=0.0, min_exclusive=True, soft_max=20.0, number_default=DEFAULT_TAU,
+           none_prop="calibrate_tau", none_label="Calibrate τ",
+           none_help="Calibrate the optical depth against ray-traced samples"),
+    Option("distance", "float", 0.0, "AO Distance",
+           "Ray length cut-off (as Cycles' world AO distance); 0 = unlimited. Used by the "
+           "ray-traced method, the density grid and calibration", min=0.0, unit='LENGTH',
+           cli_default="the World's AO distance, as Cycles uses it; unlimited without a world"),
+    Option("samples", "int", 64, "Samples", "Rays per vertex for the ray-traced method",
+           min=1, max=65536, soft_max=1024),
+    Option("time_budget", "float", 2.0, "Time Budget",
+           "Auto: seconds the bake may take; richer models predicted to take longer are not "
+           "chosen (0 = no limit)", min=0.0, unit='TIME'),
+    Option("target_rmse", "float", 0.06, "Target Error",
+           "Auto: stop climbing the ladder once a rung's RMSE on the ray-traced sample is below "
+           "this (0.06 is about an MAE of 0.05, an error an artist does not see)",
+           min=0.0, max=1.0, cli="--target-error"),
+    Option("shells", "int", 4, "Shells", "Ellipsoid shells per tree for the shells and leaf "
+           "medium methods (k-means clusters)", min=1, max=64, advanced=True),
+    Option("trim", "float", 0.0, "Trim", "Fraction of the canopy's points left out of the "
+           "fits as outliers", min=0.0, max=0.5, max_exclusive=True, advanced=True),
+    Option("calibration_points", "int", 256, "Calibration Points",
+           "Receiver points traced to calibrate τ and choose a rung", min=16, max=1 << 20,
+           advanced=True),
+    Option("calibration_samples", "int", 128, "Calibration Samples",
+           "Rays per calibration point", min=1, max=65536, advanced=True),
+    Option("seed", "int", 0, "Seed", "Seed of the calibration sample, the k-means shells and "
+           "the rays", min=0, max=2**31 - 1, advanced=True),
+    Option("forest_epsilon", "float", 1e-2, "Forest Cut-off",
+           "Instanced trees: an instance's shell is ignored where it would block less than "
+           "this (Shanmugam-Arikan Eq. 5); 1e-2 keeps a ground vertex under 10,000 trees to "
+           "~1000 occluders at a cost of < 0.08 AO", min=0.0, max=1.0, max_exclusive=True,
+           advanced=True),
+    # --- what the bake writes (Blender) ---
+    Option("use_world_distance", "bool", True, "From World",
+           "Use the World's AO distance (World > Ambient Occlusion > Distance), as Cycles' AO "
+           "bake does, so the bake and a Cycles check agree at any scale (command line: when "
+           "--distance is not given)", group="output", cli=None),
+    Option("mode", "enum", "VERTEX", "Output", "A color attribute per vertex, or an image in "
+           "the UV layout", group="output",
+           items=(("VERTEX", "Per Vertex", "A color attribute"),
+                  ("TEXEL", "Per Texel", "An image in the UV layout"))),
+    Option("attribute", "str", "CanopyAO", "Attribute",
+           "Color attribute (POINT, FLOAT_COLOR) to write", group="output"),
+    Option("overwrite", "bool", False, "Overwrite",
+           "Replace an attribute of this name that Canopy AO did not make", group="output"),
+    Option("uv_map", "str", "", "UV Map", "Texel mode: UV map (empty = the active one)",
+           group="output", cli="--uv"),
+    Option("resolution", "int", 1024, "Resolution", "Texel mode: image size in texels",
+           group="output", min=1, max=16384),
+    Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder",
+           group="output", subtype='DIR_PATH'),
+    Option("show_proxies", "bool", True, "Show Proxies", "Show the fitted shells as empties "
+           "in a 'Canopy AO Proxies' collection", group="output", cli="--no-proxies"),
+    Option("wire_material", "bool", False, "Wire Material",
+           "Connect the baked result into the objects' materials", group="output"),
+    Option("add_aov", "bool", False, "Add AOV",
+           "Add a shader AOV output and a view-layer AOV", group="output", cli=None),
+    Option("aov_name", "str", "BakedAO", "AOV Name", "Name of the AOV ('AO' would collide "
+           "with Cycles' own AO pass); on the command line, --aov NAME also adds it",
+           group="output", cli="--aov", cli_enables="add_aov"),
+    Option("check_cycles", "bool", False, "Check with Cycles",
+           "Also bake Cycles AO and report the error per object (slow)", group="output"),
+    Option("cycles_samples", "int", 64, "Cycles Samples", "Samples of the Cycles check",
+           group="output", min=1, max=65536, soft_max=4096),
+)
+BY_NAME = {o.name: o for o in OPTIONS}
+
+
+def defaults() -> dict:
+    """Every option's default, by name."""
+    return {o.name: o.default for o in OPTIONS}
+
+
+BakeSettings = dataclasses.make_dataclass(
+    "BakeSettings",
+    [(o.name, object, dataclasses.field(default=o.default)) for o in OPTIONS
+     if o.group == "bake"],
+    namespace={"__module__": __name__,
+               "__doc__": "How the AO is computed: one field per 'bake' option of "
+                          "settings.OPTIONS (see each one's help there)."})
+
+
+def validate(settings) -> None:
+    """Check every field of a BakeSettings against its option; raises CanopyAOError."""
+    for o in OPTIONS:
+        if o.group == "bake":
+            setattr(settings, o.name, o.check(getattr(settings, o.name)))
