@@ -15,7 +15,7 @@ grids, fits and calibration included):
   baseline: a rung that does not beat it has learnt nothing);
 - sphere, ellipsoid, shells, medium, grid: the engine's rungs, τ calibrated by the engine;
 - rays N: Embree at N = 1, 4, 16, 64, 256 rays (BVH build included);
-- regression: the ray-free rung (addon/canopy_ao/regression.py, occlusion_features.h):
+- regression: the ray-free rung (addon/canopy_ao/core/regression.py, occlusion_features.h):
   1024 traced calibration points, then no rays;
 - hybrid c/N: ao_near_far with N rays out to near = c grid voxels, the grid beyond
   (near is scale-free: the voxel is the grid's box / its resolution);
@@ -41,8 +41,9 @@ sys.path.insert(0, os.path.join(REPO, "examples"))
 import numpy as np  # noqa: E402
 
 import real_scenes as rs  # noqa: E402
-from canopy_ao import _core, engine, regression  # noqa: E402
-from canopy_ao.metrics import compare  # noqa: E402
+from canopy_ao import _core, core  # noqa: E402
+from canopy_ao.core import regression  # noqa: E402
+from canopy_ao.core.metrics import compare  # noqa: E402
 
 DESIGN = ("sap_callistemon", "sap_white_birch", "sap_small_maple")
 TREES = DESIGN + ("sap_douglas_fir", "sap_small_pine", "sap_weeping_willow",
@@ -61,7 +62,7 @@ def timed(fn):
 
 
 def engine_items(sc):
-    return [engine.SceneItem(n, r.upper(), t, p, nn, tr) for n, r, t, p, nn, tr in sc.items()]
+    return [core.SceneItem(n, r.upper(), t, p, nn, tr) for n, r, t, p, nn, tr in sc.items()]
 
 
 def cycles_runs(sc):
@@ -91,14 +92,14 @@ def methods(sc):
     D = sc.distance
     for m in ENGINE_RUNGS:
         try:
-            (res, rep), dt = timed(lambda: engine.bake(items, engine.BakeSettings(
+            (res, rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
                 method=m, distance=D)))
             yield m, np.concatenate([r.ao for r in res]), dt, f"tau {rep.get('tau', '')}"
         except Exception as exc:  # a rung that refuses the scene says why
             yield m, None, 0.0, f"failed: {exc}"
     tracer, t_bvh = timed(lambda: _core.RayTracer(sc.V, sc.T))
     for n in RAYS:
-        ao, dt = timed(lambda: np.asarray(tracer.ao(sc.V, sc.N, samples=n, distance=D)))
+        ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0))
         yield f"rays {n}", ao, dt + t_bvh, ""
     (per, rep), dt = timed(lambda: regression.bake(items, distance=D))
     yield "regression", np.concatenate([per[n] for n in sc.names]), dt, \
