@@ -29,6 +29,10 @@ RUNGS = (
                               "AO of a uniform medium (tabulated)"),
     ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
     ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
+    ("regression", "Regression", "Ray-free: 1024 ray-traced points fitted on cheap per-vertex "
+                                 "features of the density grid and the tree's shape; no rays "
+                                 "beyond them, cost independent of the leaf count"),
+    ("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels, the grid beyond"),
     ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
 )
 METHODS = tuple(r[0] for r in RUNGS)
@@ -51,7 +55,7 @@ def triangles_needed(method: str, tau, role: str) -> bool:
     analytic models with a given τ need positions and normals only."""
     if role == "IGNORE":
         return False
-    if method in ("raytrace", "grid", "auto") or tau is None:
+    if method in ("raytrace", "grid", "regression", "hybrid", "auto") or tau is None:
         return True
     return role == "GRASS"
 

@@ -31,6 +31,7 @@ BURIED_FRACTION = 0.01   # of the receiver's object bbox diagonal
 BURIED_RAYS = 32
 LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
 MIN_GROUP = 96           # sample points a group needs for its own fit
+POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
 
 
 def _merged(items):

@@ -47,6 +47,7 @@ class Plan:
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
     tracer: object = None
     grid: object = None
+    regression: object = None  # regression.RegressionRung, method "regression"
     calibration: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
