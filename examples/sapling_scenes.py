@@ -281,7 +281,7 @@ def main(argv):
             bpy.ops.wm.save_as_mainfile(filepath=os.path.join(
                 os.path.abspath(a.blend), f"{scene}{'_quick' if a.quick else ''}.blend"))
         for s in todo_cycles:
-            from canopy_ao.cycles_check import bake_cycles_vertex_ao
+            from canopy_ao.blender.cycles_check import bake_cycles_vertex_ao
             t2 = time.perf_counter()
             res = bake_cycles_vertex_ao(bpy.context, [o for o, _, _ in objs], distance, s)
             dt = time.perf_counter() - t2

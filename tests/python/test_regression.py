@@ -102,3 +102,12 @@ def test_ridge_recovers_a_linear_law():
     got, lam, cv = regression.ridge(X, y)
     np.testing.assert_allclose(got, w, atol=5e-3)
     assert cv < 5e-3
+
+
+@pytest.mark.parametrize("method", ["hybrid", "regression"])
+def test_command_line_offers_and_documents_the_rung(method):
+    from canopy_ao import cli
+    p = cli.build_parser()
+    assert f"{method}:" in " ".join(p.format_help().split())  # its own line of --help
+    opts = cli.options_from_args(p.parse_args(["--method", method]), world_distance=3.0)
+    assert opts["method"] == method
