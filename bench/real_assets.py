@@ -5,7 +5,7 @@
 The scenes are the exports of examples/sapling_scenes.py (bench/out/real/<scene>[_quick].npz;
 build them first, in Blender — the command is printed when one is missing). Reference: Embree at
 1024 cosine-weighted rays per vertex, AO distance = the scene's diagonal (bench/real_scenes.py,
-cached); Cycles' own bake is a second reference when examples/sapling_scenes.py --cycles N has
+cached); Cycles' own bake is a second reference when examples/sapling_scenes.py --bake-cycles N has
 been run (the highest N). Per scene, per method: MAE over all vertices and with buried vertices
 left out (leaf and branch vertices whose rays all stop within 1 % of their object's size),
 correlation (buried left out), and wall time of the whole bake as a user waits for it (BVH,
@@ -52,7 +52,7 @@ SCENES = TREES + ("grass_field_real",)
 ENGINE_RUNGS = ("sphere", "ellipsoid", "shells", "medium", "grid")
 RAYS = (1, 4, 16, 64, 256)
 GRID_RESOLUTION = 48       # DensityGrid's default: the hybrid's far field
-HYBRID = ((2.0, 16), (2.0, 32), (4.0, 32))   # (near in voxels, rays)
+HYBRID = ((2.0, 16), (2.0, 64), (8.0, 64))   # (near in voxels, rays); the ladder's: 2, 64
 
 
 def timed(fn):
@@ -66,7 +66,7 @@ def engine_items(sc):
 
 
 def cycles_runs(sc):
-    """{samples: (ao over all vertices, seconds)} from sapling_scenes.py --cycles."""
+    """{samples: (ao over all vertices, seconds)} from sapling_scenes.py --bake-cycles."""
     out = {}
     stem = os.path.basename(sc.path)[:-4] + "_cycles_"
     for f in sorted(os.listdir(os.path.dirname(sc.path))):

@@ -1,7 +1,7 @@
 """Real-generator benchmark scenes: Blender's own Sapling Tree Gen trees, a grass field, a grove.
 
     blender -b --factory-startup --python examples/sapling_scenes.py -- [--scenes NAME ...]
-        [--quick] [--out-dir bench/out/real] [--cycles N ...] [--blend DIR] [--force] [--list]
+        [--quick] [--out-dir bench/out/real] [--bake-cycles N ...] [--blend DIR] [--force] [--list]
 
 Each tree is built the way a user builds one: ``bpy.ops.curve.tree_add`` (the add-on
 ``add_curve_sapling`` bundled with Blender 3.4) with one of its bundled presets, a fixed seed and
@@ -24,8 +24,8 @@ Every scene is exported to ``<out-dir>/<scene>[_quick].npz`` so benchmarks run w
     geometry                 sha1 of names, positions and triangles (cache key for references)
     info                     str: JSON with presets, seeds and the leaf factor
 
-``--cycles N`` also bakes Cycles' own AO per vertex at N samples (denoising and adaptive sampling
-off, AO distance as above) into ``<out-dir>/<scene>[_quick]_cycles_<N>.npz`` (``ao/<name>``,
+``--bake-cycles N`` also bakes Cycles' own AO per vertex at N samples (denoising and adaptive
+sampling off, AO distance as above; not ``--cycles``, which Blender's Cycles add-on claims) into ``<out-dir>/<scene>[_quick]_cycles_<N>.npz`` (``ao/<name>``,
 ``seconds``, ``samples``, ``geometry``). ``--blend DIR`` saves each scene's .blend there.
 Presets and seeds are fixed, so the same command gives the same bytes. Exits non-zero on failure.
 """
@@ -250,7 +250,7 @@ def main(argv):
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out-dir", default=DEFAULT_OUT)
-    ap.add_argument("--cycles", type=int, nargs="*", default=[])
+    ap.add_argument("--bake-cycles", type=int, nargs="*", default=[], dest="cycles")
     ap.add_argument("--blend", help="also save each scene's .blend in this folder")
     ap.add_argument("--force", action="store_true", help="rebuild scenes already exported")
     ap.add_argument("--list", action="store_true")
