@@ -111,3 +111,15 @@ def test_command_line_offers_and_documents_the_rung(method):
     assert f"{method}:" in " ".join(p.format_help().split())  # its own line of --help
     opts = cli.options_from_args(p.parse_args(["--method", method]), world_distance=3.0)
     assert opts["method"] == method
+
+
+def test_ray_free_auto_never_picks_rays_and_weighs_the_regression():
+    from canopy_ao import cli
+    assert "--ray-free" in cli.build_parser().format_help()
+    its = items()
+    _, free = bake(its, "auto", ray_free=True, time_budget=0.0)
+    assert free["method"] not in ("raytrace", "hybrid")
+    assert "regression" in free["calibration"]["candidates"]
+    assert "raytrace" not in free["calibration"]["candidates"]
+    _, full = bake(its, "auto", time_budget=0.0)
+    assert "raytrace" in full["calibration"]["candidates"]

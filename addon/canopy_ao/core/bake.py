@@ -49,12 +49,19 @@ def prepare(items, settings: BakeSettings) -> Plan:
             plan.notes.append(f"calibration skipped: {exc}")
         plan.timings["tracer"] = time.perf_counter() - t0
 
-    if settings.method == "regression":
+    if settings.method == "regression" or (settings.method == "auto" and settings.ray_free
+                                           and plan.fits and plan.tracer is not None):
         t0 = time.perf_counter()
-        plan.regression = regression.RegressionRung(
-            items, settings.distance, points=regression.POINTS,
-            samples=settings.calibration_samples, seed=settings.seed)
-        plan.calibration = plan.regression.report
+        try:
+            plan.regression = regression.RegressionRung(
+                items, settings.distance, points=regression.POINTS,
+                samples=settings.calibration_samples, seed=settings.seed)
+        except CanopyAOError as exc:
+            if settings.method == "regression":
+                raise
+            plan.notes.append(f"regression rung not considered: {exc}")
+        if settings.method == "regression":
+            plan.calibration = plan.regression.report
         plan.timings["regression"] = time.perf_counter() - t0
     if settings.method in ("grid", "hybrid"):
         t0 = time.perf_counter()

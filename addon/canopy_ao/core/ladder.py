@@ -184,7 +184,9 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
             candidates.append("medium")
             if plan.grid is not None:
                 candidates.append("grid")
-            if plan.tracer is not None:
+            if plan.regression is not None:
+                candidates.append("regression")
+            if plan.tracer is not None and not settings.ray_free:
                 # The exact rung tops the ladder: on small or sparse scenes a few rays per vertex
                 # beat every proxy within the time budget; on big ones the budget rules it out.
                 candidates.append("raytrace")
@@ -198,7 +200,7 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
     elif analytic:
         plan.method = "ellipsoid" if settings.method == "auto" else settings.method
         plan.notes.append("no CANOPY object: no proxies fitted")
-        if grass_only_auto and plan.tracer is not None:
+        if grass_only_auto and plan.tracer is not None and not settings.ray_free:
             # The grass law (Hegeman Eq. 9) against the exact rung, on the same sample.
             plan.method, plan.tau, plan.calibration = calibrate(
                 plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)
