@@ -158,25 +158,35 @@ OcclusionFeatures::OcclusionFeatures(const DensityGrid& occluders,
 
 // --- Lookups -----------------------------------------------------------------------------------
 
-float OcclusionFeatures::lerp3(const Field& f, const std::vector<float>& v, Vec3 g) {
+namespace {
+// The trilinear stencil at lattice point g (clamped to the lattice): 8 voxel indices, weights.
+void trilinear_stencil(const int* n, Vec3 g, std::size_t* idx, float* w) {
   int i0[3];
   float fr[3];
   for (int a = 0; a < 3; ++a) {
-    const float x = std::clamp(g[a], 0.0f, static_cast<float>(f.n[a] - 1));
-    i0[a] = std::min(static_cast<int>(x), std::max(f.n[a] - 2, 0));
-    fr[a] = f.n[a] > 1 ? x - i0[a] : 0.0f;
+    const float x = std::clamp(g[a], 0.0f, static_cast<float>(n[a] - 1));
+    i0[a] = std::min(static_cast<int>(x), std::max(n[a] - 2, 0));
+    fr[a] = n[a] > 1 ? x - i0[a] : 0.0f;
   }
-  float acc = 0;
-  for (int q = 0; q < 8; ++q) {
-    int c[3];
-    float w = 1;
+  for (int c = 0; c < 8; ++c) {
+    int v[3];
+    w[c] = 1;
     for (int a = 0; a < 3; ++a) {
-      const int bit = (q >> a) & 1;
-      c[a] = std::min(i0[a] + bit, f.n[a] - 1);
-      w *= bit ? fr[a] : 1 - fr[a];
+      const int bit = (c >> a) & 1;
+      v[a] = std::min(i0[a] + bit, n[a] - 1);
+      w[c] *= bit ? fr[a] : 1 - fr[a];
     }
-    if (w > 0) acc += w * v[vidx(f.n, c[0], c[1], c[2])];
+    idx[c] = vidx(n, v[0], v[1], v[2]);
   }
+}
+}  // namespace
+
+float OcclusionFeatures::lerp3(const Field& f, const std::vector<float>& v, Vec3 g) {
+  std::size_t idx[8];
+  float w[8];
+  trilinear_stencil(f.n, g, idx, w);
+  float acc = 0;
+  for (int c = 0; c < 8; ++c) acc += w[c] * v[idx[c]];
   return acc;
 }
 
@@ -184,32 +194,13 @@ void OcclusionFeatures::taus_at(Vec3 p, float* tau) const {
   const Field& f = fine_;
   const int K = directions();
   const Vec3 g = lattice(f.origin, f.h, p);
-  auto stencil = [&](Vec3 q, std::size_t* idx, float* w) {
-    int i0[3];
-    float fr[3];
-    for (int a = 0; a < 3; ++a) {
-      const float x = std::clamp(q[a], 0.0f, static_cast<float>(f.n[a] - 1));
-      i0[a] = std::min(static_cast<int>(x), std::max(f.n[a] - 2, 0));
-      fr[a] = f.n[a] > 1 ? x - i0[a] : 0.0f;
-    }
-    for (int c = 0; c < 8; ++c) {
-      int v[3];
-      w[c] = 1;
-      for (int a = 0; a < 3; ++a) {
-        const int bit = (c >> a) & 1;
-        v[a] = std::min(i0[a] + bit, f.n[a] - 1);
-        w[c] *= bit ? fr[a] : 1 - fr[a];
-      }
-      idx[c] = vidx(f.n, v[0], v[1], v[2]) * K;
-    }
-  };
   std::size_t idx[8];
   float w[8];
   if (inside_box(f.n, g)) {
-    stencil(g, idx, w);
+    trilinear_stencil(f.n, g, idx, w);
     for (int k = 0; k < K; ++k) tau[k] = 0;
     for (int c = 0; c < 8; ++c) {
-      const float* src = f.tau.data() + idx[c];
+      const float* src = f.tau.data() + idx[c] * K;
       for (int k = 0; k < K; ++k) tau[k] += w[c] * src[k];
     }
     return;
@@ -232,8 +223,8 @@ void OcclusionFeatures::taus_at(Vec3 p, float* tau) const {
     }
     tau[k] = 0;
     if (miss || t0 > t1) continue;
-    stencil(g + d * t0, idx, w);
-    for (int c = 0; c < 8; ++c) tau[k] += w[c] * f.tau[idx[c] + k];
+    trilinear_stencil(f.n, g + d * t0, idx, w);
+    for (int c = 0; c < 8; ++c) tau[k] += w[c] * f.tau[idx[c] * K + k];
   }
 }
 
