@@ -153,12 +153,55 @@ def run_scene(name, quick, writer):
                           f"{'':8s}  bias {r['bias']:+.3f}")
 
 
+def markdown(rows):
+    """The README's table from the CSV rows: per scene, the rungs that matter for the targets."""
+    out = ["| scene | vertices | constant | best proxy rung | grid | rays 16 | rays 64 | "
+           "regression (ray-free) | hybrid 2 voxels / 64 rays |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    scenes = []
+    for r in rows:
+        if r["scene"] not in scenes:
+            scenes.append(r["scene"])
+    for sc in scenes:
+        m = {r["method"]: r for r in rows if r["scene"] == sc}
+        t64 = float(m["rays 64"]["seconds"])
+
+        def cell(name, ratio=True):
+            r = m.get(name)
+            if r is None or r["mae_unburied"] == "":
+                return "–"
+            txt = (f"{float(r['mae_all']):.3f} / {float(r['mae_unburied']):.3f}, "
+                   f"r {float(r['corr']):.2f}, {float(r['seconds']):.2g} s")
+            return txt + (f" ({float(r['seconds']) / t64:.2f}×)" if ratio else "")
+        proxies = [k for k in ENGINE_RUNGS if k != "grid" and k in m and m[k]["mae_unburied"]]
+        best = min(proxies, key=lambda k: float(m[k]["mae_unburied"])) if proxies else None
+        star = "*" if m["rays 64"]["design"] == "True" else ""
+        out.append(f"| {sc}{star} | {m['rays 64']['vertices']} | "
+                   f"{float(m['constant']['mae_all']):.3f} / "
+                   f"{float(m['constant']['mae_unburied']):.3f} | "
+                   f"{best + ': ' + cell(best, False) if best else '–'} | {cell('grid', False)} | "
+                   f"{cell('rays 16', False)} | {cell('rays 64', False)} | {cell('regression')} | "
+                   f"{cell('hybrid 2v/64')} |")
+    return "\n".join(out)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="real_assets.py", description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
     ap.add_argument("--full", action="store_true", help="full-size exports instead of quick")
     ap.add_argument("--csv", help="also write every row to this CSV file")
+    ap.add_argument("--markdown", metavar="FILE.md",
+                    help="only format an earlier --csv run as the README's table, into FILE.md")
     a = ap.parse_args(argv)
+    if a.markdown:
+        if not a.csv:
+            ap.error("--markdown needs --csv (the run to format)")
+        with open(a.csv, newline="") as fh:
+            text = markdown(list(csv.DictReader(fh)))
+        with open(a.markdown, "w") as fh:
+            fh.write(text + "\n")
+        print(text)
+        return 0
     fh = open(a.csv, "w", newline="") if a.csv else None
     writer = None
     if fh:
