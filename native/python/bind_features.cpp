@@ -111,9 +111,10 @@ void bind_features(py::module_& m) {
         return out;
       },
       py::arg("features"), py::arg("mean"), py::arg("scale"),
-      "expand_features(features, mean, scale) -> float32 (N, 3F)\n\n"
+      "expand_features(features, mean, scale) -> float32 (N, P)\n\n"
       "The regression's terms: z = (features - mean) / scale, then [1, z, z**2, z[:, 1] * z[:, "
-      "j != 1]] (squares and the products with the grid AO). mean, scale: float32 (F,), scale "
+      "j != 1]] (squares and the products with the grid AO; P = 3F, plus the 15 products of the "
+      "shape features 6-11 when F = 13). mean, scale: float32 (F,), scale "
       "> 0.");
   m.def(
       "predict_features",

@@ -17,6 +17,10 @@ namespace {
 
 constexpr float kPi = 3.14159265358979f;
 constexpr int kGridAO = 1;  // the feature the products pair with (grid AO at s = 1)
+// The shape features (normal·up … distance from the mid-point) whose pairwise products join the
+// expansion when the features are OcclusionFeatures' own (F = kCount).
+constexpr int kShapeBegin = 6, kShapeEnd = 12;
+constexpr int kShapePairs = (kShapeEnd - kShapeBegin) * (kShapeEnd - kShapeBegin - 1) / 2;
 
 // Golden-angle spiral over the sphere: K nearly uniform directions, fixed (deterministic).
 std::vector<Vec3> sphere_directions(int k) {
@@ -311,7 +315,9 @@ const char* OcclusionFeatures::feature_name(int f) {
 
 // --- The linear model --------------------------------------------------------------------------
 
-int expanded_size(int features) { return 3 * features; }
+int expanded_size(int features) {
+  return 3 * features + (features == OcclusionFeatures::kCount ? kShapePairs : 0);
+}
 
 namespace {
 void check_model(int f, const float* scale) {
@@ -332,6 +338,9 @@ inline void expand_row(const float* x, int f, const float* mean, const float* sc
   for (int j = 0; j < f; ++j) phi[p++] = z[j] * z[j];
   for (int j = 0; j < f; ++j)
     if (j != g) phi[p++] = z[g] * z[j];
+  if (f == OcclusionFeatures::kCount)
+    for (int a = kShapeBegin; a < kShapeEnd; ++a)
+      for (int b = a + 1; b < kShapeEnd; ++b) phi[p++] = z[a] * z[b];
 }
 }  // namespace
 

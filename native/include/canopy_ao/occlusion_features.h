@@ -33,8 +33,10 @@
 // and a lookup one voxel out along n each changed the MAE by < 0.001 and were left out.
 //
 // The model: z = (f − mean) / scale per feature, φ(z) = [1, z_1..z_F, z_1²..z_F², z_1 z_2 ..
-// z_1 z_F] (squares and the products with the grid AO), AO = clamp(w·φ(z), 0, 1). The weights
-// come from a ridge fit on the traced sample (addon: core regression fit; bench/real_assets.py).
+// z_1 z_F] (squares and the products with the grid AO; for these 13 features also the pairwise
+// products of the shape features 6-11: how a leaf faces depends on where it is in the crown),
+// AO = clamp(w·φ(z), 0, 1). The weights come from a ridge fit on the traced sample
+// (addon/canopy_ao/core/regression.py).
 #pragma once
 
 #include <cstddef>
@@ -97,7 +99,8 @@ class OcclusionFeatures {
 };
 
 // === The linear model
-/// Number of expanded terms for F raw features: 1 + F + F + (F − 1).
+/// Number of expanded terms for F raw features: 1 + F + F + (F − 1), plus the 15 pairwise
+/// products of the shape features 6-11 when F = OcclusionFeatures::kCount.
 int expanded_size(int features);
 
 /// φ(z) of N rows of F raw features into out (N × expanded_size(F)). mean, scale: F values
