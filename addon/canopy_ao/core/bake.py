@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import cost, ladder, lighting, native, proxies, trees
+from . import cost, ladder, lighting, native, proxies, regression, trees
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import ItemResult, Plan, SceneItem, split_trees
 from .ladder import DEFAULT_TAU
@@ -41,19 +41,33 @@ def prepare(items, settings: BakeSettings) -> Plan:
     # Grass has no proxies to calibrate, but auto still weighs its law against rays.
     grass_only_auto = (settings.method == "auto" and not plan.fits
                        and any(it.role == "GRASS" for it in items))
-    needs_tracer = settings.method == "raytrace" or grass_only_auto or (
+    needs_tracer = settings.method in ("raytrace", "hybrid") or grass_only_auto or (
         settings.method == "auto" or settings.tau is None) and bool(plan.fits)
     if needs_tracer:
         t0 = time.perf_counter()
         try:
             plan.tracer = lighting.build_tracer(whole)
         except CanopyAOError as exc:
-            if settings.method == "raytrace":
+            if settings.method in ("raytrace", "hybrid"):
                 raise
             plan.notes.append(f"calibration skipped: {exc}")
         plan.timings["tracer"] = time.perf_counter() - t0
 
-    if settings.method == "grid":
+    if settings.method == "regression" or (settings.method == "auto" and settings.ray_free
+                                           and plan.fits and plan.tracer is not None):
+        t0 = time.perf_counter()
+        try:
+            plan.regression = regression.RegressionRung(
+                items, settings.distance, points=regression.POINTS,
+                samples=settings.calibration_samples, seed=settings.seed)
+        except CanopyAOError as exc:
+            if settings.method == "regression":
+                raise
+            plan.notes.append(f"regression rung not considered: {exc}")
+        if settings.method == "regression":
+            plan.calibration = plan.regression.report
+        plan.timings["regression"] = time.perf_counter() - t0
+    if settings.method in ("grid", "hybrid"):
         t0 = time.perf_counter()
         plan.grid = lighting.build_grid(whole)
         plan.timings["grid"] = time.perf_counter() - t0

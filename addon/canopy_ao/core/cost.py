@@ -8,7 +8,10 @@ Work per receiver, counted from the plan:
 - medium: as shells, each a medium-table lookup (a costlier unit);
 - grid: DensityAOOptions.directions line integrals, each ~kExactVoxels + 2 log2(resolution)
   voxel steps (exact DDA near, mip steps growing with distance: density_grid.h);
-- raytrace: samples rays, each ~log2(triangles) BVH steps.
+- raytrace: samples rays, each ~log2(triangles) BVH steps;
+- regression: one trilinear look-up of the swept optical depth per feature direction
+  (occlusion_features.h), counted as a voxel step each;
+- hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps.
 Predicted seconds = Σ work × the unit's constant / threads; the constants are seconds per
 unit on one core of the machine that measured them, fixed here (machine speed scales them all
 alike; the choice depends on their ratios and on the time budget).
@@ -37,10 +40,12 @@ SECONDS_PER_UNIT = {
 }
 FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: analytic 1 + "
            "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "
-           "directions × (exact voxels + 2 log2 resolution), raytrace samples × log2 triangles")
+           "directions × (exact voxels + 2 log2 resolution), regression feature directions, raytrace "
+           "samples × log2 triangles, hybrid raytrace + grid")
 GRID_DIRECTIONS = 32         # DensityAOOptions.directions (the add-on's default)
 GRID_RESOLUTION = 48         # DensityGridOptions.resolution (the add-on's default)
 GRID_EXACT_VOXELS = 4        # DensityGrid::kExactVoxels
+FEATURE_DIRECTIONS = 24      # OcclusionFeatures' default directions (core/regression.py)
 
 
 def work(plan, method: str, receivers: int) -> tuple[str, float]:
@@ -58,10 +63,17 @@ def work(plan, method: str, receivers: int) -> tuple[str, float]:
     if method == "grid":
         steps = GRID_EXACT_VOXELS + 2 * math.log2(GRID_RESOLUTION)
         return "voxel_step", receivers * float(GRID_DIRECTIONS) * steps
+    if method == "regression":
+        return "voxel_step", receivers * float(FEATURE_DIRECTIONS)
     if method == "raytrace":
         m = plan.tracer.triangle_count if plan.tracer is not None else 1
         depth = math.log2(max(int(m), 2))
         return "bvh_step", receivers * float(plan.settings.samples) * depth
+    if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
+        _u, rays = work(plan, "raytrace", receivers)
+        _u, steps = work(plan, "grid", receivers)
+        ratio = SECONDS_PER_UNIT["voxel_step"] / SECONDS_PER_UNIT["bvh_step"]
+        return "bvh_step", rays + steps * ratio
     raise ValueError(f"no cost model for method {method!r}")
 
 

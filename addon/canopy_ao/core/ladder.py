@@ -29,6 +29,10 @@ RUNGS = (
                               "AO of a uniform medium (tabulated)"),
     ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
     ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
+    ("regression", "Regression", "Ray-free: 1024 ray-traced points fitted on cheap per-vertex "
+                                 "features of the density grid and the tree's shape; no rays "
+                                 "beyond them, cost independent of the leaf count"),
+    ("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels, the grid beyond"),
     ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
 )
 METHODS = tuple(r[0] for r in RUNGS)
@@ -51,7 +55,7 @@ def triangles_needed(method: str, tau, role: str) -> bool:
     analytic models with a given τ need positions and normals only."""
     if role == "IGNORE":
         return False
-    if method in ("raytrace", "grid", "auto") or tau is None:
+    if method in ("raytrace", "grid", "regression", "hybrid", "auto") or tau is None:
         return True
     return role == "GRASS"
 
@@ -237,7 +241,9 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
             candidates.append("medium")
             if plan.grid is not None:
                 candidates.append("grid")
-            if plan.tracer is not None:
+            if plan.regression is not None:
+                candidates.append("regression")
+            if plan.tracer is not None and not settings.ray_free:
                 # The exact rung tops the ladder: on small or sparse scenes a few rays per vertex
                 # beat every proxy within the time budget; on big ones the budget rules it out.
                 candidates.append("raytrace")
@@ -252,7 +258,7 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
     elif analytic:
         plan.method = "ellipsoid" if settings.method == "auto" else settings.method
         plan.notes.append("no CANOPY object: no proxies fitted")
-        if grass_only_auto and plan.tracer is not None:
+        if grass_only_auto and plan.tracer is not None and not settings.ray_free:
             # The grass law (Hegeman Eq. 9) against the exact rung, on the same sample.
             plan.method, plan.tau, plan.calibration = calibrate(
                 plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)

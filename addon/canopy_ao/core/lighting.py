@@ -94,6 +94,10 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         return trace(plan, p, n, plan.settings.samples)
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
+    if method == "regression":
+        return plan.regression.ao(role, tree, p, n)
+    if method == "hybrid":
+        return _grass(plan, role, grass_key, p, n, _hybrid_ao(plan, p, n))
     ao = np.ones(len(p), np.float32)
     dist = plan.settings.distance
     shells = {t: own_shells(plan, t, method) for t in plan.fits}
@@ -164,6 +168,23 @@ def _grid_ao(plan, p, n):
     d = plan.settings.distance
     kw = {"distance": float(d)} if d > 0 else {}
     return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
+
+
+# The hybrid's near distance in voxels of the density grid: the grid resolves occlusion beyond
+# a few voxels, rays the contact shadows inside them (scale-free: the voxel is the grid's box /
+# its resolution). Chosen on the design Sapling trees, bench/real_assets.py.
+HYBRID_VOXELS = 2.0
+
+
+def _hybrid_ao(plan, p, n):
+    """Near exact, far statistical (native ao_near_far): settings.samples rays out to
+    HYBRID_VOXELS grid voxels, the density grid beyond."""
+    d = plan.settings.distance
+    near = HYBRID_VOXELS * float(plan.grid.voxel_size)
+    return np.asarray(_core.ao_near_far(plan.tracer, plan.grid, p, n, near,
+                                        samples=int(plan.settings.samples),
+                                        distance=float(d) if d > 0 else math.inf,
+                                        seed=plan.settings.seed), dtype=np.float32)
 
 
 def _scene_triangles(items):

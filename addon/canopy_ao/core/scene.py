@@ -59,6 +59,7 @@ class Plan:
     grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     tracer: object = None
     grid: object = None
+    regression: object = None  # regression.RegressionRung, method "regression"
     calibration: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
