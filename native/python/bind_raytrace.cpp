@@ -45,16 +45,38 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
   return std::make_unique<RayTracer>(v, t, m);
 }
 
+/// An optional int32 (N,) array of own-primitive ids (None → nullptr). Values are range-checked
+/// by RayTracer::ao (std::invalid_argument → ValueError).
+const std::int32_t* ids_arg(const py::object& ids, const char* name, std::size_t n) {
+  if (ids.is_none()) return nullptr;
+  if (!py::isinstance<py::array>(ids)) {
+    throw py::value_error(std::string(name) + " must be None or an int32 numpy array");
+  }
+  const auto a = py::reinterpret_borrow<py::array>(ids);
+  require_dtype(a, name, py::dtype::of<std::int32_t>(), "int32");
+  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != n) {
+    std::ostringstream s;
+    s << name << " must have shape (" << n << ",) like points, got " << shape_str(a);
+    throw py::value_error(s.str());
+  }
+  return static_cast<const std::int32_t*>(a.data());
+}
+
 py::array_t<float> trace(const RayTracer& tracer, const py::array& points,
-                         const py::array& normals, const RayTraceOptions& o) {
+                         const py::array& normals, const RayTraceOptions& o,
+                         const py::object& vertex_ids = py::none(),
+                         const py::object& triangle_ids = py::none()) {
   const PointsView p = points_arg(points, "points", /*allow_empty=*/true);
   const PointsView n = points_arg(normals, "normals", /*allow_empty=*/true);
   check_same_rows(p, "points", n, "normals");
+  OwnPrimitives own;
+  own.vertex_ids = ids_arg(vertex_ids, "vertex_ids", p.size);
+  own.triangle_ids = ids_arg(triangle_ids, "triangle_ids", p.size);
   py::array_t<float> out = new_floats(p.size);
   float* dst = out.mutable_data();
   {
     py::gil_scoped_release release;
-    tracer.ao(p, n, o, dst);
+    tracer.ao(p, n, own, o, dst);
   }
   return out;
 }
@@ -75,12 +97,16 @@ void bind_raytrace(py::module_& m) {
       .def(
           "ao",
           [](const RayTracer& self, const py::array& points, const py::array& normals,
-             int samples, double distance, long long seed, double offset) {
-            return trace(self, points, normals, options_arg(samples, distance, seed, offset));
+             int samples, double distance, long long seed, double offset,
+             const py::object& vertex_ids, const py::object& triangle_ids) {
+            return trace(self, points, normals, options_arg(samples, distance, seed, offset),
+                         vertex_ids, triangle_ids);
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("offset") = -1.0,
-          "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0) -> float32 (N,)\n\n"
+          py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
+          "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
+          "triangle_ids=None) -> float32 (N,)\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
           "hemisphere of its normal (float32 (N, 3), normalised here; a zero normal gives 1) "
@@ -88,7 +114,14 @@ void bind_raytrace(py::module_& m) {
           "inf = unlimited). Stratified directions rotated per point from (row index, seed): "
           "deterministic, independent of the thread count. Origins move `offset` along the "
           "normal (< 0 = automatic: 1e-5 of the scene diagonal + 1e-6 of its largest "
-          "coordinate; see .auto_offset). Releases the GIL.")
+          "coordinate; see .auto_offset).\n\n"
+          "Receivers on the mesh (as Cycles: a ray skips only what it starts on): vertex_ids, "
+          "int32 (N,), the tracer's vertex each point is (-1 = none): every triangle using it "
+          "is skipped; triangle_ids, int32 (N,), the triangle each point lies on (a texel's; -1 "
+          "= none): that triangle is skipped. Such a point's rays start on its own surface "
+          "(nudged a hair towards its own triangles' centroid, no normal offset unless offset "
+          ">= 0 is given), so a surface it touches (the ground under a blade root) still "
+          "occludes. Ids outside their range: ValueError. Releases the GIL.")
       .def_property_readonly("vertex_count", &RayTracer::vertex_count)
       .def_property_readonly("triangle_count", &RayTracer::triangle_count)
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,

@@ -6,9 +6,11 @@
 #include <algorithm>
 #include <cmath>
 #include <mutex>
+#include <numeric>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #include "canopy_ao/parallel.h"
@@ -111,6 +113,63 @@ inline void onb(Vec3 n, Vec3* t, Vec3* b) {
   *b = {c, sign + n.y * n.y * a, -n.y};
 }
 
+// === Own primitives
+/// What a query hands to the filter: Embree passes filters a pointer to `base`, the first
+/// member, so the filter can cast it back (standard layout).
+struct TraceContext {
+  embree::QueryContext base;
+  const std::int32_t* own_vertex = nullptr;    // per query point (ray id), −1 = none
+  const std::int32_t* own_triangle = nullptr;  // per query point (ray id), −1 = none
+  const std::uint32_t* indices = nullptr;      // 3M: the tracer's triangles
+};
+static_assert(std::is_standard_layout<TraceContext>::value, "cast from the Embree context");
+
+/// Occlusion filter on every triangle geometry: rejects a hit on the ray's own receiver's
+/// triangles (ray id = query point), so traversal goes on past them. O(1) per hit: a triangle is
+/// a vertex's own when one of its three indices is that vertex.
+void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
+  const auto* c = reinterpret_cast<const TraceContext*>(args->context);
+  if (c->own_vertex == nullptr && c->own_triangle == nullptr) return;
+  for (unsigned k = 0; k < args->N; ++k) {
+    if (args->valid[k] == 0) continue;
+    const unsigned point = RTCRayN_id(args->ray, args->N, k);
+    const unsigned prim = RTCHitN_primID(args->hit, args->N, k);
+    if (c->own_triangle && c->own_triangle[point] == static_cast<std::int32_t>(prim)) {
+      args->valid[k] = 0;
+      continue;
+    }
+    if (c->own_vertex && c->own_vertex[point] >= 0) {
+      const auto v = static_cast<std::uint32_t>(c->own_vertex[point]);
+      const std::uint32_t* t = c->indices + 3 * static_cast<std::size_t>(prim);
+      if (t[0] == v || t[1] == v || t[2] == v) args->valid[k] = 0;
+    }
+  }
+}
+
+/// The start of a receiver lying on its own triangles: x moved towards `target` (the centroid
+/// of those triangles) by 1e-3 of the way, at least `precision` (float spacing of the scene's
+/// coordinates), at most half the way. x itself when target = x.
+inline Vec3 own_surface_origin(Vec3 x, Vec3 target, float precision) {
+  const Vec3 d = target - x;
+  const float len = length(d);
+  if (!(len > 0.0f)) return x;
+  const float step = std::min(0.5f * len, std::max(1e-3f * len, precision));
+  return x + d * (step / len);
+}
+
+void check_ids(const std::int32_t* ids, std::size_t n, std::size_t limit, const char* name,
+               const char* what) {
+  if (ids == nullptr) return;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (ids[i] < -1 || (ids[i] >= 0 && static_cast<std::size_t>(ids[i]) >= limit)) {
+      std::ostringstream s;
+      s << name << "[" << i << "] = " << ids[i] << " is neither -1 (none) nor a " << what
+        << " index in [0, " << limit << ")";
+      throw std::invalid_argument(s.str());
+    }
+  }
+}
+
 void check_points(PointsView p, const char* name) {
   if (p.size > 0 && p.data == nullptr) {
     throw std::invalid_argument(std::string(name) + " is null");
@@ -133,11 +192,17 @@ struct RayTracer::Impl {
   std::unique_ptr<ErrorRecord> errors = std::make_unique<ErrorRecord>();
   std::vector<float> vertices;       // 3V floats + 1 of padding (Embree reads 16 bytes)
   std::vector<std::uint32_t> indices;  // 3M (6M when the device culls back faces)
+  std::vector<Vec3> vertex_target;     // V: mean centroid of each vertex's triangles (or itself)
   std::size_t vertex_count = 0;
   std::size_t triangle_count = 0;
   float auto_offset = 0;
+  float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
   DevicePtr device;
   ScenePtr scene;
+
+  Vec3 vertex(std::uint32_t i) const {
+    return {vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]};
+  }
 
   /// Throws canopy_ao::Error if Embree reported anything since the last check.
   void check(const char* what) const {
@@ -166,6 +231,8 @@ struct RayTracer::Impl {
                                vertices.data(), 0, 3 * sizeof(float), vertex_count);
     rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, index_data, 0,
                                3 * sizeof(std::uint32_t), triangle_count);
+    // Both windings share primitive ids, so one filter on the original indices serves both.
+    rtcSetGeometryOccludedFilterFunction(geom, skip_own_primitives);
     rtcCommitGeometry(geom);
     rtcAttachGeometry(scene.get(), geom);
     rtcReleaseGeometry(geom);  // the scene holds its own reference
@@ -211,6 +278,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     }
   }
   m.auto_offset = vertices.size ? 1e-5f * length(hi - lo) + 1e-6f * max_abs : 0.0f;
+  m.precision = 1e-6f * max_abs;
 
   // 1. The device, with the error callback registered once so every call can be checked.
   m.device.reset(rtcNewDevice(nullptr));
@@ -242,6 +310,21 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
       m.indices[i] = static_cast<std::uint32_t>(triangles[i]);
     }
+    // Where a vertex receiver starts: towards the mean centroid of the triangles using it.
+    std::vector<Vec3> sum(vertices.size, Vec3{0, 0, 0});
+    std::vector<std::uint32_t> uses(vertices.size, 0);
+    for (std::size_t j = 0; j < triangle_count; ++j) {
+      const std::uint32_t* t = m.indices.data() + 3 * j;
+      const Vec3 c = (vertices[t[0]] + vertices[t[1]] + vertices[t[2]]) / 3.0f;
+      for (int k = 0; k < 3; ++k) {
+        sum[t[k]] = sum[t[k]] + c;
+        ++uses[t[k]];
+      }
+    }
+    m.vertex_target.resize(vertices.size);
+    for (std::size_t i = 0; i < vertices.size; ++i) {
+      m.vertex_target[i] = uses[i] ? sum[i] / static_cast<float>(uses[i]) : vertices[i];
+    }
     m.attach_triangles(m.indices.data());
     if (culls) {
       std::uint32_t* flipped = m.indices.data() + 3 * triangle_count;
@@ -271,6 +354,11 @@ std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
                    float* out) const {
+  ao(points, normals, OwnPrimitives{}, options, out);
+}
+
+void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& own,
+                   const RayTraceOptions& options, float* out) const {
   const Impl& m = *impl_;
   if (points.size != normals.size) {
     std::ostringstream s;
@@ -292,6 +380,11 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
   check_points(points, "points");
   check_points(normals, "normals");
   if (points.size > 0 && out == nullptr) throw std::invalid_argument("out is null");
+  check_ids(own.vertex_ids, points.size, m.vertex_count, "vertex_ids", "vertex");
+  check_ids(own.triangle_ids, points.size, m.triangle_count, "triangle_ids", "triangle");
+  if ((own.vertex_ids || own.triangle_ids) && points.size > 0xffffffffu) {
+    throw std::invalid_argument("too many points for 32-bit ray ids");
+  }
 
   const std::size_t n = points.size;
   if (m.triangle_count == 0) {
@@ -300,7 +393,8 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
   }
 
   const int samples = options.samples;
-  const float offset = options.offset < 0 ? m.auto_offset : options.offset;
+  const bool automatic = options.offset < 0;
+  const float offset = automatic ? m.auto_offset : options.offset;
   const float tfar = options.distance;  // +inf is fine for Embree
   const SampleSet set(samples);
   const float inv_samples = 1.0f / static_cast<float>(samples);
@@ -314,11 +408,14 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
     std::uint32_t owner[kStream];
     std::vector<int> open(end - begin, 0);
     std::size_t filled = 0;
-    embree::QueryContext context;
-    embree::init_context(&context);  // incoherent: AO rays go every way
+    TraceContext context;
+    embree::init_context(&context.base);  // incoherent: AO rays go every way
+    context.own_vertex = own.vertex_ids;
+    context.own_triangle = own.triangle_ids;
+    context.indices = m.indices.data();
 
     auto flush = [&] {
-      embree::occluded(scene, &context, rays, filled);
+      embree::occluded(scene, &context.base, rays, filled);
       for (std::size_t r = 0; r < filled; ++r) {
         // Embree sets tfar to -inf on an occluded ray.
         open[owner[r]] += rays[r].tfar >= 0.0f ? 1 : 0;
@@ -337,7 +434,20 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
       const Vec3 nn = normalize(raw / big);
       Vec3 t, b;
       onb(nn, &t, &b);
-      const Vec3 o = points[i] + nn * offset;
+      // The origin: on the receiver's own surface (see raytrace.h, "Origins"), else offset
+      // along the normal.
+      const std::int32_t ov = own.vertex_ids ? own.vertex_ids[i] : -1;
+      const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
+      Vec3 o;
+      if (automatic && ov >= 0) {
+        o = own_surface_origin(points[i], m.vertex_target[ov], m.precision);
+      } else if (automatic && ot >= 0) {
+        const std::uint32_t* t = m.indices.data() + 3 * static_cast<std::size_t>(ot);
+        const Vec3 c = (m.vertex(t[0]) + m.vertex(t[1]) + m.vertex(t[2])) / 3.0f;
+        o = own_surface_origin(points[i], c, m.precision);
+      } else {
+        o = points[i] + nn * offset;
+      }
       float du, dv;
       point_shift(i, options.seed, &du, &dv);
       const float cr = std::cos(kTwoPi * dv), sr = std::sin(kTwoPi * dv);
@@ -362,7 +472,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
         ray.time = 0.0f;
         ray.tfar = tfar;
         ray.mask = 0xffffffffu;
-        ray.id = 0;
+        ray.id = static_cast<unsigned>(i);  // the filter's key to the receiver's own primitives
         ray.flags = 0;
         owner[filled] = local;
         if (++filled == kStream) flush();
@@ -392,7 +502,13 @@ std::vector<float> RayTracer::ao_at_vertices(PointsView normals,
       << normals.size;
     throw std::invalid_argument(s.str());
   }
-  return ao(PointsView{impl_->vertices.data(), impl_->vertex_count}, normals, options);
+  std::vector<std::int32_t> self(impl_->vertex_count);
+  std::iota(self.begin(), self.end(), 0);
+  OwnPrimitives own;
+  own.vertex_ids = self.data();
+  std::vector<float> out(impl_->vertex_count);
+  ao(PointsView{impl_->vertices.data(), impl_->vertex_count}, normals, own, options, out.data());
+  return out;
 }
 
 // === One-off

@@ -121,6 +121,37 @@ double mean(const std::vector<float>& a) {
   return std::accumulate(a.begin(), a.end(), 0.0) / static_cast<double>(a.size());
 }
 
+// A closed prism (the trunk or a branch): `sides` facets around the axis from `base` along unit
+// `axis` for `length`, circumradius r, both ends capped. Ring vertex k sits at angle
+// phi0 + 2πk/sides in the (e1, e2) plane; facet k (vertices k, k+1) faces the angle
+// phi0 + π(2k+1)/sides. Returns the index of ring vertex 0 at the base.
+std::int32_t prism(Mesh* m, Vec3 base, Vec3 axis, Vec3 e1, Vec3 e2, float r, float length,
+                   int sides, float phi0) {
+  const std::int32_t first = static_cast<std::int32_t>(m->v.size() / 3);
+  for (int end = 0; end < 2; ++end) {
+    for (int k = 0; k < sides; ++k) {
+      const float ph = phi0 + 2 * kPi * k / sides;
+      m->add(base + axis * (end * length) + r * (std::cos(ph) * e1 + std::sin(ph) * e2));
+    }
+  }
+  const std::int32_t c0 = m->add(base), c1 = m->add(base + axis * length);
+  for (int k = 0; k < sides; ++k) {
+    const std::int32_t b0 = first + k, b1 = first + (k + 1) % sides;
+    const std::int32_t t0 = b0 + sides, t1 = b1 + sides;
+    m->tri(b0, b1, t1);
+    m->tri(b0, t1, t0);
+    m->tri(c0, b1, b0);
+    m->tri(c1, t0, t1);
+  }
+  return first;
+}
+
+// Mean and worst row of `ao` against `want`.
+void expect_ao(const std::vector<float>& ao, double want, const char* what) {
+  EXPECT_NEAR(mean(ao), want, 0.005) << what;  // bias well below 0.01
+  for (float v : ao) EXPECT_NEAR(v, want, 0.03) << what;
+}
+
 RayTraceOptions opts(int samples, float distance = kInf, std::uint32_t seed = 0,
                      float offset = -1) {
   RayTraceOptions o;
@@ -213,8 +244,10 @@ TEST(RayTracer, InsideAClosedBoxIsZero) {
 }
 
 TEST(RayTracer, BoxCornersAtTheirOwnVertices) {
-  // ao_at_vertices with inward normals: closed all round ⇒ 0; outward: nothing of the convex
-  // box is in front of a corner ⇒ 1. Both check that the offset clears the adjacent faces.
+  // ao_at_vertices skips the faces meeting at each corner, as Cycles skips what a ray starts
+  // on. Outward normals: nothing of the convex box is in front of a corner ⇒ 1. Inward normals
+  // (n = the octant's diagonal): only the directions into the box's octant are blocked, a
+  // cosine-weighted fraction ∫_octant ω·n dω / π = 3·(π/4)/(√3 π) = √3/4 ⇒ AO = 1 − √3/4.
   const Mesh box = cube(1);
   const RayTracer tracer = box.tracer();
   std::vector<float> in, out;
@@ -222,8 +255,9 @@ TEST(RayTracer, BoxCornersAtTheirOwnVertices) {
     in.push_back(-box.v[i] / std::sqrt(3.0f));
     out.push_back(box.v[i] / std::sqrt(3.0f));
   }
-  for (float v : tracer.ao_at_vertices({in.data(), 8}, opts(512))) EXPECT_EQ(v, 0.0f);
   for (float v : tracer.ao_at_vertices({out.data(), 8}, opts(512))) EXPECT_EQ(v, 1.0f);
+  const auto inward = tracer.ao_at_vertices({in.data(), 8}, opts(1024));
+  expect_ao(inward, 1.0 - std::sqrt(3.0) / 4.0, "inward corner");
 }
 
 TEST(RayTracer, SolidSphereAboveTheHorizonBlocksRSquaredOverDSquaredCosTheta) {
@@ -240,6 +274,117 @@ TEST(RayTracer, SolidSphereAboveTheHorizonBlocksRSquaredOverDSquaredCosTheta) {
     for (float v : ao) EXPECT_NEAR(v, want, 0.01) << "theta " << theta_deg;
     EXPECT_NEAR(mean(ao), want, 0.002) << "theta " << theta_deg;
   }
+}
+
+// === Receivers on the mesh: skip only their own triangles (Cycles' rule)
+// Each case is a receiver whose own surface touches another one; the closed forms follow from
+// the tilted-plane law: directions behind a plane through the receiver with unit normal m form
+// a cosine-weighted fraction (1 − n·m)/2 of its hemisphere, and every such direction enters a
+// solid lying behind that plane at once. An origin offset along the normal gets all of them
+// wrong (checked by hand: the blade root and the trunk base read 1.0, the leaf facing the
+// branch 0.0).
+
+TEST(RayTracer, BladeRootOnTheGroundSeesTheGroundBelowItsHorizon) {
+  // A flat blade standing on the ground, leaning back by β; its root vertex and a texel on
+  // its bottom edge. Facing down (n·up = −sin β) or up (+sin β): AO = (1 + n·up)/2.
+  for (float beta_deg : {0.0f, 20.0f}) {
+    const float beta = beta_deg * kPi / 180;
+    Mesh m = horizontal(-100, 100, -100, 100, 0);
+    const Vec3 up_blade{0, std::sin(beta), std::cos(beta)}, side{0.012f, 0, 0};
+    const Vec3 root{0.3f, -0.2f, 0};
+    const std::int32_t r0 = m.add(root - side), r1 = m.add(root + side);
+    const std::int32_t t1 = m.add(root + side + 0.3f * up_blade);
+    const std::int32_t t0 = m.add(root - side + 0.3f * up_blade);
+    m.tri(r0, r1, t1);  // triangle 2: holds the bottom edge
+    m.tri(r0, t1, t0);
+    const RayTracer tracer = m.tracer();
+    for (float facing : {1.0f, -1.0f}) {
+      const Vec3 n = facing * Vec3{0, std::cos(beta), -std::sin(beta)};
+      const double want = (1.0 + n.z) / 2.0;
+      const Receivers at_root(m.view()[static_cast<std::size_t>(r0)], n, 64);
+      const std::vector<std::int32_t> vid(64, r0), none(64, -1), tid(64, 2);
+      OwnPrimitives own;
+      own.vertex_ids = vid.data();
+      std::vector<float> ao(64);
+      tracer.ao(at_root.points(), at_root.normals(), own, opts(1024), ao.data());
+      expect_ao(ao, want, "root vertex");
+      // A texel on the bottom edge, on triangle 2 (the vertex ids all −1: no vertex).
+      const Receivers texel(root, n, 64);
+      own.vertex_ids = none.data();
+      own.triangle_ids = tid.data();
+      tracer.ao(texel.points(), texel.normals(), own, opts(1024), ao.data());
+      expect_ao(ao, want, "bottom-edge texel");
+    }
+  }
+}
+
+TEST(RayTracer, TrunkBaseOnTheGroundIsHalfOpen) {
+  // A 16-sided capped trunk on the ground; a base-ring vertex with its radial (smooth) normal.
+  // Below the horizon: the ground. Above it nothing: near a convex vertex the trunk lies behind
+  // both facet planes meeting there, and no direction of the radial hemisphere is behind both.
+  const int sides = 16;
+  Mesh m = horizontal(-100, 100, -100, 100, 0);
+  const std::int32_t b0 = prism(&m, {0, 0, 0}, {0, 0, 1}, {1, 0, 0}, {0, 1, 0}, 0.2f, 3.0f,
+                                sides, 0.0f);
+  const Receivers r(m.view()[static_cast<std::size_t>(b0)], {1, 0, 0}, 64);
+  const std::vector<std::int32_t> vid(64, b0);
+  OwnPrimitives own;
+  own.vertex_ids = vid.data();
+  std::vector<float> ao(64);
+  m.tracer().ao(r.points(), r.normals(), own, opts(1024), ao.data());
+  expect_ao(ao, 0.5, "trunk base");
+}
+
+TEST(RayTracer, LeafLyingOnABranchSeesTheBranchBehindTheFacet) {
+  // An 8-sided capped branch along y, its top facet at z = r cos(π/8); a leaf's base edge lies
+  // on that facet and the leaf rises at α = 45°. Its base vertex, facing up or down
+  // (n·up = ±cos α): the convex branch blocks exactly the directions behind the facet.
+  const int sides = 8;
+  const float r = 0.05f, alpha = kPi / 4;
+  Mesh m;
+  prism(&m, {0, -1, 0}, {0, 1, 0}, {1, 0, 0}, {0, 0, 1}, r, 2.0f, sides, kPi / 2 - kPi / sides);
+  const Vec3 x0{0.005f, 0.1f, r * std::cos(kPi / sides)}, along{0, 0.03f, 0};
+  const Vec3 rise = 0.1f * Vec3{std::cos(alpha), 0, std::sin(alpha)};
+  const std::int32_t l0 = m.add(x0), l1 = m.add(x0 + along), l2 = m.add(x0 + along + rise),
+                     l3 = m.add(x0 + rise);
+  m.tri(l0, l1, l2);
+  m.tri(l0, l2, l3);
+  const RayTracer tracer = m.tracer();
+  const std::vector<std::int32_t> vid(64, l0);
+  OwnPrimitives own;
+  own.vertex_ids = vid.data();
+  for (float facing : {1.0f, -1.0f}) {
+    const Vec3 n = facing * Vec3{-std::sin(alpha), 0, std::cos(alpha)};
+    const Receivers rc(x0, n, 64);
+    std::vector<float> ao(64);
+    tracer.ao(rc.points(), rc.normals(), own, opts(1024), ao.data());
+    expect_ao(ao, (1.0 + n.z) / 2.0, facing > 0 ? "leaf facing up" : "leaf facing the branch");
+  }
+}
+
+TEST(RayTracer, OwnPrimitiveIdsAreChecked) {
+  const Mesh box = cube(1);
+  const RayTracer tracer = box.tracer();
+  const Receivers r({1, 1, 1}, {1, 1, 1}, 2);
+  std::vector<float> out(2);
+  for (std::vector<std::int32_t> bad : {std::vector<std::int32_t>{0, 8},
+                                        std::vector<std::int32_t>{-2, 0}}) {
+    OwnPrimitives own;
+    own.vertex_ids = bad.data();
+    EXPECT_THROW(tracer.ao(r.points(), r.normals(), own, opts(8), out.data()),
+                 std::invalid_argument);
+  }
+  const std::vector<std::int32_t> tri_bad{0, 12};
+  OwnPrimitives own;
+  own.triangle_ids = tri_bad.data();
+  EXPECT_THROW(tracer.ao(r.points(), r.normals(), own, opts(8), out.data()),
+               std::invalid_argument);
+  // −1 everywhere is the plain query.
+  const std::vector<std::int32_t> none{-1, -1};
+  own.vertex_ids = none.data();
+  own.triangle_ids = none.data();
+  tracer.ao(r.points(), r.normals(), own, opts(64), out.data());
+  EXPECT_EQ(out, tracer.ao(r.points(), r.normals(), opts(64)));
 }
 
 // === Determinism

@@ -19,12 +19,23 @@
 // estimate is unbiased, stratified, and depends only on (its row index, seed, its own data):
 // never on the thread count, the block split or other points. No rand(), no global state.
 //
-// Origins: x + offset · n̂, rays from t = 0 to t = distance. offset < 0 (the default) means
-// automatic: 1e-5 × the scene's bounding-box diagonal + 1e-6 × the largest absolute vertex
-// coordinate (float precision of the hit test, which grows with the extent and with the
-// distance from the origin). A leaf's own vertex therefore does not see its own triangle. The
-// offset is also a bias (occluders nearer than it along the normal are missed): pass an
-// explicit one below the smallest gap that matters, e.g. for a tiny tree on a huge ground.
+// Origins (docs/DESIGN.md, 'Baselines and references': skip only the receiver's own triangles,
+// as Cycles does). A receiver may name the triangles it lies on (OwnPrimitives): a vertex of
+// the tracer's mesh (every triangle using that vertex is its own) or a triangle (a texel's). Its
+// rays then ignore those triangles (an Embree filter on the primitive id) and start on the
+// surface itself, t from 0: nothing else is skipped, so a blade root standing on the ground sees
+// the ground below its horizon. The origin moves a hair (1e-3 of the way, at least the float
+// precision of the coordinates, at most half) towards the centroid of its own triangles, which
+// puts it strictly on its own side of any surface it touches (the ground under a root, the
+// branch under a leaf) without crossing anything farther than that hair.
+//
+// A receiver without own primitives (an arbitrary point, or offset ≥ 0 given explicitly)
+// starts at x + offset · n̂ instead. offset < 0 (the default) means automatic: 1e-5 × the
+// scene's bounding-box diagonal + 1e-6 × the largest absolute vertex coordinate (float
+// precision of the hit test, which grows with the extent and with the distance from the
+// origin). A leaf's own vertex therefore does not see its own triangle, but such an offset also
+// skips a surface the point lies on whenever the normal leans into it, and misses occluders
+// nearer than it along the normal: name the own primitives where they are known.
 //
 // Edge cases (measured, never NaN, never a crash — DESIGN 8):
 //  - empty mesh (0 triangles, any vertex count including 0): nothing occludes, AO = 1 everywhere;
@@ -32,6 +43,8 @@
 //  - normals need not be unit length: they are normalised;
 //  - non-finite vertex, point or normal coordinates: std::invalid_argument;
 //  - triangle index outside [0, V): std::invalid_argument;
+//  - an own vertex id outside [0, V) or own triangle id outside [0, M) (other than −1 = none):
+//    std::invalid_argument;
 //  - samples < 1, distance ≤ 0 or NaN, offset NaN: std::invalid_argument;
 //  - a failure reported by Embree (out of memory, ...): canopy_ao::Error with Embree's message.
 //
@@ -64,8 +77,19 @@ struct RayTraceOptions {
   /// Seed of the per-point rotations. Same seed → bit-identical results; another seed → other
   /// noise with the same expectation.
   std::uint32_t seed = 0;
-  /// Ray origin offset along the normal, scene units (≥ 0), or < 0 for automatic (see above).
+  /// Ray origin offset along the normal, scene units (≥ 0), or < 0 for automatic (see above:
+  /// the own-surface start where own primitives are given, else the automatic normal offset).
   float offset = -1.0f;
+};
+
+/// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no
+/// receiver has one); otherwise it holds one int32 per query point, −1 = none:
+///  - vertex_ids[i]: an index into the tracer's vertices; every triangle using it is skipped;
+///  - triangle_ids[i]: an index into the tracer's triangles; that triangle is skipped.
+/// Both may be given for the same point (the union is skipped; the vertex sets the origin).
+struct OwnPrimitives {
+  const std::int32_t* vertex_ids = nullptr;
+  const std::int32_t* triangle_ids = nullptr;
 };
 
 /// How the Embree scene is built (tuning, not semantics: results are the same up to float
@@ -99,10 +123,14 @@ class RayTracer {
   /// be unit length; a zero normal gives 1. `out` must hold N floats.
   void ao(PointsView points, PointsView normals, const RayTraceOptions& options,
           float* out) const;
+  /// Same, skipping each receiver's own primitives (OwnPrimitives: N entries per given array).
+  void ao(PointsView points, PointsView normals, const OwnPrimitives& own,
+          const RayTraceOptions& options, float* out) const;
   /// Same, returning a new vector of N values in [0, 1].
   std::vector<float> ao(PointsView points, PointsView normals,
                         const RayTraceOptions& options = {}) const;
-  /// AO at every vertex of the mesh itself (#V values), with the given #V by 3 vertex normals.
+  /// AO at every vertex of the mesh itself (#V values), with the given #V by 3 vertex normals;
+  /// each vertex is its own receiver (OwnPrimitives::vertex_ids = 0, 1, ..., V−1).
   std::vector<float> ao_at_vertices(PointsView normals, const RayTraceOptions& options = {}) const;
 
   /// The offset used when RayTraceOptions::offset < 0.
