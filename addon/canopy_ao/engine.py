@@ -156,6 +156,9 @@ class Plan:
     trunks: dict = field(default_factory=dict)  # tree -> list of _core.Ellipsoid (solid)
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
     tracer: object = None
+    # item name -> (first vertex, first triangle) of its mesh inside the tracer's (the receiver
+    # ids that let a ray skip only its own triangles, as Cycles does)
+    tracer_bases: dict = field(default_factory=dict)
     grid: object = None
     calibration: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
@@ -248,17 +251,21 @@ def _own_shells(plan, tree, method):
 
 
 def _evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
-                     p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
+                     p: np.ndarray, n: np.ndarray, method: str, tau: float,
+                     own=None) -> np.ndarray:
     """AO for receiver points p, n of an item: the scene's own objects (below) times the
-    instanced trees of :func:`attach_forest`, if any (V = Π (1 − occ), so the fields multiply)."""
-    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau)
+    instanced trees of :func:`attach_forest`, if any (V = Π (1 − occ), so the fields multiply).
+    own: None or {"vertex_ids": int32 (N,), "triangle_ids": int32 (N,)}, the item's own
+    vertex / triangle of each point in its mesh (-1 = none), for the ray-traced rung (_trace)."""
+    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
     if plan.forest is not None and len(p):
         ao = np.clip(ao * plan.forest.ao(p, n), 0.0, 1.0).astype(np.float32, copy=False)
     return ao
 
 
 def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | None,
-                           p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
+                           p: np.ndarray, n: np.ndarray, method: str, tau: float,
+                           own=None) -> np.ndarray:
     """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree.
 
     Any receiver inside a tree's shells (its own canopy, a trunk, but also ground or grass that
@@ -268,7 +275,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if len(p) == 0:
         return np.ones(0, np.float32)
     if method == "raytrace":
-        return _trace(plan, p, n, plan.settings.samples)
+        return _trace(plan, p, n, plan.settings.samples, own=_tracer_ids(plan, grass_key, own))
     if method == "grid":
         return _grid_ao(plan, p, n)
     ao = np.ones(len(p), np.float32)
@@ -316,12 +323,28 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     return np.clip(ao, 0.0, 1.0, out=ao)  # ao is this function's own array
 
 
-def _trace(plan: Plan, p, n, samples, seed=None):
+def _tracer_ids(plan: Plan, name, own):
+    """An item's own ids (see _evaluate_points) shifted to the tracer's mesh, or None when the
+    item is not in it. -1 (none) stays -1."""
+    if not own or plan.tracer_bases.get(name) is None:
+        return None
+    bases = dict(zip(("vertex_ids", "triangle_ids"), plan.tracer_bases[name]))
+    out = {}
+    for key, ids in own.items():
+        if ids is not None:
+            ids = np.asarray(ids, np.int64)
+            out[key] = np.ascontiguousarray(np.where(ids >= 0, ids + bases[key], -1), np.int32)
+    return out
+
+
+def _trace(plan: Plan, p, n, samples, seed=None, own=None):
+    """Ray-traced AO; own: None or tracer-mesh ids {"vertex_ids", "triangle_ids"} (_tracer_ids)
+    so each ray skips only its receiver's own triangles (RayTracer.ao)."""
     if plan.tracer is None:
         raise EngineError("ray tracing needs the scene's triangles; none were given")
     d = plan.settings.distance
     return plan.tracer.ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
-                          seed=plan.settings.seed if seed is None else int(seed))
+                          seed=plan.settings.seed if seed is None else int(seed), **(own or {}))
 
 
 # === Calibration (DESIGN 5) ==================================================================
@@ -375,23 +398,25 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     for it, idx in picks:
         p = np.ascontiguousarray(it.positions[idx])
         n = np.ascontiguousarray(it.normals[idx])
-        refs.append(_trace(plan, p, n, s.calibration_samples))
-        groups.append((it, p, n))
+        own = _tracer_ids(plan, it.name, {"vertex_ids": np.asarray(idx)})
+        refs.append(_trace(plan, p, n, s.calibration_samples, own=own))
+        groups.append((it, p, n, own))
     ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
     t_trace = time.perf_counter() - t0
 
     def err(method, tau):
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
-            got = [_trace(plan, p, n, s.samples, seed=s.seed + 7919) for _it, p, n in groups]
+            got = [_trace(plan, p, n, s.samples, seed=s.seed + 7919, own=own)
+                   for _it, p, n, own in groups]
         else:
             got = [_evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
-                   for it, p, n in groups]
+                   for it, p, n, _own in groups]
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got - ref) ** 2)) if len(ref) else 0.0
 
     n_receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
-    big = max((it for it, _p, _n in groups), key=lambda it: len(it.positions))
+    big = max((g[0] for g in groups), key=lambda it: len(it.positions))
     bp = np.ascontiguousarray(big.positions[:4096])
     bn = np.ascontiguousarray(big.normals[:4096])
     results, predicted = {}, {}
@@ -407,7 +432,8 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         # Cost per point on one batch of the largest receiver, scaled to every receiver (a
         # batch large enough that per-call overhead does not dominate).
         t1 = time.perf_counter()
-        _evaluate_points(plan, big.role, big.tree, big.name, bp, bn, m, tau)
+        _evaluate_points(plan, big.role, big.tree, big.name, bp, bn, m, tau,
+                         own={"vertex_ids": np.arange(len(bp), dtype=np.int32)})
         predicted[m] = (time.perf_counter() - t1) / max(len(bp), 1) * n_receivers
     # Walk up the ladder (DESIGN 5): a richer rung only if it cuts the error by > 10 %, the
     # current one misses the target, and the richer one fits the time budget.
@@ -481,7 +507,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
     if needs_tracer:
         t0 = time.perf_counter()
         try:
-            plan.tracer = _build_tracer(items)
+            plan.tracer, plan.tracer_bases = _build_tracer(items)
         except EngineError as exc:
             if settings.method == "raytrace":
                 raise
@@ -533,15 +559,19 @@ def prepare(items, settings: BakeSettings) -> Plan:
     return plan
 
 
-def _scene_triangles(items):
-    """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32)."""
-    verts, tris, base = [], [], 0
+def _scene_triangles(items, bases=None):
+    """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32).
+    bases: a dict to fill with item name -> (its first vertex, its first triangle) there."""
+    verts, tris, base, tri_base = [], [], 0, 0
     for it in items:
         if it.role == "IGNORE" or not len(it.triangles):
             continue
+        if bases is not None:  # a name seen twice cannot say which mesh it means: no ids
+            bases[it.name] = None if it.name in bases else (base, tri_base)
         verts.append(it.positions)
         tris.append(it.triangles + base)
         base += len(it.positions)
+        tri_base += len(it.triangles)
     if not verts:
         raise EngineError("the scene has no triangles")
     return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
@@ -563,8 +593,10 @@ def _bole(plan: Plan, item: SceneItem) -> np.ndarray:
 
 
 def _build_tracer(items):
+    """(RayTracer of every item's triangles, item name -> (first vertex, first triangle))."""
     cls = _need("RayTracer")
-    return cls(*_scene_triangles(items))
+    bases = {}
+    return cls(*_scene_triangles(items, bases)), bases
 
 
 def _build_grid(items, settings):
@@ -599,7 +631,8 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
         ao = np.ones(len(item.positions), np.float32)
     else:
         ao = _evaluate_points(plan, item.role, item.tree, item.name, item.positions,
-                              item.normals, plan.method, plan.tau)
+                              item.normals, plan.method, plan.tau,
+                              own={"vertex_ids": np.arange(len(item.positions), dtype=np.int32)})
     if ao.shape != (len(item.positions),) or not np.all(np.isfinite(ao)):
         raise EngineError(f"{item.name}: the {plan.method} model gave invalid values")
     return ItemResult(item.name, item.role, item.tree, plan.method, ao,

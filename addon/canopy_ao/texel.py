@@ -112,9 +112,10 @@ def gather_corner_triangles(obj, depsgraph, uv_map):
 
 # === Raster (native, or the numpy stand-in)
 
-def _rasterize_numpy(uvs, positions, normals, width, height, max_candidates=1 << 22):
+def _rasterize_numpy(uvs, positions, normals, width, height, max_candidates=1 << 22,
+                     with_triangles=False):
     """Texel-centre coverage in numpy. Lowest triangle id wins a texel; texels whose centre is
-    strictly inside two or more triangles count as overlapping."""
+    strictly inside two or more triangles count as overlapping. Returns as rasterize()."""
     m = len(uvs) // 3
     tri_uv = uvs.reshape(m, 3, 2).astype(np.float64) * (width, height)
     a, b, c = tri_uv[:, 0], tri_uv[:, 1], tri_uv[:, 2]
@@ -187,19 +188,22 @@ def _rasterize_numpy(uvs, positions, normals, width, height, max_candidates=1 <<
              "invalid_uv": int(np.count_nonzero(~finite)), "exact_texels": int(len(pixels)),
              "conservative_texels": 0,
              "overlapping_texels": int(np.count_nonzero(hits >= 2)), "raster": "numpy"}
-    return (pixels, np.ascontiguousarray(pos, dtype=np.float32),
-            np.ascontiguousarray(nrm, dtype=np.float32), stats)
+    out = (pixels, np.ascontiguousarray(pos, dtype=np.float32),
+           np.ascontiguousarray(nrm, dtype=np.float32), stats)
+    return out + (tri.astype(np.int32),) if with_triangles else out
 
 
-def rasterize(uvs, positions, normals, width, height):
+def rasterize(uvs, positions, normals, width, height, with_triangles=False):
     """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict):
     one receiver point per covered texel, ascending pixel index j * width + i.
+    with_triangles=True appends int32 (T,): the triangle (corner row // 3) each texel lies on.
     Native: conservative coverage (islands thinner than a texel keep texels); the numpy
     stand-in covers texel centres only."""
     core = _core()
     fn = getattr(core, "rasterize_uv", None) if core is not None else None
     if fn is None:
-        return _rasterize_numpy(uvs, positions, normals, width, height)
+        return _rasterize_numpy(uvs, positions, normals, width, height,
+                                with_triangles=with_triangles)
     ts = fn(uvs, positions, normals, resolution=(width, height), conservative=True)
     # The TexelSet's arrays are read-only views of its own buffers: copy what ao_fn receives
     # so nothing outlives or writes into it.
@@ -208,6 +212,8 @@ def rasterize(uvs, positions, normals, width, height):
     nrm = np.array(ts.normals, dtype=np.float32).reshape(-1, 3)
     stats = {k: int(v) for k, v in dict(ts.stats).items()}
     stats["raster"] = "native"
+    if with_triangles:
+        return pixels, pos, nrm, stats, np.array(ts.triangles, dtype=np.int32)
     return pixels, pos, nrm, stats
 
 
@@ -328,11 +334,13 @@ def _load_image(obj, path):
 # === Entry points
 
 def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, image_dir=None,
-               wire=True, aov_name="BakedAO"):
+               wire=True, aov_name="BakedAO", own_triangles=False):
     """Bake AO per texel of obj's UV layout into an EXR and a Blender image, wired into obj's
     materials (wire_texel_ao) unless wire=False.
 
-    ao_fn(positions float32 (T, 3), normals float32 (T, 3)) -> float32 (T,) AO in [0, 1].
+    ao_fn(positions float32 (T, 3), normals float32 (T, 3)) -> float32 (T,) AO in [0, 1];
+    with own_triangles=True it gets a third argument, int32 (T,): each texel's triangle in the
+    evaluated mesh's loop-triangle order (so a ray can skip only what it starts on).
     Returns (image, stats); stats holds the raster counts, "path", "texels", "warnings"
     (e.g. overlapping UVs) and "notes". Raises ValueError before changing anything when obj is
     not a mesh, has no (such) UV map, or the resolution is out of range.
@@ -349,7 +357,7 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
         materials.check_aov_name(aov_name)
     depsgraph = context.evaluated_depsgraph_get()
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
-    pixels, tpos, tnrm, stats = rasterize(uvs, pos, nrm, res, res)
+    pixels, tpos, tnrm, stats, ttri = rasterize(uvs, pos, nrm, res, res, with_triangles=True)
     stats = dict(stats)
     stats["warnings"] = []
     stats["notes"] = []
@@ -366,7 +374,8 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
                                  "check the UVs lie in the 0–1 square")
         ao = np.zeros(0, dtype=np.float32)
     else:
-        ao = np.asarray(ao_fn(tpos, tnrm), dtype=np.float32)
+        ao = np.asarray(ao_fn(tpos, tnrm, ttri) if own_triangles else ao_fn(tpos, tnrm),
+                        dtype=np.float32)
         if ao.shape != (len(pixels),) or not np.all(np.isfinite(ao)):
             raise RuntimeError(f"Object '{obj.name}': the AO model returned "
                                f"{ao.shape} values for {len(pixels)} texels or non-finite AO")
@@ -399,15 +408,19 @@ def bake_objects(context, plan, targets, opts):
     for it in targets:
         obj = context.scene.objects[it.name]
 
-        def ao_fn(p, n, it=it):
+        def ao_fn(p, n, tri, it=it):
+            # The texel's own triangle, when the texel mesh is the item's (same loop triangles).
+            own = None
+            if len(tri) and int(tri.max()) < len(it.triangles):
+                own = {"triangle_ids": tri}
             return engine._evaluate_points(plan, it.role, it.tree, it.name, p, n,
-                                           plan.method, plan.tau)
+                                           plan.method, plan.tau, own=own)
 
         _image, stats = bake_texel(
             context, obj, ao_fn, uv_map=opts.get("uv_map") or None,
             resolution=opts.get("resolution", 1024), margin=opts.get("margin", 4),
             image_dir=opts.get("image_dir") or None,
             wire=bool(opts.get("wire_material", True)),
-            aov_name=opts.get("aov_name", "BakedAO"))
+            aov_name=opts.get("aov_name", "BakedAO"), own_triangles=True)
         out[obj.name] = stats
     return out

@@ -239,6 +239,39 @@ def test_trunk_base_on_the_ground_is_half_open():
     assert abs(ao.mean() - 0.5) < 0.005 and np.all(np.abs(ao - 0.5) < 0.03)
 
 
+def test_engine_bakes_blade_roots_as_the_closed_form():
+    """The add-on's ray-traced rung passes each vertex as its own receiver: the root vertices
+    of upright blades on a ground grid read 1/2 (the ground below their horizon), where the
+    normal offset alone read 1.0."""
+    from canopy_ao import engine
+
+    gx, gy = np.meshgrid(np.linspace(-5, 5, 11), np.linspace(-5, 5, 11))
+    gv = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], 1)
+    q = np.arange(10)[:, None] * 11 + np.arange(10)[None, :]
+    q = q.ravel()
+    gt = np.concatenate([np.stack([q, q + 1, q + 12], 1), np.stack([q, q + 12, q + 11], 1)])
+    blades_v, blades_t = [], []
+    for k, x in enumerate((-2.25, 0.35, 2.65)):  # apart: no blade sees another
+        root = np.array([x, 0.45 * k - 0.3, 0.0])
+        side = np.array([0.01, 0, 0])
+        blades_v += [root - side, root + side, root + side + [0, 0, 0.3], root - side + [0, 0, 0.3]]
+        blades_t += [[4 * k, 4 * k + 1, 4 * k + 2], [4 * k, 4 * k + 2, 4 * k + 3]]
+    bv = np.array(blades_v, np.float32)
+    bn = np.tile(np.float32([0, 1, 0]), (len(bv), 1))
+    items = [engine.SceneItem("Ground", "GROUND", "", gv, np.tile(np.float32([0, 0, 1]), (len(gv), 1)),
+                              gt),
+             engine.SceneItem("Blades", "GRASS", "", bv, bn, np.array(blades_t, np.int32))]
+    plan = engine.prepare(items, engine.BakeSettings(method="raytrace", samples=1024))
+    ao = engine.evaluate_item(plan, items[1]).ao
+    roots = np.arange(len(bv)) % 4 < 2
+    assert abs(ao[roots].mean() - 0.5) < 0.01 and np.all(np.abs(ao[roots] - 0.5) < 0.03)
+    # The tips, 30 cm up: the ground also fills their lower half but for grazing rays past its
+    # 5 m edge (a cosine-weighted ~atan(0.3 / 5) / π ≈ 0.02 from the nearest edge).
+    assert np.all((ao[~roots] > 0.5) & (ao[~roots] < 0.56))
+    ground = engine.evaluate_item(plan, items[0]).ao
+    assert np.all(ground > 0.97)  # thin blades far from the grid's vertices
+
+
 def test_own_primitive_ids_are_checked():
     v, t, root, down = blade_on_ground(0.0)
     rt = _core.RayTracer(v, t)
