@@ -83,6 +83,14 @@ py::array_t<float> trace(const RayTracer& tracer, const py::array& points,
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
+Sampling sampling_arg(const std::string& name) {
+  if (name == "lattice") return Sampling::kLattice;
+  if (name == "sobol") return Sampling::kSobol;
+  if (name == "independent") return Sampling::kIndependent;
+  throw py::value_error("sampling must be 'lattice', 'sobol' or 'independent', got '" + name +
+                        "'");
+}
+
 }  // namespace
 
 void bind_raytrace(py::module_& m) {
@@ -98,15 +106,18 @@ void bind_raytrace(py::module_& m) {
           "ao",
           [](const RayTracer& self, const py::array& points, const py::array& normals,
              int samples, double distance, long long seed, double offset,
-             const py::object& vertex_ids, const py::object& triangle_ids) {
-            return trace(self, points, normals, options_arg(samples, distance, seed, offset),
-                         vertex_ids, triangle_ids);
+             const py::object& vertex_ids, const py::object& triangle_ids,
+             const std::string& sampling) {
+            RayTraceOptions o = options_arg(samples, distance, seed, offset);
+            o.sampling = sampling_arg(sampling);
+            return trace(self, points, normals, o, vertex_ids, triangle_ids);
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("offset") = -1.0,
           py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
+          py::arg("sampling") = "lattice",
           "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
-          "triangle_ids=None) -> float32 (N,)\n\n"
+          "triangle_ids=None, sampling='lattice') -> float32 (N,)\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
           "hemisphere of its normal (float32 (N, 3), normalised here; a zero normal gives 1) "
@@ -119,9 +130,11 @@ void bind_raytrace(py::module_& m) {
           "int32 (N,), the tracer's vertex each point is (-1 = none): every triangle using it "
           "is skipped; triangle_ids, int32 (N,), the triangle each point lies on (a texel's; -1 "
           "= none): that triangle is skipped. Such a point's rays start on its own surface "
-          "(nudged a hair towards its own triangles' centroid, no normal offset unless offset "
-          ">= 0 is given), so a surface it touches (the ground under a blade root) still "
-          "occludes. Ids outside their range: ValueError. Releases the GIL.")
+          "(a hair inside its own triangle, the vertex's one facing the normal most squarely; "
+          "no normal offset unless offset >= 0 is given), so a surface it touches (the ground "
+          "under a blade root) still occludes. Ids outside their range: ValueError.\n\n"
+          "sampling: 'lattice' (a Fibonacci lattice rotated per point), 'sobol' (Owen-scrambled "
+          "Sobol' per point) or 'independent' (i.i.d. rays, the baseline). Releases the GIL.")
       .def_property_readonly("vertex_count", &RayTracer::vertex_count)
       .def_property_readonly("triangle_count", &RayTracer::triangle_count)
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,

@@ -7,10 +7,10 @@
 #include <cmath>
 #include <mutex>
 #include <numeric>
+#include <type_traits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 #include <utility>
 
 #include "canopy_ao/parallel.h"
@@ -104,6 +104,86 @@ struct SampleSet {
   }
 };
 
+// --- Owen-scrambled Sobol' points (Burley, "Practical Hash-based Owen Scrambling", JCGT 9(4),
+// 2020): the first two Sobol' dimensions, shuffled and scrambled by a nested-uniform hash per
+// point. Any prefix of 2^k points is a (0, k, 2)-net (stratified in every elementary interval),
+// and any prefix stays well spread, whatever N.
+inline std::uint32_t reverse_bits(std::uint32_t x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+  x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+/// Burley's improved Laine–Karras hash: each bit flips depending only on the bits below it.
+inline std::uint32_t laine_karras(std::uint32_t x, std::uint32_t seed) {
+  x ^= x * 0x3d20adeau;
+  x += seed;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
+  return x;
+}
+
+/// Owen scrambling of a 32-bit fixed-point number in [0, 1): bits from the most significant.
+inline std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
+  return reverse_bits(laine_karras(reverse_bits(x), seed));
+}
+
+/// Sobol' dimension 2 (dimension 1 is reverse_bits: van der Corput), 32-bit fixed point.
+inline std::uint32_t sobol2(std::uint32_t i) {
+  std::uint32_t r = 0;
+  for (std::uint32_t v = 1u << 31; i; i >>= 1, v ^= v >> 1) {
+    if (i & 1u) r ^= v;
+  }
+  return r;
+}
+
+/// One point's `n` cosine-weighted directions in its tangent frame (x, y on the unit disk, z =
+/// height: Malley's method, u ∈ [0,1) → radius sqrt(u), height sqrt(1 − u)), from (point
+/// index, seed) alone.
+void point_directions(Sampling sampling, const SampleSet& set, std::size_t index,
+                      std::uint32_t seed, int n, float* xs, float* ys, float* zs) {
+  const std::uint64_t h =
+      mix64(static_cast<std::uint64_t>(index) + mix64(0x9e3779b97f4a7c15ULL ^ seed));
+  constexpr float k24 = 1.0f / 16777216.0f;
+  if (sampling == Sampling::kLattice) {
+    // The shared Fibonacci lattice, Cranley–Patterson-rotated by (du, dv): the shift in v is
+    // one 2-D rotation of the stored (cos, sin), not a sincos per ray.
+    float du, dv;
+    point_shift(index, seed, &du, &dv);
+    const float cr = std::cos(kTwoPi * dv), sr = std::sin(kTwoPi * dv);
+    for (int s = 0; s < n; ++s) {
+      float u = set.u[s] + du;
+      u -= u >= 1.0f ? 1.0f : 0.0f;
+      const float r = std::sqrt(u);
+      zs[s] = std::sqrt(std::max(0.0f, 1.0f - u));
+      xs[s] = r * (set.cos_phi[s] * cr - set.sin_phi[s] * sr);  // r cos(φ_s + 2π dv)
+      ys[s] = r * (set.sin_phi[s] * cr + set.cos_phi[s] * sr);
+    }
+    return;
+  }
+  const auto shuffle = static_cast<std::uint32_t>(h), s0 = static_cast<std::uint32_t>(h >> 32);
+  const auto s1 = static_cast<std::uint32_t>(mix64(h) >> 32);
+  for (int s = 0; s < n; ++s) {
+    float u, v;
+    if (sampling == Sampling::kSobol) {
+      const std::uint32_t i = owen_scramble(static_cast<std::uint32_t>(s), shuffle);
+      u = static_cast<float>(owen_scramble(reverse_bits(i), s0) >> 8) * k24;
+      v = static_cast<float>(owen_scramble(sobol2(i), s1) >> 8) * k24;
+    } else {  // independent: a counter-based hash of (point, sample)
+      const std::uint64_t r = mix64(h + 0x9e3779b97f4a7c15ULL * static_cast<std::uint64_t>(s + 1));
+      u = static_cast<float>(r >> 40) * k24;
+      v = static_cast<float>((r >> 8) & 0xffffffu) * k24;
+    }
+    const float r = std::sqrt(u);
+    xs[s] = r * std::cos(kTwoPi * v);
+    ys[s] = r * std::sin(kTwoPi * v);
+    zs[s] = std::sqrt(std::max(0.0f, 1.0f - u));
+  }
+}
+
 /// Branchless orthonormal basis around unit n (Duff et al., JCGT 6(1) 2017, Listing 3).
 inline void onb(Vec3 n, Vec3* t, Vec3* b) {
   const float sign = std::copysign(1.0f, n.z);
@@ -146,14 +226,15 @@ void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
   }
 }
 
-/// The start of a receiver lying on its own triangles: x moved towards `target` (the centroid
-/// of those triangles) by 1e-3 of the way, at least `precision` (float spacing of the scene's
-/// coordinates), at most half the way. x itself when target = x.
+/// The start of a receiver lying on its own triangle: x moved towards `target` (that
+/// triangle's centroid) by 1e-3 of the way, at least 16 × `precision` (float spacing of the
+/// scene's coordinates, so the start is clear of the back-off below), at most half the way.
+/// x itself when target = x.
 inline Vec3 own_surface_origin(Vec3 x, Vec3 target, float precision) {
   const Vec3 d = target - x;
   const float len = length(d);
   if (!(len > 0.0f)) return x;
-  const float step = std::min(0.5f * len, std::max(1e-3f * len, precision));
+  const float step = std::min(0.5f * len, std::max(1e-3f * len, 16.0f * precision));
   return x + d * (step / len);
 }
 
@@ -192,7 +273,8 @@ struct RayTracer::Impl {
   std::unique_ptr<ErrorRecord> errors = std::make_unique<ErrorRecord>();
   std::vector<float> vertices;       // 3V floats + 1 of padding (Embree reads 16 bytes)
   std::vector<std::uint32_t> indices;  // 3M (6M when the device culls back faces)
-  std::vector<Vec3> vertex_target;     // V: mean centroid of each vertex's triangles (or itself)
+  // The triangles using each vertex (CSR): vertex v's are tris_of[first_tri[v] .. first_tri[v+1]).
+  std::vector<std::uint32_t> first_tri, tris_of;
   std::size_t vertex_count = 0;
   std::size_t triangle_count = 0;
   float auto_offset = 0;
@@ -202,6 +284,31 @@ struct RayTracer::Impl {
 
   Vec3 vertex(std::uint32_t i) const {
     return {vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]};
+  }
+  Vec3 centroid(std::uint32_t tri) const {
+    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+    return (vertex(t[0]) + vertex(t[1]) + vertex(t[2])) / 3.0f;
+  }
+  /// Where vertex v's rays aim their start (see own_surface_origin): the centroid of the
+  /// triangle using v whose plane faces unit normal n most squarely (the first such on ties;
+  /// zero-area triangles never), so the start stays on the surface, not inside the solid a
+  /// convex corner bounds. v itself when no triangle with area uses it.
+  Vec3 vertex_target(std::uint32_t v, Vec3 n) const {
+    float best = -1.0f;
+    std::uint32_t pick = 0;
+    for (std::uint32_t k = first_tri[v]; k < first_tri[v + 1]; ++k) {
+      const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tris_of[k]);
+      const Vec3 a = vertex(t[0]);
+      const Vec3 c = cross(vertex(t[1]) - a, vertex(t[2]) - a);
+      const float len = length(c);
+      if (!(len > 0.0f)) continue;
+      const float facing = std::fabs(dot(c, n)) / len;
+      if (facing > best) {
+        best = facing;
+        pick = tris_of[k];
+      }
+    }
+    return best >= 0.0f ? centroid(pick) : vertex(v);
   }
 
   /// Throws canopy_ao::Error if Embree reported anything since the last check.
@@ -310,20 +417,16 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
       m.indices[i] = static_cast<std::uint32_t>(triangles[i]);
     }
-    // Where a vertex receiver starts: towards the mean centroid of the triangles using it.
-    std::vector<Vec3> sum(vertices.size, Vec3{0, 0, 0});
-    std::vector<std::uint32_t> uses(vertices.size, 0);
+    // The triangles using each vertex, in triangle order (where a vertex receiver starts).
+    m.first_tri.assign(vertices.size + 1, 0);
+    for (std::size_t i = 0; i < 3 * triangle_count; ++i) ++m.first_tri[m.indices[i] + 1];
+    for (std::size_t v = 0; v < vertices.size; ++v) m.first_tri[v + 1] += m.first_tri[v];
+    m.tris_of.resize(3 * triangle_count);
+    std::vector<std::uint32_t> fill(m.first_tri.begin(), m.first_tri.end() - 1);
     for (std::size_t j = 0; j < triangle_count; ++j) {
-      const std::uint32_t* t = m.indices.data() + 3 * j;
-      const Vec3 c = (vertices[t[0]] + vertices[t[1]] + vertices[t[2]]) / 3.0f;
       for (int k = 0; k < 3; ++k) {
-        sum[t[k]] = sum[t[k]] + c;
-        ++uses[t[k]];
+        m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
-    }
-    m.vertex_target.resize(vertices.size);
-    for (std::size_t i = 0; i < vertices.size; ++i) {
-      m.vertex_target[i] = uses[i] ? sum[i] / static_cast<float>(uses[i]) : vertices[i];
     }
     m.attach_triangles(m.indices.data());
     if (culls) {
@@ -407,6 +510,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     alignas(64) RTCRay rays[kStream];
     std::uint32_t owner[kStream];
     std::vector<int> open(end - begin, 0);
+    std::vector<float> xs(samples), ys(samples), zs(samples);
     std::size_t filled = 0;
     TraceContext context;
     embree::init_context(&context.base);  // incoherent: AO rays go every way
@@ -434,43 +538,40 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const Vec3 nn = normalize(raw / big);
       Vec3 t, b;
       onb(nn, &t, &b);
-      // The origin: on the receiver's own surface (see raytrace.h, "Origins"), else offset
-      // along the normal.
+      // The start (see raytrace.h, "Origins"): on the receiver's own surface, else offset
+      // along the normal. Rays that start on their own surface back off by the coordinates'
+      // float spacing (back, tfar + back), so a surface through the start itself (a face
+      // pressed flat against another) blocks them, as Cycles' do.
       const std::int32_t ov = own.vertex_ids ? own.vertex_ids[i] : -1;
       const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
       Vec3 o;
+      float back = 0.0f;
       if (automatic && ov >= 0) {
-        o = own_surface_origin(points[i], m.vertex_target[ov], m.precision);
+        o = own_surface_origin(points[i], m.vertex_target(static_cast<std::uint32_t>(ov), nn),
+                               m.precision);
+        back = m.precision;
       } else if (automatic && ot >= 0) {
-        const std::uint32_t* t = m.indices.data() + 3 * static_cast<std::size_t>(ot);
-        const Vec3 c = (m.vertex(t[0]) + m.vertex(t[1]) + m.vertex(t[2])) / 3.0f;
-        o = own_surface_origin(points[i], c, m.precision);
+        o = own_surface_origin(points[i], m.centroid(static_cast<std::uint32_t>(ot)),
+                               m.precision);
+        back = m.precision;
       } else {
         o = points[i] + nn * offset;
       }
-      float du, dv;
-      point_shift(i, options.seed, &du, &dv);
-      const float cr = std::cos(kTwoPi * dv), sr = std::sin(kTwoPi * dv);
+      point_directions(options.sampling, set, i, options.seed, samples, xs.data(), ys.data(),
+                       zs.data());
       const std::uint32_t local = static_cast<std::uint32_t>(i - begin);
       for (int s = 0; s < samples; ++s) {
-        // Malley's method: u uniform on [0,1) → radius sqrt(u) on the disk, height sqrt(1−u).
-        float u = set.u[s] + du;
-        u -= u >= 1.0f ? 1.0f : 0.0f;
-        const float r = std::sqrt(u);
-        const float z = std::sqrt(std::max(0.0f, 1.0f - u));
-        const float c = set.cos_phi[s] * cr - set.sin_phi[s] * sr;  // cos(φ_s + 2π dv)
-        const float sn = set.sin_phi[s] * cr + set.cos_phi[s] * sr;
-        const float x = r * c, y = r * sn;
+        const float x = xs[s], y = ys[s], z = zs[s];
         RTCRay& ray = rays[filled];
-        ray.org_x = o.x;
-        ray.org_y = o.y;
-        ray.org_z = o.z;
-        ray.tnear = 0.0f;
         ray.dir_x = t.x * x + b.x * y + nn.x * z;
         ray.dir_y = t.y * x + b.y * y + nn.y * z;
         ray.dir_z = t.z * x + b.z * y + nn.z * z;
+        ray.org_x = o.x - back * ray.dir_x;
+        ray.org_y = o.y - back * ray.dir_y;
+        ray.org_z = o.z - back * ray.dir_z;
+        ray.tnear = 0.0f;
         ray.time = 0.0f;
-        ray.tfar = tfar;
+        ray.tfar = tfar + back;
         ray.mask = 0xffffffffu;
         ray.id = static_cast<unsigned>(i);  // the filter's key to the receiver's own primitives
         ray.flags = 0;

@@ -23,11 +23,19 @@
 // as Cycles does). A receiver may name the triangles it lies on (OwnPrimitives): a vertex of
 // the tracer's mesh (every triangle using that vertex is its own) or a triangle (a texel's). Its
 // rays then ignore those triangles (an Embree filter on the primitive id) and start on the
-// surface itself, t from 0: nothing else is skipped, so a blade root standing on the ground sees
-// the ground below its horizon. The origin moves a hair (1e-3 of the way, at least the float
-// precision of the coordinates, at most half) towards the centroid of its own triangles, which
-// puts it strictly on its own side of any surface it touches (the ground under a root, the
-// branch under a leaf) without crossing anything farther than that hair.
+// surface itself: nothing else is skipped, so a blade root standing on the ground sees the
+// ground below its horizon. The start moves a hair (1e-3 of the way, at least 16 × the float
+// spacing of the coordinates, at most half) towards the centroid of one own triangle: a
+// texel's, or of a vertex's triangles the one facing its normal most squarely (so the start
+// stays on the surface, not inside the solid a convex corner bounds). That puts it strictly on
+// its own side of any surface it touches (the ground under a root, the branch under a leaf)
+// without crossing anything farther away. Its rays then back off by the float spacing (start
+// − spacing · ω, tfar + spacing), so a surface through the start itself, a face pressed flat
+// against another, blocks them.
+// Checked against Cycles' own vertex bake (Blender 3.4, 1024 samples): blade roots on the ground
+// leaning either way and the top ring of a capped trunk agree within 0.004; the base ring of a
+// trunk whose cap lies in the ground plane reads 0.167 where Cycles gives 0.128 (Cycles
+// averages a vertex's corners, and the cap's corner sees nothing; the old offset gave 0.83).
 //
 // A receiver without own primitives (an arbitrary point, or offset ≥ 0 given explicitly)
 // starts at x + offset · n̂ instead. offset < 0 (the default) means automatic: 1e-5 × the
@@ -64,6 +72,20 @@
 namespace canopy_ao {
 
 // === Options
+/// Each point's cosine-weighted sample set. Measured on Sapling Tree Gen trees (MAE against a
+/// 4096-ray reference, bench/bench_sampling.py): the lattice and the Owen-scrambled Sobol' net
+/// agree within 2 % at 16, 64 and 256 rays; independent rays are worse (figures there).
+enum class Sampling {
+  /// The shared Fibonacci lattice, Cranley–Patterson-rotated per point (the default; above).
+  kLattice,
+  /// Owen-scrambled Sobol' (0, 2)-sequence, hashed per point (Burley, "Practical Hash-based
+  /// Owen Scrambling", JCGT 9(4), 2020): stratified in every elementary interval at 2^k rays,
+  /// and any prefix of a point's rays is itself well spread.
+  kSobol,
+  /// Independent uniform rays (a counter-based hash per point and ray): the baseline.
+  kIndependent,
+};
+
 /// Per-call settings of the ray-traced AO. Defaults match the Python API.
 struct RayTraceOptions {
   /// Cosine-weighted rays per point (≥ 1). The standard error at AO = a is at most
@@ -80,13 +102,15 @@ struct RayTraceOptions {
   /// Ray origin offset along the normal, scene units (≥ 0), or < 0 for automatic (see above:
   /// the own-surface start where own primitives are given, else the automatic normal offset).
   float offset = -1.0f;
+  /// Which sample set (see Sampling; all unbiased, deterministic, thread-count independent).
+  Sampling sampling = Sampling::kLattice;
 };
 
 /// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no
 /// receiver has one); otherwise it holds one int32 per query point, −1 = none:
 ///  - vertex_ids[i]: an index into the tracer's vertices; every triangle using it is skipped;
 ///  - triangle_ids[i]: an index into the tracer's triangles; that triangle is skipped.
-/// Both may be given for the same point (the union is skipped; the vertex sets the origin).
+/// Both may be given for the same point (the union is skipped; the vertex sets the start).
 struct OwnPrimitives {
   const std::int32_t* vertex_ids = nullptr;
   const std::int32_t* triangle_ids = nullptr;
