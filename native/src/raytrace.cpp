@@ -227,14 +227,13 @@ void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
 }
 
 /// The start of a receiver lying on its own triangle: x moved towards `target` (that
-/// triangle's centroid) by 1e-3 of the way, at least 16 × `precision` (float spacing of the
-/// scene's coordinates, so the start is clear of the back-off below), at most half the way.
-/// x itself when target = x.
+/// triangle's centroid) by 1e-3 of the way, at least `precision` (float spacing of the scene's
+/// coordinates), at most half the way. x itself when target = x.
 inline Vec3 own_surface_origin(Vec3 x, Vec3 target, float precision) {
   const Vec3 d = target - x;
   const float len = length(d);
   if (!(len > 0.0f)) return x;
-  const float step = std::min(0.5f * len, std::max(1e-3f * len, 16.0f * precision));
+  const float step = std::min(0.5f * len, std::max(1e-3f * len, precision));
   return x + d * (step / len);
 }
 
@@ -539,21 +538,16 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       Vec3 t, b;
       onb(nn, &t, &b);
       // The start (see raytrace.h, "Origins"): on the receiver's own surface, else offset
-      // along the normal. Rays that start on their own surface back off by the coordinates'
-      // float spacing (back, tfar + back), so a surface through the start itself (a face
-      // pressed flat against another) blocks them, as Cycles' do.
+      // along the normal.
       const std::int32_t ov = own.vertex_ids ? own.vertex_ids[i] : -1;
       const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
       Vec3 o;
-      float back = 0.0f;
       if (automatic && ov >= 0) {
         o = own_surface_origin(points[i], m.vertex_target(static_cast<std::uint32_t>(ov), nn),
                                m.precision);
-        back = m.precision;
       } else if (automatic && ot >= 0) {
         o = own_surface_origin(points[i], m.centroid(static_cast<std::uint32_t>(ot)),
                                m.precision);
-        back = m.precision;
       } else {
         o = points[i] + nn * offset;
       }
@@ -566,12 +560,12 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         ray.dir_x = t.x * x + b.x * y + nn.x * z;
         ray.dir_y = t.y * x + b.y * y + nn.y * z;
         ray.dir_z = t.z * x + b.z * y + nn.z * z;
-        ray.org_x = o.x - back * ray.dir_x;
-        ray.org_y = o.y - back * ray.dir_y;
-        ray.org_z = o.z - back * ray.dir_z;
+        ray.org_x = o.x;
+        ray.org_y = o.y;
+        ray.org_z = o.z;
         ray.tnear = 0.0f;
         ray.time = 0.0f;
-        ray.tfar = tfar + back;
+        ray.tfar = tfar;
         ray.mask = 0xffffffffu;
         ray.id = static_cast<unsigned>(i);  // the filter's key to the receiver's own primitives
         ray.flags = 0;

@@ -362,29 +362,6 @@ TEST(RayTracer, LeafLyingOnABranchSeesTheBranchBehindTheFacet) {
   }
 }
 
-TEST(RayTracer, FacePressedFlatOnTheGroundFacingItIsClosed) {
-  // A plate lying in the ground plane itself (a trunk's bottom cap): its vertex and a texel,
-  // facing down into the ground. The ground passes through the start: every ray must stop.
-  Mesh m = horizontal(-100, 100, -100, 100, 0);
-  const std::int32_t p0 = m.add({0.3f, 0.2f, 0}), p1 = m.add({0.5f, 0.2f, 0});
-  const std::int32_t p2 = m.add({0.5f, 0.4f, 0}), p3 = m.add({0.3f, 0.4f, 0});
-  m.tri(p0, p1, p2);  // triangle 2
-  m.tri(p0, p2, p3);
-  const RayTracer tracer = m.tracer();
-  const Receivers at_vertex(m.view()[static_cast<std::size_t>(p0)], {0, 0, -1}, 8);
-  const Receivers texel({0.4f, 0.25f, 0}, {0, 0, -1}, 8);
-  const std::vector<std::int32_t> vid(8, p0), tid(8, 2);
-  OwnPrimitives own;
-  own.vertex_ids = vid.data();
-  std::vector<float> ao(8);
-  tracer.ao(at_vertex.points(), at_vertex.normals(), own, opts(256), ao.data());
-  for (float v : ao) EXPECT_EQ(v, 0.0f);
-  own.vertex_ids = nullptr;
-  own.triangle_ids = tid.data();
-  tracer.ao(texel.points(), texel.normals(), own, opts(256), ao.data());
-  for (float v : ao) EXPECT_EQ(v, 0.0f);
-}
-
 TEST(RayTracer, OwnPrimitiveIdsAreChecked) {
   const Mesh box = cube(1);
   const RayTracer tracer = box.tracer();
