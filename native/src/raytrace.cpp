@@ -263,15 +263,78 @@ void check_points(PointsView p, const char* name) {
   }
 }
 
+/// Attaches triangles (shared buffers: they must outlive the scene) to `scene`; `filter` may be
+/// null. Returns Embree's error state through the caller's check().
+void attach_triangles(RTCDevice device, RTCScene scene, const float* vertices,
+                      std::size_t vertex_count, const std::uint32_t* indices,
+                      std::size_t triangle_count, RTCFilterFunctionN filter) {
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  if (geom == nullptr) return;  // the error callback has the reason
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices, 0,
+                             3 * sizeof(float), vertex_count);
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices, 0,
+                             3 * sizeof(std::uint32_t), triangle_count);
+  if (filter) rtcSetGeometryOccludedFilterFunction(geom, filter);
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);  // the scene holds its own reference
+}
+
+/// The indices of `triangles` (validated), then, when the device culls back faces, each
+/// triangle again with the opposite winding (two-sided occluders: Debian's Embree does not
+/// cull; a build that does gets both windings). Returns the triangle count per winding.
+std::size_t two_sided_indices(const std::int32_t* triangles, std::size_t count, bool culls,
+                              std::vector<std::uint32_t>* out) {
+  out->resize((culls ? 6 : 3) * count);
+  for (std::size_t i = 0; i < 3 * count; ++i) (*out)[i] = static_cast<std::uint32_t>(triangles[i]);
+  if (culls) {
+    std::uint32_t* flipped = out->data() + 3 * count;
+    for (std::size_t j = 0; j < count; ++j) {
+      flipped[3 * j] = (*out)[3 * j];
+      flipped[3 * j + 1] = (*out)[3 * j + 2];
+      flipped[3 * j + 2] = (*out)[3 * j + 1];
+    }
+  }
+  return count;
+}
+
+void check_mesh(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+                const std::string& what) {
+  check_points(vertices, (what + "vertices").c_str());
+  if (triangle_count > 0 && triangles == nullptr) {
+    throw std::invalid_argument(what + "triangles is null");
+  }
+  if (vertices.size > 0xffffffffu || triangle_count > 0x7fffffffu) {
+    throw std::invalid_argument(what + "mesh too large for 32-bit indices");
+  }
+  for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
+    if (triangles[i] < 0 || static_cast<std::size_t>(triangles[i]) >= vertices.size) {
+      std::ostringstream s;
+      s << what << "triangles row " << i / 3 << " has vertex index " << triangles[i]
+        << ", outside [0, " << vertices.size << ")";
+      throw std::invalid_argument(s.str());
+    }
+  }
+}
+
 }  // namespace
 
 // === Impl
 struct RayTracer::Impl {
+  /// A prototype's own scene, instanced by the main one (buffers first: they outlive it).
+  struct Prototype {
+    std::vector<float> vertices;  // 3V + 1 of padding
+    std::vector<std::uint32_t> indices;
+    ScenePtr scene;
+  };
+
   // Declaration order is destruction order reversed: the scene goes before the device, both
   // before the buffers Embree shares and the error record its callback writes to.
   std::unique_ptr<ErrorRecord> errors = std::make_unique<ErrorRecord>();
   std::vector<float> vertices;       // 3V floats + 1 of padding (Embree reads 16 bytes)
   std::vector<std::uint32_t> indices;  // 3M (6M when the device culls back faces)
+  std::vector<std::unique_ptr<Prototype>> prototypes;  // instanced meshes (occluders only)
+  std::size_t instance_count = 0;
   // The triangles using each vertex (CSR): vertex v's are tris_of[first_tri[v] .. first_tri[v+1]).
   std::vector<std::uint32_t> first_tri, tris_of;
   std::size_t vertex_count = 0;
@@ -330,40 +393,38 @@ struct RayTracer::Impl {
     throw Error(s.str());
   }
 
-  void attach_triangles(const std::uint32_t* index_data) {
-    RTCGeometry geom = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
-    check("rtcNewGeometry");
-    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                               vertices.data(), 0, 3 * sizeof(float), vertex_count);
-    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, index_data, 0,
-                               3 * sizeof(std::uint32_t), triangle_count);
-    // Both windings share primitive ids, so one filter on the original indices serves both.
-    rtcSetGeometryOccludedFilterFunction(geom, skip_own_primitives);
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene.get(), geom);
-    rtcReleaseGeometry(geom);  // the scene holds its own reference
-    check("geometry setup");
-  }
 };
 
 // === Constructor
 RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
                      std::size_t triangle_count, const RayTracerBuildOptions& build)
+    : RayTracer(vertices, triangles, triangle_count, {}, {}, build) {}
+
+RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
+                     std::size_t triangle_count, const std::vector<Prototype>& prototypes,
+                     const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
-  check_points(vertices, "vertices");
-  if (triangle_count > 0 && triangles == nullptr) {
-    throw std::invalid_argument("triangles is null");
+  check_mesh(vertices, triangles, triangle_count, "");
+  for (std::size_t k = 0; k < prototypes.size(); ++k) {
+    const Prototype& p = prototypes[k];
+    check_mesh(p.vertices, p.triangles, p.triangle_count,
+               "prototype " + std::to_string(k) + ": ");
   }
-  if (vertices.size > 0xffffffffu || triangle_count > 0x7fffffffu) {
-    throw std::invalid_argument("mesh too large for 32-bit indices");
-  }
-  for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
-    if (triangles[i] < 0 || static_cast<std::size_t>(triangles[i]) >= vertices.size) {
-      std::ostringstream s;
-      s << "triangles row " << i / 3 << " has vertex index " << triangles[i] << ", outside [0, "
-        << vertices.size << ")";
+  for (std::size_t k = 0; k < instances.size(); ++k) {
+    const Instance& in = instances[k];
+    std::ostringstream s;
+    s << "instance " << k << ": ";
+    if (in.prototype >= prototypes.size()) {
+      s << "prototype " << in.prototype << " outside [0, " << prototypes.size() << ")";
       throw std::invalid_argument(s.str());
+    }
+    for (float x : in.matrix) {
+      if (!std::isfinite(x)) throw std::invalid_argument(s.str() + "non-finite matrix entry");
+    }
+    const float* r = in.matrix + 12;  // the last row of an affine matrix: 0 0 0 1
+    if (r[0] != 0.0f || r[1] != 0.0f || r[2] != 0.0f || r[3] != 1.0f) {
+      throw std::invalid_argument(s.str() + "matrix is not affine (last row must be 0 0 0 1)");
     }
   }
   m.vertex_count = vertices.size;
@@ -407,15 +468,10 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   if (vertices.size) {
     std::copy(vertices.data, vertices.data + 3 * vertices.size, m.vertices.begin());
   }
+  const bool culls =
+      rtcGetDeviceProperty(m.device.get(), RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0;
   if (triangle_count > 0) {
-    // Two-sided occluders: Debian's Embree does not cull back faces; if a build does, add
-    // every triangle a second time with the opposite winding.
-    const bool culls =
-        rtcGetDeviceProperty(m.device.get(), RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0;
-    m.indices.resize((culls ? 6 : 3) * triangle_count);
-    for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
-      m.indices[i] = static_cast<std::uint32_t>(triangles[i]);
-    }
+    two_sided_indices(triangles, triangle_count, culls, &m.indices);
     // The triangles using each vertex, in triangle order (where a vertex receiver starts).
     m.first_tri.assign(vertices.size + 1, 0);
     for (std::size_t i = 0; i < 3 * triangle_count; ++i) ++m.first_tri[m.indices[i] + 1];
@@ -427,20 +483,53 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
         m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
     }
-    m.attach_triangles(m.indices.data());
-    if (culls) {
-      std::uint32_t* flipped = m.indices.data() + 3 * triangle_count;
-      for (std::size_t j = 0; j < triangle_count; ++j) {
-        flipped[3 * j] = m.indices[3 * j];
-        flipped[3 * j + 1] = m.indices[3 * j + 2];
-        flipped[3 * j + 2] = m.indices[3 * j + 1];
-      }
-      m.attach_triangles(flipped);
+    // Both windings share primitive ids, so one filter on the original indices serves both.
+    for (int w = 0; w < (culls ? 2 : 1); ++w) {
+      attach_triangles(m.device.get(), m.scene.get(), m.vertices.data(), vertices.size,
+                       m.indices.data() + 3 * triangle_count * w, triangle_count,
+                       skip_own_primitives);
     }
+    m.check("geometry setup");
   }
 
-  // 4. The BVH build, on the caller's thread cap (Embree's TBB tasks join this arena).
   tbb::task_arena arena(max_threads());
+  // 4a. Instanced meshes (Embree instances: RTC_GEOMETRY_TYPE_INSTANCE): one scene per
+  // prototype, built once, placed by each instance's matrix. They only occlude: no receiver
+  // lies on them, so they have no filter.
+  for (const Prototype& p : prototypes) {
+    auto pm = std::make_unique<Impl::Prototype>();
+    pm->vertices.assign(3 * p.vertices.size + 1, 0.0f);
+    if (p.vertices.size) std::copy(p.vertices.data, p.vertices.data + 3 * p.vertices.size,
+                                   pm->vertices.begin());
+    two_sided_indices(p.triangles, p.triangle_count, culls, &pm->indices);
+    pm->scene.reset(rtcNewScene(m.device.get()));
+    m.check("rtcNewScene (prototype)");
+    rtcSetSceneFlags(pm->scene.get(),
+                     build.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+    rtcSetSceneBuildQuality(pm->scene.get(), build.high_quality ? RTC_BUILD_QUALITY_HIGH
+                                                                : RTC_BUILD_QUALITY_MEDIUM);
+    for (int w = 0; w < (culls && p.triangle_count ? 2 : 1) && p.triangle_count; ++w) {
+      attach_triangles(m.device.get(), pm->scene.get(), pm->vertices.data(), p.vertices.size,
+                       pm->indices.data() + 3 * p.triangle_count * w, p.triangle_count,
+                       nullptr);
+    }
+    arena.execute([&] { rtcCommitScene(pm->scene.get()); });
+    m.check("prototype setup");
+    m.prototypes.push_back(std::move(pm));
+  }
+  for (const Instance& in : instances) {
+    RTCGeometry geom = rtcNewGeometry(m.device.get(), RTC_GEOMETRY_TYPE_INSTANCE);
+    m.check("rtcNewGeometry (instance)");
+    rtcSetGeometryInstancedScene(geom, m.prototypes[in.prototype]->scene.get());
+    rtcSetGeometryTransform(geom, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, in.matrix);
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(m.scene.get(), geom);
+    rtcReleaseGeometry(geom);
+  }
+  m.instance_count = instances.size();
+  m.check("instance setup");
+
+  // 4. The BVH build, on the caller's thread cap (Embree's TBB tasks join this arena).
   arena.execute([&] { rtcCommitScene(m.scene.get()); });
   m.check("rtcCommitScene");
 }
@@ -452,6 +541,7 @@ RayTracer& RayTracer::operator=(RayTracer&&) noexcept = default;
 float RayTracer::auto_offset() const { return impl_->auto_offset; }
 std::size_t RayTracer::vertex_count() const { return impl_->vertex_count; }
 std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
+std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
 
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
@@ -489,7 +579,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   }
 
   const std::size_t n = points.size;
-  if (m.triangle_count == 0) {
+  if (m.triangle_count == 0 && m.instance_count == 0) {
     std::fill(out, out + n, 1.0f);
     return;
   }

@@ -459,6 +459,84 @@ TEST(RayTracer, EverySampleSetIsTheSameWhateverTheThreadCount) {
   }
 }
 
+// === Instances
+
+TEST(RayTracer, InstancesOccludeAsTheirFlattenedCopies) {
+  // Three placed copies of a small "crown" (random leaves in a ball) over a ground plane,
+  // rotated, scaled, one mirrored: the same AO as the same triangles written out, up to rays
+  // grazing a triangle edge (float rounding of the transform): at most 2 of 256 rays per point.
+  const Mesh crown = canopy(400, 1.0f, 0.3f, 21);
+  Mesh ground = horizontal(-20, 20, -20, 20, 0);
+  Mesh flat = ground;
+  std::vector<Instance> placed(3);
+  const float c30 = std::cos(kPi / 6), s30 = std::sin(kPi / 6);
+  const float mats[3][12] = {{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 3},
+                             {1.5f * c30, -1.5f * s30, 0, 4, 1.5f * s30, 1.5f * c30, 0, 1, 0, 0,
+                              1.5f, 4},
+                             {-0.8f, 0, 0, -3, 0, 0.8f, 0.2f, 2, 0, 0, 0.8f, 2.5f}};  // mirrored
+  for (int k = 0; k < 3; ++k) {
+    std::copy(mats[k], mats[k] + 12, placed[k].matrix);
+    const float* a = mats[k];
+    const std::int32_t base = static_cast<std::int32_t>(flat.v.size() / 3);
+    for (std::size_t i = 0; i < crown.v.size(); i += 3) {
+      const double x = crown.v[i], y = crown.v[i + 1], z = crown.v[i + 2];
+      flat.add({static_cast<float>(a[0] * x + a[1] * y + a[2] * z + a[3]),
+                static_cast<float>(a[4] * x + a[5] * y + a[6] * z + a[7]),
+                static_cast<float>(a[8] * x + a[9] * y + a[10] * z + a[11])});
+    }
+    for (std::int32_t j : crown.t) flat.t.push_back(base + j);
+  }
+  const Prototype proto{crown.view(), crown.t.data(), crown.triangles()};
+  const RayTracer instanced(ground.view(), ground.t.data(), ground.triangles(), {proto}, placed);
+  EXPECT_EQ(instanced.instance_count(), 3u);
+  EXPECT_EQ(instanced.triangle_count(), 2u);
+  // Receivers on the ground under and between the crowns (normal up), and in the air facing
+  // every way.
+  std::vector<float> p, n;
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> u(-6, 6);
+  for (int i = 0; i < 400; ++i) {
+    const bool air = i % 2;
+    p.insert(p.end(), {u(rng), u(rng), air ? 1.0f + std::fabs(u(rng)) : 0.0f});
+    n.insert(n.end(), {air ? u(rng) : 0.0f, air ? u(rng) : 0.0f, air ? u(rng) : 1.0f});
+  }
+  const PointsView pv{p.data(), p.size() / 3}, nv{n.data(), n.size() / 3};
+  const auto a = instanced.ao(pv, nv, opts(256, 30));
+  const auto b = flat.tracer().ao(pv, nv, opts(256, 30));
+  double worst = 0, sum = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    worst = std::max(worst, std::fabs(static_cast<double>(a[i]) - b[i]));
+    sum += b[i];
+  }
+  EXPECT_LE(worst, 2.0 / 256);
+  EXPECT_LT(sum / a.size(), 0.95);  // the crowns do occlude
+  EXPECT_GT(sum / a.size(), 0.3);
+
+  // Without its own mesh, instances alone still occlude.
+  const RayTracer only(PointsView{nullptr, 0}, nullptr, 0, {proto}, placed);
+  EXPECT_LT(mean(only.ao(pv, nv, opts(64, 30))), 0.99);
+}
+
+TEST(RayTracer, BadInstancesThrowInvalidArgument) {
+  const Mesh crown = canopy(10, 1.0f, 0.3f, 2);
+  const Mesh ground = horizontal(-1, 1, -1, 1, 0);
+  const Prototype proto{crown.view(), crown.t.data(), crown.triangles()};
+  std::vector<Instance> bad(1);
+  bad[0].prototype = 1;
+  EXPECT_THROW(RayTracer(ground.view(), ground.t.data(), 2, {proto}, bad), std::invalid_argument);
+  bad[0].prototype = 0;
+  bad[0].matrix[5] = std::nanf("");
+  EXPECT_THROW(RayTracer(ground.view(), ground.t.data(), 2, {proto}, bad), std::invalid_argument);
+  bad[0].matrix[5] = 1;
+  bad[0].matrix[14] = 0.5f;  // projective
+  EXPECT_THROW(RayTracer(ground.view(), ground.t.data(), 2, {proto}, bad), std::invalid_argument);
+  Mesh broken = crown;
+  broken.t[0] = 99;
+  const Prototype bad_proto{broken.view(), broken.t.data(), broken.triangles()};
+  EXPECT_THROW(RayTracer(ground.view(), ground.t.data(), 2, {bad_proto}, {}),
+               std::invalid_argument);
+}
+
 // === Determinism
 
 TEST(RayTracer, DeterministicWhateverTheThreadCount) {

@@ -127,6 +127,21 @@ struct RayTracerBuildOptions {
   bool robust = false;
 };
 
+/// A mesh placed many times by Instance (an instanced tree): #V by 3 vertices, #M by 3 vertex
+/// indices in [0, V), as the RayTracer's own mesh.
+struct Prototype {
+  PointsView vertices;
+  const std::int32_t* triangles = nullptr;
+  std::size_t triangle_count = 0;
+};
+
+/// One placement of a Prototype: `matrix` is the row-major 4 × 4 world-from-prototype
+/// transform (affine: last row 0 0 0 1; any scale, rotation, shear or mirroring).
+struct Instance {
+  std::uint32_t prototype = 0;
+  float matrix[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+};
+
 // === Ray tracer
 /// An Embree scene of two-sided triangles, built once (expensive: reuse it for many queries).
 class RayTracer {
@@ -137,6 +152,15 @@ class RayTracer {
   /// afterwards. M may be 0 (then AO = 1 everywhere).
   /// Throws std::invalid_argument on bad input, canopy_ao::Error if Embree fails.
   RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+            const RayTracerBuildOptions& build = {});
+  /// Same, plus instanced meshes (Embree instances, RTC_GEOMETRY_TYPE_INSTANCE): each
+  /// prototype's BVH is built once, each instance places it by its matrix, so a forest of
+  /// copies costs one tree's memory. Instanced triangles occlude like the own mesh's (two-sided,
+  /// same AO) but carry no receivers: OwnPrimitives ids always refer to the own mesh. Throws
+  /// std::invalid_argument for a bad prototype mesh, an instance's prototype outside
+  /// [0, #prototypes), a non-finite or non-affine matrix.
+  RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+            const std::vector<Prototype>& prototypes, const std::vector<Instance>& instances,
             const RayTracerBuildOptions& build = {});
   ~RayTracer();
   RayTracer(RayTracer&&) noexcept;
@@ -163,6 +187,7 @@ class RayTracer {
   float auto_offset() const;
   std::size_t vertex_count() const;
   std::size_t triangle_count() const;
+  std::size_t instance_count() const;
 
  private:
   struct Impl;
