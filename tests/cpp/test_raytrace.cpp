@@ -117,6 +117,15 @@ struct Receivers {
   PointsView normals() const { return {n.data(), n.size() / 3}; }
 };
 
+// n random (Gaussian, so isotropic, not unit) normals, packed xyz.
+std::vector<float> random_normals(std::size_t n, std::uint32_t seed) {
+  std::vector<float> nrm(3 * n);
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g;
+  for (float& x : nrm) x = g(rng);
+  return nrm;
+}
+
 double mean(const std::vector<float>& a) {
   return std::accumulate(a.begin(), a.end(), 0.0) / static_cast<double>(a.size());
 }
@@ -433,10 +442,7 @@ TEST(RayTracer, StratifiedSampleSetsBeatIndependentRays) {
 TEST(RayTracer, EverySampleSetIsTheSameWhateverTheThreadCount) {
   const Mesh leaves = canopy(2000, 2, 0.25f, 5);
   const RayTracer tracer = leaves.tracer();
-  std::vector<float> nrm(leaves.v.size());
-  std::mt19937 rng(9);
-  std::normal_distribution<float> g;
-  for (float& x : nrm) x = g(rng);
+  const std::vector<float> nrm = random_normals(leaves.view().size, 9);
   const PointsView pts = leaves.view(), nv{nrm.data(), leaves.view().size};
   std::vector<std::int32_t> self(pts.size);
   std::iota(self.begin(), self.end(), 0);
@@ -543,10 +549,7 @@ TEST(RayTracer, DeterministicWhateverTheThreadCount) {
   const Mesh leaves = canopy(2000, 2, 0.25f, 7);
   const RayTracer tracer = leaves.tracer();
   // Receivers on the leaves' own vertices, normals random (any direction is valid).
-  std::vector<float> nrm(leaves.v.size());
-  std::mt19937 rng(3);
-  std::normal_distribution<float> g;
-  for (float& x : nrm) x = g(rng);
+  const std::vector<float> nrm = random_normals(leaves.view().size, 3);
   const PointsView pts = leaves.view(), nv{nrm.data(), leaves.view().size};
 
   const int prev = set_max_threads(1);
