@@ -19,7 +19,7 @@
 // estimate is unbiased, stratified, and depends only on (its row index, seed, its own data):
 // never on the thread count, the block split or other points. No rand(), no global state.
 //
-// Origins (docs/DESIGN.md, 'Baselines and references': skip only the receiver's own triangles,
+// Origins (docs/DESIGN.md, 'The method ladder': skip only the receiver's own triangles,
 // as Cycles does). A receiver may name the triangles it lies on (OwnPrimitives): a vertex of
 // the tracer's mesh (every triangle using that vertex is its own) or a triangle (a texel's). Its
 // rays then ignore those triangles (an Embree filter on the primitive id) and start on the
