@@ -111,7 +111,8 @@ class BakeJob:
         try:
             t.ao[a:b] = core.evaluate_receivers(
                 self.plan, t.item, t.positions[a:b], t.normals[a:b],
-                vertices=slice(a, b) if t.kind == "vertex" else None)
+                vertices=slice(a, b) if t.kind == "vertex" else None,
+                triangles=t.triangles[a:b] if t.triangles is not None else None)
         except CanopyAOError as exc:
             raise CanopyAOError(f"{t.item.name}: {exc}") from exc
         t.seconds += self._lap("evaluate", t0) - t0

@@ -13,6 +13,7 @@ class Target:
     def __init__(self, item, obj, positions, normals):
         self.item, self.obj = item, obj
         self.positions, self.normals = positions, normals
+        self.triangles = None  # texels: each one's triangle in the item's mesh (own rays)
         self.ao = np.ones(len(positions), np.float32)
         self.seconds = 0.0
         self.stats = {}
@@ -61,6 +62,11 @@ class TexelTarget(Target):
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
                                      opts["resolution"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
+        # The raster's loop triangles are the item's own when the counts agree (the same
+        # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
+        tris = self.rx.triangles
+        if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
+            self.triangles = tris
 
     def write(self, txn, opts):
         image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,

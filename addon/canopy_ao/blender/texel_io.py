@@ -91,16 +91,18 @@ def gather_corner_triangles(obj, depsgraph, uv_map):
 
 
 def rasterize(uvs, positions, normals, width, height):
-    """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict):
-    one receiver point per covered texel, ascending pixel index j * width + i, by the native
-    rasteriser (conservative coverage: islands thinner than a texel keep texels)."""
+    """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict,
+    triangles int32 (T,)): one receiver point per covered texel, ascending pixel index
+    j * width + i, by the native rasteriser (conservative coverage: islands thinner than a
+    texel keep texels); triangles: the loop triangle (corner row // 3) each texel lies on."""
     ts = _core.rasterize_uv(uvs, positions, normals, resolution=(width, height),
                             conservative=True)
     # The TexelSet's arrays are read-only views of its own buffers: copy what the bake keeps.
     stats = {k: int(v) for k, v in dict(ts.stats).items()}
     return (np.array(ts.pixels, dtype=np.int32),
             np.array(ts.positions, dtype=np.float32).reshape(-1, 3),
-            np.array(ts.normals, dtype=np.float32).reshape(-1, 3), stats)
+            np.array(ts.normals, dtype=np.float32).reshape(-1, 3), stats,
+            np.array(ts.triangles, dtype=np.int32))
 
 
 @dataclass
@@ -114,6 +116,7 @@ class TexelReceivers:
     positions: np.ndarray
     normals: np.ndarray
     stats: dict = field(default_factory=dict)  # raster counts, "warnings", "notes"
+    triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
 
 
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
@@ -130,7 +133,7 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
     if margin < 0:
         raise CanopyAOError(f"Margin must be >= 0 texels, not {margin}")
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
-    pixels, tpos, tnrm, stats = rasterize(uvs, pos, nrm, res, res)
+    pixels, tpos, tnrm, stats, ttri = rasterize(uvs, pos, nrm, res, res)
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
     if stats.get("overlapping_texels", 0) > 0:
         stats["warnings"].append(
@@ -141,7 +144,7 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
         stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
                                  f"map '{uv_map}' at {res}×{res}; raise the resolution or "
                                  "check the UVs lie in the 0–1 square")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):

@@ -46,7 +46,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
     if needs_tracer:
         t0 = time.perf_counter()
         try:
-            plan.tracer = lighting.build_tracer(whole)
+            plan.tracer = lighting.build_tracer(whole, plan.tracer_bases)
         except CanopyAOError as exc:
             if settings.method in ("raytrace", "hybrid"):
                 raise
@@ -87,7 +87,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
 
 @refusals_are_user_errors
 def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
-                       vertices=None) -> np.ndarray:
+                       vertices=None, triangles=None) -> np.ndarray:
     """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
     texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
     and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
@@ -96,14 +96,21 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     An item holding several trees (item.tree_names) lights each receiver with its own tree's:
     ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the
     vertex's tree; without it (texels) each receiver takes the tree whose fitted crown is
-    nearest (in the crown's own unit frame)."""
+    nearest (in the crown's own unit frame). ``triangles`` (int32 (N,), texels: the item's
+    triangle each lies on, -1 = unknown) lets the exact rung's rays skip only that one."""
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
         return np.ones(len(p), np.float32)
+    if vertices is not None:
+        own = {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
+    elif triangles is not None:
+        own = {"triangle_ids": np.asarray(triangles, np.int32)}
+    else:
+        own = None
     if item.tree_labels is None or len(item.tree_names) <= 1:
         ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
-                                      plan.taus())
+                                      plan.taus(), own)
     else:
         labels = (item.tree_labels[vertices] if vertices is not None
                   else _nearest_crown(plan, item.tree_names, p))
@@ -113,7 +120,8 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
             if len(sel):
                 ao[sel] = lighting.evaluate_points(
                     plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
-                    np.ascontiguousarray(n[sel]), plan.method, plan.taus())
+                    np.ascontiguousarray(n[sel]), plan.method, plan.taus(),
+                    {k: v[sel] for k, v in own.items()} if own else None)
     if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     return ao
