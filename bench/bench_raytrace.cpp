@@ -6,7 +6,7 @@
 // directions, no per-point rotation); "bare_1M" the same rays as one 64-ray stream per point
 // (second argument 1 = coherent flag; Embree 3 only: Embree 4 has no streams); "bare_packet8"
 // as rtcOccluded8 packets (what RayTracer uses on Embree 4). Target:
-// RayTracer ≥ 80% of the fastest bare loop (DESIGN 9 measured 2.5–4 M incoherent AO rays/s
+// RayTracer ≥ 80% of the fastest bare loop (docs/DESIGN.md, 'Facts measured in Blender': 2.5–4 M incoherent AO rays/s
 // per core). rays/cpu_s divides by the CPU time of the whole process: a per-core figure that
 // survives other processes sharing the cores; rays/s is wall-clock.
 //

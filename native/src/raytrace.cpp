@@ -21,7 +21,7 @@ namespace {
 
 constexpr float kTwoPi = 6.28318530717958647692f;
 // Rays per embree::occluded call (a stream on Embree 3, 8-wide packets on Embree 4): Embree 3's
-// streams are fastest from ~64 rays (DESIGN 9). A batch is flushed once it holds kMinStream rays
+// streams are fastest from ~64 rays (docs/DESIGN.md, 'Facts measured in Blender'). A batch is flushed once it holds kMinStream rays
 // and its last point is complete, so at 64 samples a batch is one point's rays (one origin).
 // Measured on Embree 3: as fast as 256-ray streams mixing four points (within the ±5% noise
 // here), and as fast as a bare per-point rtcOccluded1M loop.
@@ -455,7 +455,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   }
   rtcSetDeviceErrorFunction(m.device.get(), record_error, m.errors.get());
 
-  // 2. The scene: default flags (ROBUST costs a third of the speed, DESIGN 9).
+  // 2. The scene: default flags (ROBUST costs a third of the speed, docs/DESIGN.md, 'Facts measured in Blender').
   m.scene.reset(rtcNewScene(m.device.get()));
   m.check("rtcNewScene");
   rtcSetSceneFlags(m.scene.get(), build.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);

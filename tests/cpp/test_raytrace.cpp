@@ -1,5 +1,5 @@
 // Known answers for the Embree AO reference (raytrace.h). Every expected value is a closed
-// form for cosine-weighted AO (DESIGN 2); tolerances are stated next to each check.
+// form for cosine-weighted AO (docs/DESIGN.md, 'What AO means here'); tolerances are stated next to each check.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -1,7 +1,7 @@
 // Canopy AO — elementary functions that GCC auto-vectorises.
 //
 // libm's expf is a call GCC cannot vectorise (without -ffast-math and libmvec), which costs the
-// one-sphere model a factor ~8 (DESIGN 9: 170 M vs 1.3 G vertices/s per core). These versions
+// one-sphere model a factor ~8 (docs/DESIGN.md, 'Facts measured in Blender': 170 M vs 1.3 G vertices/s per core). These versions
 // are branch-free straight-line code: inlined into a simple loop they become vector code, AVX2/FMA
 // where the loop is in an AVX2 function (CANOPY_AO_TARGET_AVX2, canopy_model.cpp's kernels).
 //

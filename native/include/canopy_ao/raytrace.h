@@ -1,8 +1,8 @@
 // Canopy AO — ray-traced ambient occlusion with Embree (3 or 4): the exact answer (up to sampling
 // noise), the reference every approximate model is checked against, and the source of
-// calibration samples (DESIGN 3.7, 5).
+// calibration samples (docs/DESIGN.md, 'The method ladder' and 'Auto mode').
 //
-// What it computes (DESIGN 2, Cycles' meaning, DESIGN 9):
+// What it computes (docs/DESIGN.md, 'What AO means here': Cycles' meaning):
 //
 //     AO(x, n) = (1/π) ∫_hemisphere(n) V_D(x, ω) (ω·n) dω        in [0, 1], 1 = open sky
 //
@@ -47,7 +47,7 @@
 // skips a surface the point lies on whenever the normal leans into it, and misses occluders
 // nearer than it along the normal: name the own primitives where they are known.
 //
-// Edge cases (measured, never NaN, never a crash — DESIGN 8):
+// Edge cases (measured, never NaN, never a crash — docs/DESIGN.md, 'How we check ourselves'):
 //  - empty mesh (0 triangles, any vertex count including 0): nothing occludes, AO = 1 everywhere;
 //  - zero-length normal: no hemisphere is defined; AO = 1 (documented fallback);
 //  - normals need not be unit length: they are normalised;
@@ -124,7 +124,7 @@ struct OwnPrimitives {
 struct RayTracerBuildOptions {
   /// RTC_BUILD_QUALITY_HIGH (spatial splits: slower build, faster traversal) instead of MEDIUM.
   bool high_quality = false;
-  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed, DESIGN 9).
+  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed, docs/DESIGN.md, 'Facts measured in Blender').
   bool robust = false;
 };
 
