@@ -190,6 +190,41 @@ def write_ao_attribute(obj, name, ao, overwrite=False):
     return attr
 
 
+def write_float_attribute(obj, name, values, overwrite=False):
+    """Write float (V,) as a POINT-domain FLOAT attribute (one frame of a frame-range bake's
+    cache), under write_ao_attribute's ownership rules."""
+    why = check_attribute(obj, name, overwrite)
+    if why:
+        raise MeshIOError(why)
+    mesh = obj.data
+    values = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
+    if len(values) != len(mesh.vertices):
+        raise MeshIOError(f"{obj.name}: {len(values)} values for {len(mesh.vertices)} vertices")
+    attr = mesh.attributes.get(name)
+    if attr is not None and (attr.data_type != 'FLOAT' or attr.domain != 'POINT'):
+        mesh.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = mesh.attributes.new(name, 'FLOAT', 'POINT')
+    attr.data.foreach_set("value", values)
+    mesh.update_tag()
+    _mark_owned(obj, name)
+    return attr
+
+
+def remove_owned_attribute(obj, name):
+    """Remove an attribute Canopy AO made, and its ownership mark; True if one went."""
+    if name not in owned_attributes(obj):
+        return False
+    attr = obj.data.attributes.get(name)
+    if attr is not None:
+        obj.data.attributes.remove(attr)
+    for idblock in (obj, obj.data):
+        idblock[OWNED_PROP] = json.dumps([n for n in _owned(idblock) if n != name])
+    obj.data.update_tag()
+    return attr is not None
+
+
 def read_ao_attribute(obj, name):
     """The red channel of a POINT color attribute as float32 (V,) (for tests and checks)."""
     attr = obj.data.attributes[name]

@@ -1,0 +1,69 @@
+"""AO that follows animated vegetation (no bpy): the proxies refitted to each frame's deformed
+leaves and evaluated with what the first bake decided (docs/DESIGN.md, 'Live and per-frame AO').
+
+Hegeman et al. evaluate their canopy shells per frame for trees moving in the wind, because a
+fit and an analytic evaluation cost little. Here a frame keeps from the first bake everything
+that does not move: the rung, τ (scene and per tree, from its calibration), every item's role
+and tree (and the tree labels of a mesh holding several), the triangles (the topology of a
+deformed mesh does not change; only grass blades need them). It redoes what moves: the fits
+(sphere, ellipsoid, k-means shells with the same seed, trunks, grass heights) and the
+evaluation, so a frame's AO is the AO of a full bake of that frame with the same rung and τ.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import proxies
+from .native import CanopyAOError, refusals_are_user_errors
+from .scene import Plan, SceneItem, split_trees
+
+# The rungs that refit and evaluate fast enough per frame: the analytic proxy models (the
+# Reeves-Blau baseline is analytic too). The density grid and the rays rebuild a grid or a BVH
+# over every triangle each frame, which is a full bake, not a live update.
+LIVE_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau")
+
+
+def check_method(method: str) -> None:
+    """CanopyAOError unless ``method`` (a rung, or what auto chose) can run live."""
+    if method not in LIVE_METHODS:
+        raise CanopyAOError(
+            f"live and per-frame AO run the analytic rungs only ({', '.join(LIVE_METHODS)}); "
+            f"the {method} rung rebuilds its grid or ray tracer from every triangle each frame: "
+            "choose one of those methods (or bake single frames)")
+
+
+def frame_items(template, positions, normals) -> list:
+    """This frame's SceneItems: each template item (the first bake's, role and tree resolved)
+    with the frame's positions and normals {name: float32 (V, 3)}. Raises CanopyAOError when a
+    mesh's vertex count changed (its topology is not the first bake's)."""
+    out = []
+    for it in template:
+        p, n = positions[it.name], normals[it.name]
+        if len(p) != len(it.positions):
+            raise CanopyAOError(f"{it.name}: {len(p)} vertices at this frame, "
+                                f"{len(it.positions)} at the first bake (the topology changed; "
+                                "bake again)")
+        out.append(SceneItem(it.name, it.role, it.tree, p, n, it.triangles,
+                             tree_source="set", tree_labels=it.tree_labels,
+                             tree_names=it.tree_names, tree_why=it.tree_why))
+    return out
+
+
+@refusals_are_user_errors
+def refit(base: Plan, items) -> Plan:
+    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted."""
+    check_method(base.method)
+    plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
+                tau_by_tree=dict(base.tau_by_tree), forest=base.forest)
+    proxies.fit_scene(plan, split_trees(items))
+    plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
+    return plan
+
+
+def template_items(items) -> list:
+    """The first bake's items as a frame's template: positions kept only for their count."""
+    return [SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
+                      it.triangles if it.role == "GRASS" else np.zeros((0, 3), np.int32),
+                      tree_source="set", tree_labels=it.tree_labels, tree_names=it.tree_names,
+                      tree_why=it.tree_why) for it in items]
