@@ -257,3 +257,39 @@ def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_pa
     assert {"CanopyAO_3", "CanopyAO_4"} <= names
     assert sys.modules["canopy_ao.blender.frames"].MODIFIER in \
         bpy.context.scene.objects["Leaves"].modifiers
+
+
+def test_live_and_frame_bakes_in_a_window(user_scripts):
+    """In a real window (Xvfb): undo around live AO (an unrelated edit undone: the session is
+    rebuilt at the next frame; the live bake undone: live AO off, nothing written), and the
+    modal frame-range bake (Esc leaves nothing; run to the end, every frame cached). Skipped
+    without xvfb-run."""
+    import shutil
+    if shutil.which("xvfb-run") is None:
+        pytest.skip("xvfb-run not installed: the windowed check cannot run")
+    script = os.path.join(os.path.dirname(__file__), "ui_live.py")
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
+    r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", bpy.app.binary_path,
+                        "--factory-startup", "--enable-event-simulate", "--python", script],
+                       env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and "UI-OK" in r.stdout, (r.stdout[-1500:], r.stderr[-1500:])
+
+
+def test_auto_choosing_a_rung_that_cannot_run_live_is_refused_unwritten(animated,
+                                                                        monkeypatch):
+    from canopy_ao.core import ladder
+    real = ladder.choose
+
+    def choose_rays(plan, items, grass_only_auto):
+        real(plan, items, grass_only_auto)
+        plan.method = "raytrace"  # as auto does on a small scene its rays bake within budget
+    monkeypatch.setattr(ladder, "choose", choose_rays)
+    with pytest.raises(CanopyAOError, match="auto chose the raytrace rung"):
+        run_bake(bpy.context, list(NAMES), opts(method="auto", tau=None, live=True))
+    assert "CanopyAO" not in animated.objects["Leaves"].data.attributes
+    assert not animated.canopy_ao.live
+    with pytest.raises(CanopyAOError, match="auto chose the raytrace rung"):
+        frames.FrameBake(bpy.context, list(NAMES), opts(method="auto", tau=None), 1, 3).run()
+    assert not any(a.name.startswith("CanopyAO") for a in
+                   animated.objects["Leaves"].data.attributes)
+    assert animated.frame_current == 1

@@ -265,12 +265,9 @@ class CANOPY_AO_OT_bake_frames(bpy.types.Operator):
         except CanopyAOError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
-        wm = context.window_manager
-        wm.progress_begin(0, self._bake.steps)
-        self._timer = wm.event_timer_add(0.01, window=context.window)
-        wm.modal_handler_add(self)
-        context.workspace.status_text_set("Canopy AO: baking frames… (Esc to cancel)")
-        return {'RUNNING_MODAL'}
+        from .operators import start_modal
+        return start_modal(self, context, self._bake.steps,
+                           "Canopy AO: baking frames… (Esc to cancel)")
 
     def _stop(self, context):
         wm = context.window_manager

@@ -139,7 +139,8 @@ class BakeJob:
         report, whose "stage_seconds" are this bake's times per stage."""
         o = self.opts
         if o["live"]:
-            core_live.check_method(self.plan.method)  # what auto chose: refused unwritten
+            # What auto chose may be the grid or rays: refused with nothing written.
+            core_live.check_method(self.plan.method, self.settings.method == "auto")
         t0 = time.perf_counter()
         txn = Transaction()
         try:

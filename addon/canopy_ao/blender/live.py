@@ -63,7 +63,7 @@ class Session:
     """What one scene's live AO keeps between frames; built from a prepared BakeJob."""
 
     def __init__(self, job):
-        core_live.check_method(job.plan.method)  # "auto" may have chosen the grid or rays
+        core_live.check_method(job.plan.method, job.settings.method == "auto")
         self.scene_name = job.scene.name
         self.plan = job.plan
         self.template = core_live.template_items(job.items)

@@ -77,6 +77,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         sub = row.row(align=True)
         sub.enabled = s.check_cycles
         sub.prop(s, "cycles_samples", text="Samples")
+        col.prop(s, "live")  # the Animation subpanel shows its state and the range bake
         col.separator()
         n_sel = sum(1 for o in context.selected_objects if o.type == 'MESH')
         label = f"Bake {n_sel} Selected" if n_sel else "Bake All Visible"
@@ -106,7 +107,7 @@ class CANOPY_AO_PT_animation(_Sidebar, bpy.types.Panel):
         from . import live
         col = self.layout.column()
         s, scene = context.scene.canopy_ao, context.scene
-        col.prop(s, "live")
+        col.label(text="Live AO: on" if s.live else "Live AO: off (tick Live above)")
         session = live.session_of(scene)
         if s.live and session is not None:
             ms = 1000.0 * session.timings.get("total", 0.0)

@@ -27,13 +27,15 @@ from .scene import Plan, SceneItem, split_trees
 LIVE_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau")
 
 
-def check_method(method: str) -> None:
-    """CanopyAOError unless ``method`` (a rung, or what auto chose) can run live."""
+def check_method(method: str, by_auto: bool = False) -> None:
+    """CanopyAOError unless ``method`` (a rung, or what auto chose: ``by_auto``) can run
+    live."""
     if method not in LIVE_METHODS:
+        which = f"auto chose the {method} rung, which" if by_auto else f"the {method} rung"
         raise CanopyAOError(
             f"live and per-frame AO run the analytic rungs only ({', '.join(LIVE_METHODS)}); "
-            f"the {method} rung rebuilds its grid or ray tracer from every triangle each frame: "
-            "choose one of those methods (or bake single frames)")
+            f"{which} rebuilds its grid or ray tracer from every triangle each frame: choose "
+            "one of those methods (or bake single frames)")
 
 
 def frame_items(template, positions, normals) -> list:
