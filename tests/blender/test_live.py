@@ -112,7 +112,7 @@ def test_live_keeps_the_first_bakes_calibrated_tau(animated):
 
 @pytest.mark.parametrize("kw, words", [
     (dict(method="raytrace"), "analytic rungs"), (dict(method="grid"), "analytic rungs"),
-    (dict(mode='TEXEL'), "per-vertex")])
+    (dict(mode='TEXEL'), "per-vertex attributes only")])
 def test_live_refuses_what_cannot_run_live_and_changes_nothing(animated, kw, words):
     with pytest.raises(CanopyAOError, match=words):
         run_bake(bpy.context, list(NAMES), opts(live=True, **kw))
@@ -293,3 +293,23 @@ def test_auto_choosing_a_rung_that_cannot_run_live_is_refused_unwritten(animated
     assert not any(a.name.startswith("CanopyAO") for a in
                    animated.objects["Leaves"].data.attributes)
     assert animated.frame_current == 1
+
+
+def test_the_animation_panel_shows_live_state_and_the_frame_bakes(animated):
+    from types import SimpleNamespace
+    from test_addon import FakeLayout
+    from canopy_ao.blender import panels
+
+    def drawn():
+        log = []
+        panels.CANOPY_AO_PT_animation.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+        return log
+    off = drawn()
+    assert {("operator", "canopy_ao.bake_frames"), ("operator", "canopy_ao.clear_frames")} \
+        <= set(off)
+    assert ("operator", "canopy_ao.live_stop") not in off
+    run_bake(bpy.context, list(NAMES), opts(live=True))
+    animated.frame_set(2)
+    on = drawn()
+    assert ("operator", "canopy_ao.live_stop") in on
+    assert any(kind == "label" and text.startswith("ellipsoid, τ 1.7") for kind, text in on)

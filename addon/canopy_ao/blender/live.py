@@ -52,9 +52,9 @@ class _Context:
 def check_request(opts):
     """Refuse, before any work, a live bake that cannot run live: texels, a non-live rung."""
     if opts["mode"] != 'VERTEX':
-        raise CanopyAOError("live AO writes per-vertex attributes only (a texel bake per "
-                            "frame would rasterise and write an image each frame): set Output "
-                            "to Per Vertex, or bake a frame range")
+        raise CanopyAOError("live AO and frame-range bakes write per-vertex attributes only "
+                            "(a texel bake per frame would rasterise and write an image each "
+                            "frame): set Output to Per Vertex")
     if opts["method"] != "auto":
         core_live.check_method(opts["method"])
 
@@ -143,7 +143,8 @@ def _rebuild(scene, depsgraph):
         job.plan.tau_by_tree = {k: float(v) for k, v in rec["tau_by_tree"].items()}
         _SESSIONS[scene.name] = session = Session(job)
         return session
-    job = BakeJob(ctx, [], dict(scene_options(scene), live=True))
+    # Not the Cycles check: seconds of Cycles baking inside a frame change.
+    job = BakeJob(ctx, [], dict(scene_options(scene), live=True, check_cycles=False))
     job.run()
     job.commit(ctx)  # commit begins the session (job.py)
     return _SESSIONS[scene.name]
