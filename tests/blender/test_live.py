@@ -264,15 +264,8 @@ def test_live_and_frame_bakes_in_a_window(user_scripts):
     rebuilt at the next frame; the live bake undone: live AO off, nothing written), and the
     modal frame-range bake (Esc leaves nothing; run to the end, every frame cached). Skipped
     without xvfb-run."""
-    import shutil
-    if shutil.which("xvfb-run") is None:
-        pytest.skip("xvfb-run not installed: the windowed check cannot run")
-    script = os.path.join(os.path.dirname(__file__), "ui_live.py")
-    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
-    r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", bpy.app.binary_path,
-                        "--factory-startup", "--enable-event-simulate", "--python", script],
-                       env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and "UI-OK" in r.stdout, (r.stdout[-1500:], r.stderr[-1500:])
+    from ui_harness import run_in_window
+    run_in_window(os.path.join(os.path.dirname(__file__), "ui_live.py"), user_scripts)
 
 
 def test_auto_choosing_a_rung_that_cannot_run_live_is_refused_unwritten(animated,

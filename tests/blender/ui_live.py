@@ -8,7 +8,6 @@ Run by test_live.py::test_live_and_frame_bakes_in_a_window when xvfb-run exists.
 """
 import os
 import sys
-import traceback
 
 import bpy
 import numpy as np
@@ -17,20 +16,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "python"))
 sys.path.insert(0, HERE)  # first: this folder's conftest and test_live
 
-
-def fail(msg):
-    print(f"UI-FAIL: {msg}", file=sys.stderr, flush=True)
-    os._exit(1)
-
-
-def check(cond, msg):
-    if not cond:
-        fail(msg)
-
-
-def window_ctx():
-    win = bpy.context.window_manager.windows[0]
-    return dict(window=win, screen=win.screen, area=win.screen.areas[0])
+from ui_harness import check, run_steps, window_ctx  # noqa: E402
 
 
 def leaves_ao():
@@ -119,17 +105,4 @@ def steps():
     os._exit(0)
 
 
-_it = steps()
-
-
-def tick():
-    try:
-        return next(_it)
-    except StopIteration:
-        return None
-    except BaseException:
-        traceback.print_exc()
-        fail("exception")
-
-
-bpy.app.timers.register(tick, first_interval=1.0)
+run_steps(steps)
