@@ -306,3 +306,12 @@ def test_the_animation_panel_shows_live_state_and_the_frame_bakes(animated):
     on = drawn()
     assert ("operator", "canopy_ao.live_stop") in on
     assert any(kind == "label" and text.startswith("ellipsoid, τ 1.7") for kind, text in on)
+
+
+def test_live_refuses_targets_a_frame_cache_would_hide(animated):
+    frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 2).run()
+    frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 3).run()  # a range baked again
+    assert "CanopyAO_3" in animated.objects["Leaves"].data.attributes
+    with pytest.raises(CanopyAOError, match="frame cache .* would hide live AO"):
+        run_bake(bpy.context, list(NAMES), opts(live=True))
+    assert not animated.canopy_ao.live

@@ -11,7 +11,7 @@ from . import cycles_check, gather, instances, live, materials, mesh_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget
 from .. import core
-from ..core import live as core_live, metrics, settings
+from ..core import metrics, settings
 from ..core.native import CanopyAOError
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
@@ -139,8 +139,7 @@ class BakeJob:
         report, whose "stage_seconds" are this bake's times per stage."""
         o = self.opts
         if o["live"]:
-            # What auto chose may be the grid or rays: refused with nothing written.
-            core_live.check_method(self.plan.method, self.settings.method == "auto")
+            live.check_job(self)  # what auto chose, a frame cache: refused unwritten
         t0 = time.perf_counter()
         txn = Transaction()
         try:

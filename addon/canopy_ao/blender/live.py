@@ -59,6 +59,17 @@ def check_request(opts):
         core_live.check_method(opts["method"])
 
 
+def check_job(job):
+    """Refuse, before its commit, a prepared live bake that cannot run live: what auto chose
+    may be the grid or rays, and a frame cache's read-back would hide the live attribute."""
+    core_live.check_method(job.plan.method, job.settings.method == "auto")
+    from .frames import MODIFIER
+    cached = [t.obj.name for t in job.targets if t.obj.modifiers.get(MODIFIER) is not None]
+    if cached:
+        raise CanopyAOError(f"{', '.join(cached)}: a frame cache ('{MODIFIER}' modifier) would "
+                            "hide live AO; clear it first (Clear Frame Cache)")
+
+
 class Session:
     """What one scene's live AO keeps between frames; built from a prepared BakeJob."""
 
