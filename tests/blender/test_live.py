@@ -315,3 +315,17 @@ def test_live_refuses_targets_a_frame_cache_would_hide(animated):
     with pytest.raises(CanopyAOError, match="frame cache .* would hide live AO"):
         run_bake(bpy.context, list(NAMES), opts(live=True))
     assert not animated.canopy_ao.live
+
+
+def test_a_reloaded_file_keeps_the_shell_partition_of_the_session_that_saved_it(animated,
+                                                                                 tmp_path):
+    run_bake(bpy.context, list(NAMES), opts(method="shells", live=True))
+    animated.frame_set(5)
+    at5 = {n: _ao(n) for n in NAMES}
+    path = str(tmp_path / "shells.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)  # re-armed at frame 5, a frame the bake was not at
+    scene = bpy.context.scene
+    scene.frame_set(6)
+    scene.frame_set(5)
+    _assert_equal({n: _ao(n) for n in NAMES}, at5)

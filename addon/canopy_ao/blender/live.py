@@ -24,6 +24,7 @@ import sys
 import time
 
 import bpy
+import numpy as np
 from bpy.app.handlers import persistent
 
 from . import mesh_io
@@ -32,6 +33,7 @@ from ..core import live as core_live
 from ..core.native import CanopyAOError
 
 RECORD = "canopy_ao_live"  # the scene's custom property: JSON of what a rebuild needs
+SHELLS = "canopy_ao_live_shells"  # ... and the shell partition per tree: {"0": int32 array}
 _SESSIONS = {}  # scene name -> Session
 _SUSPENDED = []  # non-empty while a frame-range bake steps the frames itself
 
@@ -82,8 +84,10 @@ class Session:
         self.attribute = job.opts["attribute"]
         self.frames = 0
         self.timings = {}  # the last frame's seconds per stage
+        self.shell_trees = sorted(job.plan.shell_labels)
         self.record = json.dumps({
             "objects": self.targets, "tau_by_tree": dict(job.plan.tau_by_tree),
+            "shell_trees": self.shell_trees,
             "opts": dict(job.opts, method=job.plan.method, tau=job.plan.tau, live=True)})
 
     def update(self, scene, depsgraph):
@@ -135,6 +139,10 @@ def begin(job):
     session = Session(job)
     _SESSIONS[job.scene.name] = session
     job.scene[RECORD] = session.record
+    # ID property arrays take and give numpy buffers (1M labels in < 1 ms); keys are indices,
+    # as tree names may be longer than an ID property key.
+    job.scene[SHELLS] = {str(i): np.ascontiguousarray(job.plan.shell_labels[t], np.int32)
+                         for i, t in enumerate(session.shell_trees)}
     job.scene.canopy_ao.live = True
     return session
 
@@ -152,6 +160,12 @@ def _rebuild(scene, depsgraph):
         job = BakeJob(ctx, rec["objects"], dict(rec["opts"], live=True))
         job.prepare()
         job.plan.tau_by_tree = {k: float(v) for k, v in rec["tau_by_tree"].items()}
+        # The first bake's partition, not this frame's clustering: a file re-armed on load (a
+        # farm task's first frame) shades as the session that saved it did.
+        stored = scene.get(SHELLS) or {}
+        job.plan.shell_labels = {t: np.asarray(stored[str(i)], dtype=np.int32)
+                                 for i, t in enumerate(rec.get("shell_trees", []))
+                                 if str(i) in stored}
         _SESSIONS[scene.name] = session = Session(job)
         return session
     # Not the Cycles check: seconds of Cycles baking inside a frame change.
