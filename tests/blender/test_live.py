@@ -312,6 +312,7 @@ def test_live_refuses_targets_a_frame_cache_would_hide(animated):
     frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 2).run()
     frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 3).run()  # a range baked again
     assert "CanopyAO_3" in animated.objects["Leaves"].data.attributes
+    assert len([g for g in bpy.data.node_groups if g.get(frames.GROUP_TAG)]) == 1
     with pytest.raises(CanopyAOError, match="frame cache .* would hide live AO"):
         run_bake(bpy.context, list(NAMES), opts(live=True))
     assert not animated.canopy_ao.live

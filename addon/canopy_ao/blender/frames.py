@@ -116,6 +116,8 @@ class FrameBake:
             self._restore_frame()
             raise
         txn.done()
+        for ng in [g for g in bpy.data.node_groups if g.get(GROUP_TAG) and g.users == 0]:
+            bpy.data.node_groups.remove(ng)  # an earlier range's read-back, replaced
         self._restore_frame()
         plan = self.session.plan
         ms = 1000.0 * sum(self.seconds) / max(len(self.seconds), 1)
