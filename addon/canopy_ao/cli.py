@@ -54,7 +54,8 @@ def build_parser():
     """The command line: object selection and output switches, then one argument per option
     of core/settings.py's OPTIONS."""
     p = argparse.ArgumentParser(
-        prog="blender -b scene.blend --python-expr 'import canopy_ao.cli; canopy_ao.cli.main()' --",
+        prog="blender -b scene.blend --python-exit-code 1 --python-expr "
+             "'import canopy_ao.cli; canopy_ao.cli.main()' --",
         description="Bake Canopy AO into a color attribute of mesh objects.")
     which = p.add_mutually_exclusive_group()
     which.add_argument("--objects", nargs="+", metavar="NAME", help="objects to bake")
@@ -106,6 +107,8 @@ def main(argv=None):
     args = parser.parse_args(_argv(argv))  # exits 2 with usage on bad arguments
     if args.threads < 0:
         parser.error(f"--threads must be >= 0, got {args.threads}")
+    if args.report is not None and not args.report.strip():
+        parser.error("--report needs a file name")
     try:
         run(args)
         code = 0

@@ -382,6 +382,7 @@ def test_cli_threads_caps_the_native_core_and_leaves_the_result_alone(tree_scene
     (["--target-error", "nan"], "target_rmse must be a finite number in [0, 1]"),
     (["--resolution", "0"], "resolution must be an integer in [1, 16384]"),
     (["--cycles-samples", "-3"], "cycles_samples must be an integer in [1, 65536]"),
+    (["--report", ""], "--report needs a file name"),
 ])
 def test_cli_numbers_out_of_range_exit_2_with_a_message(tree_scene_objects, capsys, args,
                                                           message):

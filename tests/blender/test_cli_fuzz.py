@@ -24,7 +24,5 @@ def test_no_crash_hang_traceback_or_bad_ao(short_run):
     assert hard == []
 
 
-@pytest.mark.xfail(strict=True, reason="the CLI does not yet refuse every non-finite or "
-                   "out-of-range number with exit 2 (README: 2 on bad arguments)")
 def test_bad_numbers_exit_2(short_run):
     assert [f for f in short_run[2] if f[2] == "wrong_exit"] == []
