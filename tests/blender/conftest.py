@@ -87,3 +87,16 @@ def tree_scene_objects():
     bpy.context.scene.canopy_ao.calibrate_tau = True
     yield obs
     _clear_scene()
+
+
+def require_sapling():
+    """Enable Blender's bundled Sapling Tree Gen, or skip: it is bundled with Blender up to 4.1
+    (from 4.2 it is an extension, not in Debian's package)."""
+    import addon_utils
+    addon_utils.enable("add_curve_sapling", default_set=False)
+    try:  # bpy.ops.curve.tree_add always exists as a wrapper; its RNA only when registered
+        bpy.ops.curve.tree_add.get_rna_type()
+    except KeyError:
+        pytest.skip(f"Sapling Tree Gen is not bundled with Blender {bpy.app.version_string} "
+                    "(an extension from 4.2 on)")
+

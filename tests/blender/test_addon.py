@@ -396,6 +396,29 @@ def test_cli_numbers_out_of_range_exit_2_with_a_message(tree_scene_objects, caps
     assert ATTR not in bpy.data.objects["Ground"].data.attributes
 
 
+@pytest.mark.parametrize("name, message", [
+    ("position", "names one of Blender's own layers"),
+    (".select_vert", "names one of Blender's own layers"),
+    ("a" * 80, "longer than Blender's limit of 63 bytes"),
+    ("UV", "names one of Blender's own layers"),
+])
+def test_attribute_names_blender_owns_or_shortens_are_refused(tree_scene_objects, capsys, name,
+                                                               message):
+    """Even with --overwrite: a built-in attribute, a UV map's name or a name past Blender's
+    length limit is refused before anything is written (exit 1, a message, no traceback)."""
+    from canopy_ao import cli
+    mesh = bpy.data.objects["Ground"].data
+    if name == "UV" and name not in mesh.uv_layers:
+        mesh.uv_layers.new(name="UV")
+    layers = sorted(a.name for a in mesh.attributes)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere", "--attribute", name,
+                  "--overwrite"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 1 and message in err and "Traceback" not in err, err
+    assert sorted(a.name for a in mesh.attributes) == layers
+
+
 def test_every_option_reachable_from_panel_operator_and_cli():
     """One declaration per option (core/settings.py) gives a scene property the panel draws,
     an operator property and a command-line argument."""

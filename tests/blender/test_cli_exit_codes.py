@@ -51,5 +51,5 @@ def test_the_documented_command_fails_with_a_message_without_the_addon(source, t
         assert r.returncode != 0, f"{source}: exit 0 without the add-on: {command}"
         # The add-on's package, or the extension's repository package above it.
         out = r.stdout + r.stderr
-        assert "No module named 'canopy_ao'" in out or "No module named 'bl_ext'" in out, \
+        assert "No module named 'canopy_ao'" in out or "No module named 'bl_ext" in out, \
             out[-1000:]

@@ -5,17 +5,14 @@ import bpy
 import numpy as np
 import pytest
 
-from conftest import _clear_scene, add_mesh
+from conftest import _clear_scene, add_mesh, require_sapling
 
 
 def _sapling_tree(offset_x):
     """A quaking aspen from Blender's bundled Sapling Tree Gen (leaves on), its branch curve
     converted to a mesh beside the leaves, unparented into the scene collection (as a user
     gathering trees into one collection would have them)."""
-    import addon_utils
-    addon_utils.enable("add_curve_sapling", default_set=False)
-    if not hasattr(bpy.ops.curve, "tree_add"):
-        pytest.skip("Sapling Tree Gen is not bundled with this Blender")
+    require_sapling()
     before = set(bpy.data.objects)
     bpy.ops.curve.tree_add(do_update=True, bevel=True, showLeaves=True, seed=int(offset_x))
     new = [o for o in bpy.data.objects if o not in before]

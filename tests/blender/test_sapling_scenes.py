@@ -15,6 +15,12 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 sys.path.insert(0, os.path.join(REPO, "examples"))
 
 import sapling_scenes as ss  # noqa: E402
+from conftest import require_sapling  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _sapling():
+    require_sapling()
 
 
 def _components(tris, n):

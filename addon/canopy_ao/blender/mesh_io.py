@@ -148,10 +148,26 @@ def _mark_owned(obj, name):
         idblock[OWNED_PROP] = json.dumps(names)
 
 
+# Blender keeps layer names in 64-byte buffers (MAX_CUSTOMDATA_LAYER_NAME, with the NUL).
+MAX_ATTRIBUTE_NAME_BYTES = 63
+# Attributes Blender itself owns on a mesh (3.4 to 5.x): never ours to replace, not even with
+# Overwrite (their type and domain are fixed; "." names are internal).
+BUILTIN_ATTRIBUTES = frozenset((
+    "position", "normal", "radius", "id", "material_index", "sharp_face", "sharp_edge",
+    "crease", "crease_vert", "crease_edge", "bevel_weight_vert", "bevel_weight_edge",
+    "shade_smooth", "edge_crease", "vertex_crease", "custom_normal"))
+
+
 def check_attribute(obj, name, overwrite):
     """None if ``name`` may be written on obj, else the reason it may not (nothing changed)."""
     if not name:
         return "the attribute name is empty"
+    if len(name.encode("utf-8")) > MAX_ATTRIBUTE_NAME_BYTES:
+        return (f"the attribute name '{name[:20]}…' is longer than Blender's limit of "
+                f"{MAX_ATTRIBUTE_NAME_BYTES} bytes (Blender would shorten it)")
+    if name.startswith(".") or name in BUILTIN_ATTRIBUTES or name in obj.data.uv_layers:
+        return (f"{obj.name}: '{name}' names one of Blender's own layers (a built-in "
+                "attribute or a UV map); choose another attribute name")
     attr = obj.data.attributes.get(name)
     if attr is None or overwrite or name in owned_attributes(obj):
         return None
