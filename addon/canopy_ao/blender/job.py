@@ -11,7 +11,7 @@ from . import cycles_check, gather, instances, materials, mesh_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget
 from .. import core
-from ..core import metrics, settings
+from ..core import maps, metrics, settings
 from ..core.native import CanopyAOError
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
@@ -42,8 +42,14 @@ class BakeJob:
         if opts["wire_material"] or opts["add_aov"]:
             try:
                 materials.check_aov_name(opts["aov_name"])
+                if opts["thickness"] and opts["wire_material"]:
+                    materials.check_aov_name(opts["thickness_name"])
             except ValueError as exc:
                 raise CanopyAOError(str(exc)) from None
+        if opts["thickness"] and opts["thickness_name"] in (opts["attribute"],
+                                                            opts["aov_name"]):
+            raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is also the "
+                                "AO's attribute or AOV; give it a name of its own")
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -113,6 +119,11 @@ class BakeJob:
                 vertices=slice(a, b) if t.kind == "vertex" else None)
         except CanopyAOError as exc:
             raise CanopyAOError(f"{t.item.name}: {exc}") from exc
+        if self.opts["thickness"]:
+            if t.thickness is None:
+                t.thickness = np.zeros(t.count, np.float32)
+            t.thickness[a:b] = maps.thickness(self.plan, t.item, t.positions[a:b],
+                                              slice(a, b) if t.kind == "vertex" else None)
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
@@ -179,6 +190,10 @@ class BakeJob:
         rep = core.report(self.plan, self.results)
         rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
         rep["mode"] = o["mode"].lower()
+        rep["channel"] = o["channel"]
+        if o["channel"] != "RGBA" and o["wire_material"]:
+            rep["notes"].append(f"the AO went into channel {o['channel']} only, so it was not "
+                                "multiplied into the materials (a packed map is for engines)")
         rep["instances"] = {
             "instances": self.prototypes.count if self.prototypes else 0,
             "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
@@ -189,6 +204,8 @@ class BakeJob:
             e = rep["objects"][t.item.name]
             e["role_source"] = self.how[t.item.name]
             e["vertices"] = len(t.item.positions)
+            if t.thickness is not None:
+                e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
             if t.kind == "texel":
                 e["texel"] = t.report()
                 rep["notes"].extend(t.stats.get("warnings", []))

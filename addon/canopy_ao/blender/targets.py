@@ -2,9 +2,11 @@
 rasteriser finds in its UV layout), the AO evaluated for them, and how that AO is written
 (docs/DESIGN.md, 'Data flow'). Reading happens when a target is made, writing only in write()."""
 
+import bpy
 import numpy as np
 
-from . import materials, mesh_io, texel_io
+from ..core.native import CanopyAOError
+from . import maps_io, materials, mesh_io, texel_io
 
 
 class Target:
@@ -14,6 +16,7 @@ class Target:
         self.item, self.obj = item, obj
         self.positions, self.normals = positions, normals
         self.ao = np.ones(len(positions), np.float32)
+        self.thickness = None  # float32 like ao when the bake also makes the thickness
         self.seconds = 0.0
         self.stats = {}
 
@@ -39,17 +42,34 @@ class VertexTarget(Target):
 
     def __init__(self, item, obj, opts):
         super().__init__(item, obj, item.positions, item.normals)
-        why = mesh_io.check_attribute(obj, opts["attribute"], opts["overwrite"])
+        if opts["channel"] != "RGBA":  # one channel: any color attribute, when asked
+            why = maps_io.check_channel_attribute(obj, opts["attribute"])
+        else:
+            why = mesh_io.check_attribute(obj, opts["attribute"], opts["overwrite"])
+        if not why and opts["thickness"]:
+            why = mesh_io.check_attribute(obj, opts["thickness_name"], opts["overwrite"])
         if why:
             raise mesh_io.MeshIOError(why + " (nothing was changed)")
 
     def write(self, txn, opts):
         txn.attribute(self.obj, opts["attribute"])
-        mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
-                                   overwrite=opts["overwrite"])
+        if opts["channel"] != "RGBA":
+            maps_io.write_attribute_channel(self.obj, opts["attribute"], self.ao,
+                                            opts["channel"])
+        else:
+            mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
+                                       overwrite=opts["overwrite"])
+        if self.thickness is not None:
+            txn.attribute(self.obj, opts["thickness_name"])
+            mesh_io.write_ao_attribute(self.obj, opts["thickness_name"], self.thickness,
+                                       overwrite=opts["overwrite"])
         if opts["wire_material"]:
             wire_undo(txn, self.obj)
-            materials.wire_vertex_ao(self.obj, opts["attribute"], opts["aov_name"])
+            if opts["channel"] == "RGBA":  # a packed channel is for engines, not multiplied
+                materials.wire_vertex_ao(self.obj, opts["attribute"], opts["aov_name"])
+            if self.thickness is not None:
+                maps_io.wire_thickness(self.obj, "vertex", opts["thickness_name"],
+                                       opts["thickness_name"])
 
 
 class TexelTarget(Target):
@@ -62,13 +82,37 @@ class TexelTarget(Target):
                                      opts["resolution"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
 
+        if opts["channel"] != "RGBA":
+            self.pack = bpy.data.images.get(opts["pack_image"])
+            if self.pack is None:
+                raise CanopyAOError(f"Channel {opts['channel']} per texel packs into an image: "
+                                    f"no image named '{opts['pack_image']}'; set Pack Image "
+                                    "(nothing was changed)")
+
     def write(self, txn, opts):
-        image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
-                                                  opts["image_dir"] or None, txn)
+        if opts["channel"] != "RGBA":
+            img, mask = texel_io.splat(self.rx.pixels, self.ao, self.rx.resolution,
+                                       self.rx.resolution, self.rx.margin)
+            image = maps_io.pack_image_channel(self.pack, img, opts["channel"], txn)
+            self.stats = dict(self.rx.stats, image=img, mask=mask, path=image.filepath,
+                              packed_into=image.name, channel=opts["channel"])
+        else:
+            image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
+                                                      opts["image_dir"] or None, txn)
+        if self.thickness is not None:
+            timage, tstats = texel_io.write_texels(self.obj, self.rx, self.thickness,
+                                                   opts["image_dir"] or None, txn,
+                                                   suffix=opts["thickness_name"],
+                                                   background=0.0)
+            self.stats["thickness_path"] = tstats["path"]
         if opts["wire_material"]:
             wire_undo(txn, self.obj)
-            self.stats["nodes_added"] = materials.wire_texel_ao(self.obj, image, self.rx.uv_map,
-                                                                opts["aov_name"])
+            if opts["channel"] == "RGBA":
+                self.stats["nodes_added"] = materials.wire_texel_ao(
+                    self.obj, image, self.rx.uv_map, opts["aov_name"])
+            if self.thickness is not None:
+                maps_io.wire_thickness(self.obj, "texel", timage, opts["thickness_name"],
+                                       self.rx.uv_map)
 
     def report(self):
         """The texel stats as plain data for the JSON report."""

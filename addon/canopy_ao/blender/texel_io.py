@@ -20,12 +20,13 @@ from . import materials, mesh_io
 from ..core.native import CanopyAOError, _core
 
 TAG = "canopy_ao"
-OBJ_KEY = "canopy_ao_object"   # on our images: the object they belong to
+OBJ_KEY = "canopy_ao_object"   # on our images: the object they belong to ...
+MAP_KEY = "canopy_ao_map"      # ... and the map they hold (absent: "CanopyAO", the AO)
 MAX_RESOLUTION = 16384
 
 
-def image_name(obj):
-    return f"{obj.name}_CanopyAO"
+def image_name(obj, suffix="CanopyAO"):
+    return f"{obj.name}_{suffix}"
 
 
 # === Mesh → texel receivers
@@ -156,9 +157,9 @@ def splat(pixels, values, width, height, margin, background=1.0):
 
 # === Image file and Blender image
 
-def image_path(obj, image_dir, notes):
+def image_path(obj, image_dir, notes, suffix="CanopyAO"):
     """Where obj's EXR goes (the folder is made); a note says when it is a temporary one."""
-    fname = bpy.path.clean_name(image_name(obj)) + ".exr"
+    fname = bpy.path.clean_name(image_name(obj, suffix)) + ".exr"
     if image_dir:
         if image_dir.startswith("//") and not bpy.data.filepath:
             d = os.path.join(tempfile.gettempdir(), "canopy_ao")
@@ -189,16 +190,17 @@ def write_exr(path, ao):
         raise CanopyAOError(f"Could not write '{path}': {exc}") from exc
 
 
-def _find_our_image(obj):
+def _find_our_image(obj, suffix="CanopyAO"):
     for img in bpy.data.images:
-        if img.get(TAG) and img.get(OBJ_KEY) == obj.name:
+        if img.get(TAG) and img.get(OBJ_KEY) == obj.name and \
+                img.get(MAP_KEY, "CanopyAO") == suffix:
             return img
     return None
 
 
-def load_image(obj, path):
+def load_image(obj, path, suffix="CanopyAO"):
     """(image, undo): obj's image of ours, (re)loaded from path; undo() puts back what was."""
-    img = _find_our_image(obj)
+    img = _find_our_image(obj, suffix)
     if img is not None:
         old = img.filepath
 
@@ -211,9 +213,10 @@ def load_image(obj, path):
         # Never touches a user image of the same name: load() makes a new datablock and Blender
         # gives it a free name.
         img = bpy.data.images.load(path, check_existing=False)
-        img.name = image_name(obj)
+        img.name = image_name(obj, suffix)
         img[TAG] = True
         img[OBJ_KEY] = obj.name
+        img[MAP_KEY] = suffix
 
         def undo():
             bpy.data.images.remove(img)
@@ -251,18 +254,18 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
     return image, stats
 
 
-def write_texels(obj, rx, ao, image_dir, txn):
-    """Splat AO per texel into the image, write its EXR and (re)load it as obj's image, each
-    write recorded in txn (commit.Transaction; a replaced file is kept until txn.done()).
-    Returns (image, stats)."""
+def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0):
+    """Splat AO (or another map: suffix names it) per texel into the image, write its EXR and
+    (re)load it as obj's image, each write recorded in txn (commit.Transaction; a replaced file
+    is kept until txn.done()). Returns (image, stats)."""
     res = rx.resolution
-    img_arr, mask = splat(rx.pixels, ao, res, res, rx.margin)
+    img_arr, mask = splat(rx.pixels, ao, res, res, rx.margin, background)
     stats = dict(rx.stats, margin_texels=int(np.count_nonzero(mask == 2)),
                  notes=list(rx.stats["notes"]))
-    path = image_path(obj, image_dir, stats["notes"])
+    path = image_path(obj, image_dir, stats["notes"], suffix)
     txn.add(keep_file(path))
     write_exr(path, img_arr)
-    image, undo_image = load_image(obj, path)
+    image, undo_image = load_image(obj, path, suffix)
     txn.add(undo_image)
     stats.update(path=path, writer="native", image=img_arr, mask=mask)
     return image, stats

@@ -1,0 +1,158 @@
+"""Maps beyond grey AO: one channel of an existing color attribute or image (the others
+bit-identical), and the canopy thickness per vertex and per texel, wired as a render pass."""
+import os
+
+import bpy
+import numpy as np
+import pytest
+
+import helpers_materials as H
+from canopy_ao.blender import materials, properties
+from canopy_ao.blender.job import run_bake
+from canopy_ao.core.native import CanopyAOError
+
+
+@pytest.fixture
+def tree(tmp_path):
+    """A UV-mapped ground plane (Ground) under a UV sphere of leaves (Leaves)."""
+    H.empty_scene()
+    ground = H.add_plane(size=6.0, subdivisions=11, name="Ground")
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=1.2,
+                                         location=(0, 0, 1.6))
+    leaves = bpy.context.object
+    leaves.name = "Leaves"
+    ground.canopy_ao.role, leaves.canopy_ao.role = 'GROUND', 'CANOPY'
+    for ob in bpy.context.scene.objects:
+        ob.select_set(False)
+    bpy.context.view_layer.update()
+    return dict(ground=ground, leaves=leaves, image_dir=str(tmp_path))
+
+
+def opts(**kw):
+    base = dict(properties.scene_options(bpy.context.scene), method="ellipsoid", tau=2.0,
+                distance=0.0, show_proxies=False)
+    base.update(kw)
+    return base
+
+
+def _colors(attr, key="color"):
+    buf = np.empty(len(attr.data) * 4, np.float32)
+    attr.data.foreach_get(key, buf)
+    return buf.reshape(-1, 4)
+
+
+def _grey_ao(t, name):
+    """The AO a grey bake writes (its red channel) on Ground, for comparison."""
+    run_bake(bpy.context, ["Ground"], opts(attribute="Grey", image_dir=t["image_dir"]))
+    return _colors(t["ground"].data.attributes["Grey"])[:, 0]
+
+
+def test_channel_into_a_users_float_attribute_keeps_the_other_channels(tree):
+    me = tree["ground"].data
+    paint = me.color_attributes.new("Paint", 'FLOAT_COLOR', 'POINT')
+    before = np.random.default_rng(0).random((len(me.vertices), 4)).astype(np.float32)
+    paint.data.foreach_set("color", before.ravel())
+    # Grey (no channel) into the user's attribute: refused, nothing changed.
+    with pytest.raises(CanopyAOError, match="did not make"):
+        run_bake(bpy.context, ["Ground"], opts(attribute="Paint"))
+    assert np.array_equal(_colors(me.attributes["Paint"]), before)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts(attribute="Paint", channel="A"))
+    after = _colors(me.attributes["Paint"])
+    assert rep["channel"] == "A"
+    assert np.array_equal(after[:, :3].view(np.uint32), before[:, :3].view(np.uint32))
+    ao = _grey_ao(tree, "Grey")
+    assert np.array_equal(after[:, 3], ao) and ao.min() < 0.9  # the crown shades the ground
+    assert "Paint" not in tree["ground"].get("canopy_ao_attributes", "")  # still the user's
+
+
+def test_channel_into_a_byte_corner_attribute_keeps_the_other_bytes(tree):
+    me = tree["ground"].data
+    attr = me.color_attributes.new("Col", 'BYTE_COLOR', 'CORNER')
+    before = np.random.default_rng(1).integers(0, 256, (len(me.loops), 4)) / 255.0
+    attr.data.foreach_set("color_srgb", before.astype(np.float32).ravel())
+    before = _colors(attr, "color_srgb")
+    run_bake(bpy.context, ["Ground"], opts(attribute="Col", channel="G"))
+    after = _colors(me.attributes["Col"], "color_srgb")
+    keep = [0, 2, 3]
+    assert np.array_equal(after[:, keep], before[:, keep])
+    loop_vert = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", loop_vert)
+    ao = _grey_ao(tree, "Grey")
+    assert np.abs(after[:, 1] - ao[loop_vert]).max() <= 0.5 / 255 + 1e-6
+
+
+def test_channel_into_a_float_and_a_byte_image_keeps_the_other_channels(tree):
+    ground = tree["ground"]
+    res = 32
+    _job, rep = run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res,
+                                                       image_dir=tree["image_dir"]))
+    grey = rep["objects"]["Ground"]["texel"]["path"]
+    ao = bpy.data.images.load(grey, check_existing=False)
+    ref = np.empty(res * res * 4, np.float32)
+    ao.pixels.foreach_get(ref)
+    ref = ref.reshape(-1, 4)[:, 0]
+    for is_float, channel in ((True, "B"), (False, "R")):
+        img = bpy.data.images.new(f"Packed{is_float}", res, res, alpha=True,
+                                  float_buffer=is_float)
+        rng = np.random.default_rng(2)
+        vals = rng.random(res * res * 4).astype(np.float32)
+        if not is_float:
+            vals = np.round(vals * 255) / 255
+        img.pixels.foreach_set(vals)
+        before = np.empty_like(vals)
+        img.pixels.foreach_get(before)
+        run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res, channel=channel,
+                                               pack_image=img.name,
+                                               image_dir=tree["image_dir"]))
+        after = np.empty_like(vals)
+        img.pixels.foreach_get(after)
+        c = "RGBA".index(channel)
+        keep = [k for k in range(4) if k != c]
+        b4, af = before.reshape(-1, 4), after.reshape(-1, 4)
+        assert np.array_equal(af[:, keep].view(np.uint32), b4[:, keep].view(np.uint32))
+        assert np.abs(af[:, c] - ref).max() <= (1e-6 if is_float else 0.5 / 255 + 1e-6)
+    assert ground.name  # the object itself is untouched by packing
+
+
+def test_texel_channel_needs_an_image_of_the_right_size(tree):
+    with pytest.raises(CanopyAOError, match="no image named"):
+        run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', channel="R", pack_image="Nope"))
+    bpy.data.images.new("Small", 8, 8)
+    with pytest.raises(CanopyAOError, match="Resolution to 8"):
+        run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=16, channel="R",
+                                               pack_image="Small",
+                                               image_dir=tree["image_dir"]))
+
+
+def test_thickness_per_vertex_wired_as_a_pass(tree_scene_objects):
+    obs = tree_scene_objects
+    _job, rep = run_bake(bpy.context, ["Leaves", "Trunk", "Ground"],
+                         opts(thickness=True, wire_material=True))
+    leaves = _colors(obs["Leaves"].data.attributes["CanopyThickness"])[:, 0]
+    ground = _colors(obs["Ground"].data.attributes["CanopyThickness"])[:, 0]
+    # Leaves fill a ball: 0 at its rim, deep inside near its centre (1 - |x - C| / R).
+    p = np.array([v.co for v in obs["Leaves"].data.vertices])
+    r = np.linalg.norm(p - p.mean(axis=0), axis=1)
+    assert 0.0 <= leaves.min() < 0.05 and leaves.max() > 0.7
+    assert leaves[r < np.quantile(r, 0.2)].mean() > leaves[r > np.quantile(r, 0.8)].mean() + 0.4
+    assert np.all(ground == 0.0)  # the ground lies below the crown
+    assert rep["objects"]["Leaves"]["thickness_mean"] == pytest.approx(leaves.mean(), abs=1e-6)
+    for ob in (obs["Leaves"], obs["Ground"]):
+        nt = ob.material_slots[0].material.node_tree
+        aov = [n for n in nt.nodes if n.get("canopy_ao") == "thickness_aov"]
+        src = [n for n in nt.nodes if n.get("canopy_ao") == "thickness_source"]
+        assert len(aov) == 1 and len(src) == 1 and src[0].layer_name == "CanopyThickness"
+        assert materials._aov_target(aov[0]) == "CanopyThickness"
+    materials.unwire(obs["Leaves"])
+    assert len(obs["Leaves"].material_slots) == 0  # our material, nodes and all, is gone
+
+
+def test_thickness_per_texel_writes_its_own_image(tree):
+    _job, rep = run_bake(bpy.context, ["Leaves"], opts(
+        mode='TEXEL', resolution=32, thickness=True, image_dir=tree["image_dir"]))
+    path = rep["objects"]["Leaves"]["texel"]["thickness_path"]
+    assert os.path.exists(path) and path != rep["objects"]["Leaves"]["texel"]["path"]
+    img = next(i for i in bpy.data.images if i.get("canopy_ao_map") == "CanopyThickness")
+    px = np.empty(32 * 32 * 4, np.float32)
+    img.pixels.foreach_get(px)
+    assert 0.0 <= px.min() and px.max() <= 1.0
