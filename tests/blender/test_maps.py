@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import helpers_materials as H
+from canopy_ao import _core
 from canopy_ao.blender import materials, properties
 from canopy_ao.blender.job import run_bake
 from canopy_ao.core.native import CanopyAOError
@@ -156,3 +157,125 @@ def test_thickness_per_texel_writes_its_own_image(tree):
     px = np.empty(32 * 32 * 4, np.float32)
     img.pixels.foreach_get(px)
     assert 0.0 <= px.min() and px.max() <= 1.0
+
+
+def _uvs(obj):
+    layer = obj.data.uv_layers.active.data
+    buf = np.empty(len(layer) * 2, np.float32)
+    layer.foreach_get("uv", buf)
+    return buf.reshape(-1, 2)
+
+
+def _set_uvs(obj, uv):
+    obj.data.uv_layers.active.data.foreach_set("uv", np.ascontiguousarray(uv, np.float32).ravel())
+    obj.data.update()
+
+
+def _face_shift(obj, uv, where):
+    """Per-corner UV offsets moving each face by where(face's mean u, mean v)."""
+    shift = np.zeros((len(uv), 2), np.float32)
+    for p in obj.data.polygons:
+        rows = list(p.loop_indices)
+        shift[rows] = where(*uv[rows].mean(axis=0))
+    return shift
+
+
+def _read_tile(path):
+    return _core.read_image(path)[:, :, 0]
+
+
+def test_udim_bake_writes_each_used_tile_with_its_margin(tree):
+    """Faces moved to tiles 1002 and 1011 (same place in their tile) bake the same texels as
+    before the move, each tile in its own file with a margin, loaded as one tiled image."""
+    ground, res = tree["ground"], 32
+    _job, rep = run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res,
+                                                       image_dir=tree["image_dir"]))
+    whole = _read_tile(rep["objects"]["Ground"]["texel"]["path"])
+    uv = _uvs(ground)
+    _set_uvs(ground, uv + _face_shift(ground, uv, lambda u, v: (1, 0) if u > 0.5 else
+                                      (0, 1) if v > 0.5 else (0, 0)))  # → 1002, 1011
+    _job, rep = run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res, udim=True,
+                                                       image_dir=tree["image_dir"]))
+    tex = rep["objects"]["Ground"]["texel"]
+    assert tex["tiles"] == [1001, 1002, 1011]
+    assert [os.path.basename(p) for p in tex["paths"]] == [
+        f"Ground_CanopyAO.{n}.exr" for n in (1001, 1002, 1011)]
+    image = next(i for i in bpy.data.images if i.get("canopy_ao_object") == "Ground")
+    assert image.source == 'TILED' and "<UDIM>" in image.filepath
+    assert sorted(t.number for t in image.tiles) == [1001, 1002, 1011]
+    covered = np.zeros((res, res), bool)
+    for n, path in zip(tex["tiles"], tex["paths"]):
+        mask = _job.targets[0].stats["image_tiles"][n][1]
+        tile = _read_tile(path)
+        own = mask == 1
+        assert np.any(mask == 2), n  # a margin round each tile's islands
+        assert np.abs(tile[own] - whole[own]).max() < 1e-6, n
+        assert not np.any(covered & own), n  # each texel of the layout in one tile only
+        covered |= own
+    # A later bake with fewer tiles leaves no stale tile for Blender to find.
+    _set_uvs(ground, uv)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res, udim=True,
+                                                       image_dir=tree["image_dir"]))
+    assert rep["objects"]["Ground"]["texel"]["tiles"] == [1001]
+    assert not os.path.exists(os.path.join(tree["image_dir"], "Ground_CanopyAO.1002.exr"))
+    assert [t.number for t in image.tiles] == [1001]
+
+
+def test_two_objects_into_one_atlas_each_write_their_own_texels(tree):
+    ground, res = tree["ground"], 32
+    other = H.add_plane(size=2.0, subdivisions=3, location=(2.0, 2.0, 0.0), name="Patch")
+    other.canopy_ao.role = 'GROUND'
+    _set_uvs(ground, _uvs(ground) * (0.5, 1.0))              # left half of the atlas
+    _set_uvs(other, _uvs(other) * (0.5, 1.0) + (0.5, 0.0))   # right half
+    alone = {}
+    for ob in (ground, other):
+        _j, rep = run_bake(bpy.context, [ob.name], opts(mode='TEXEL', resolution=res,
+                                                        image_dir=tree["image_dir"]))
+        alone[ob.name] = (_read_tile(rep["objects"][ob.name]["texel"]["path"]),
+                          _j.targets[0].stats["mask"] == 1)
+    job, rep = run_bake(bpy.context, ["Ground", "Patch"], opts(
+        mode='TEXEL', resolution=res, atlas="Shared", image_dir=tree["image_dir"],
+        wire_material=True))
+    assert rep["atlas"]["shared_texels"] == 0
+    (path,) = rep["atlas"]["paths"]
+    assert os.path.basename(path) == "Shared_CanopyAO.exr"
+    atlas = _read_tile(path)
+    for name, (img, own) in alone.items():
+        assert own.sum() > 50 and np.abs(atlas[own] - img[own]).max() < 1e-6, name
+    image = next(i for i in bpy.data.images if i.get("canopy_ao_atlas") == "Shared")
+    for ob in (ground, other):
+        nt = ob.material_slots[0].material.node_tree
+        assert [n.image for n in nt.nodes if n.get("canopy_ao") == "source"] == [image]
+    # Overlapping layouts: the texels both claim are counted and the note names both.
+    _set_uvs(other, _uvs(other) - (0.5, 0.0))
+    _job, rep = run_bake(bpy.context, ["Ground", "Patch"], opts(
+        mode='TEXEL', resolution=res, atlas="Shared", image_dir=tree["image_dir"]))
+    assert rep["atlas"]["shared_texels"] > 50
+    note = next(n for n in rep["notes"] if "claimed by two" in n)
+    assert "Ground (" in note and "Patch (" in note
+
+
+def test_cycles_checks_every_tile_and_each_atlas_object_on_its_own_texels(tree):
+    """The check per tile (UVs shifted onto 0–1 and back) finds what the one-tile check finds
+    on the same texels, and a packed channel is checked as the grey AO is."""
+    ground, res = tree["ground"], 32
+    o = dict(mode='TEXEL', resolution=res, image_dir=tree["image_dir"], check_cycles=True,
+             cycles_samples=16)
+    _j, rep = run_bake(bpy.context, ["Ground"], opts(**o))
+    one = rep["objects"]["Ground"]["cycles"]
+    uv = _uvs(ground)
+    moved = uv + _face_shift(ground, uv, lambda u, v: (1, 0) if u > 0.5 else (0, 0))
+    _set_uvs(ground, moved)
+    _j, rep = run_bake(bpy.context, ["Ground"], opts(udim=True, **o))
+    tiles = rep["objects"]["Ground"]["cycles"]
+    assert np.array_equal(_uvs(ground), moved)  # put back after the check
+    assert sorted(tiles["mae_per_tile"]) == [1001, 1002]
+    assert abs(tiles["n"] - one["n"]) <= 0.1 * one["n"]
+    assert abs(tiles["mae"] - one["mae"]) < 0.03, (tiles["mae"], one["mae"])
+    _set_uvs(ground, uv)
+    _j, rep = run_bake(bpy.context, ["Ground"], opts(atlas="Solo", **o))
+    solo = rep["objects"]["Ground"]["cycles"]
+    assert abs(solo["mae"] - one["mae"]) < 0.03 and abs(solo["n"] - one["n"]) <= 0.1 * one["n"]
+    _j, rep = run_bake(bpy.context, ["Ground"], opts(check_cycles=True, cycles_samples=16,
+                                                     attribute="Packed", channel="B"))
+    assert rep["objects"]["Ground"]["cycles"]["mae"] < 0.2

@@ -7,7 +7,7 @@ import time
 import bpy
 import numpy as np
 
-from . import cycles_check, gather, instances, materials, mesh_io
+from . import cycles_check, gather, instances, materials, mesh_io, tiles_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget
 from .. import core
@@ -150,8 +150,12 @@ class BakeJob:
         t0 = time.perf_counter()
         txn = Transaction()
         try:
-            for t in self.targets:
-                t.write(txn, o)
+            if o["atlas"] and o["mode"] == 'TEXEL':  # one image for every object
+                rep_atlas = tiles_io.write_atlas(self.targets, txn, o)
+            else:
+                rep_atlas = None
+                for t in self.targets:
+                    t.write(txn, o)
             self.prototypes.commit(txn, o)
             if o["add_aov"]:
                 if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
@@ -160,6 +164,9 @@ class BakeJob:
                 materials.ensure_view_layer_aov(self.scene, o["aov_name"])
             t0 = self._lap("write", t0)
             rep = self._report()
+            if rep_atlas is not None:
+                rep["atlas"] = {"name": o["atlas"], "paths": rep_atlas["paths"],
+                                "shared_texels": rep_atlas["shared_texels"]}
             if o["check_cycles"]:
                 self._check_cycles(context, rep)
         except BaseException:
@@ -230,7 +237,10 @@ class BakeJob:
                     rep["objects"][name]["cycles"] = {
                         k: float(v) for k, v in metrics.compare(t.ao, ref[name]).items()}
             for t in self.targets:
-                if t.kind == "texel":
+                if t.kind == "texel" and "image_tiles" in t.stats:  # UDIM or atlas
+                    rep["objects"][t.item.name]["cycles"] = tiles_io.check_tiles(
+                        context, t, d, samples)
+                elif t.kind == "texel":
                     m = cycles_check.check_texel(context, t.obj, t.stats["image"], t.rx.uv_map,
                                                  d, samples, ours_mask=t.stats["mask"] == 1)
                     rep["objects"][t.item.name]["cycles"] = {k: float(v) for k, v in m.items()}

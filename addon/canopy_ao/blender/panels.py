@@ -65,6 +65,8 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
             col.prop(s, "image_dir")
+            col.prop(s, "udim")
+            col.prop(s, "atlas")
             sub = col.row()
             sub.enabled = s.channel != 'RGBA'
             sub.prop(s, "pack_image")
@@ -99,8 +101,8 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "image_dir", "channel", "pack_image", "thickness", "thickness_name", "show_proxies",
-        "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples"}
+        "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
+        "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples"}
 
 
 class CANOPY_AO_PT_advanced(_Sidebar, bpy.types.Panel):

@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 
 from ..core.native import CanopyAOError
-from . import maps_io, materials, mesh_io, texel_io
+from . import maps_io, materials, mesh_io, texel_io, tiles_io
 
 
 class Target:
@@ -78,10 +78,12 @@ class TexelTarget(Target):
     kind = "texel"
 
     def __init__(self, item, obj, opts, depsgraph):
+        if opts["channel"] != "RGBA" and (opts["udim"] or opts["atlas"]):
+            raise CanopyAOError("a channel is packed into one image of one object's 0–1 tile; "
+                                "turn off UDIM Tiles and Atlas to pack (nothing was changed)")
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
-                                     opts["resolution"])
+                                     opts["resolution"], udim=opts["udim"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
-
         if opts["channel"] != "RGBA":
             self.pack = bpy.data.images.get(opts["pack_image"])
             if self.pack is None:
@@ -96,15 +98,32 @@ class TexelTarget(Target):
             image = maps_io.pack_image_channel(self.pack, img, opts["channel"], txn)
             self.stats = dict(self.rx.stats, image=img, mask=mask, path=image.filepath,
                               packed_into=image.name, channel=opts["channel"])
+        elif opts["udim"]:
+            image, st = tiles_io.write_tiled(self.obj, [(self.rx, self.ao)],
+                                             opts["image_dir"] or None, txn, tiled=True)
+            self.stats = dict(self.rx.stats, path=st["paths"][0], paths=st["paths"],
+                              tiles=sorted(st["tiles"]), image_tiles=st["tiles"],
+                              notes=self.rx.stats["notes"] + st["notes"])
         else:
             image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
                                                       opts["image_dir"] or None, txn)
-        if self.thickness is not None:
+        timage = None
+        if self.thickness is not None and opts["udim"]:
+            timage, tstats = tiles_io.write_tiled(self.obj, [(self.rx, self.thickness)],
+                                                  opts["image_dir"] or None, txn,
+                                                  suffix=opts["thickness_name"], tiled=True,
+                                                  background=0.0)
+            self.stats["thickness_path"] = tstats["paths"][0]
+        elif self.thickness is not None:
             timage, tstats = texel_io.write_texels(self.obj, self.rx, self.thickness,
                                                    opts["image_dir"] or None, txn,
                                                    suffix=opts["thickness_name"],
                                                    background=0.0)
             self.stats["thickness_path"] = tstats["path"]
+        self.wire(txn, opts, image, timage)
+
+    def wire(self, txn, opts, image, timage):
+        """Wire the AO image (and the thickness's, timage) into obj's materials when asked."""
         if opts["wire_material"]:
             wire_undo(txn, self.obj)
             if opts["channel"] == "RGBA":

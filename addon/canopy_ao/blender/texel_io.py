@@ -115,11 +115,13 @@ class TexelReceivers:
     positions: np.ndarray
     normals: np.ndarray
     stats: dict = field(default_factory=dict)  # raster counts, "warnings", "notes"
+    tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
 
 
-def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
-    """The texels of obj's UV layout at resolution² as receivers. Raises CanopyAOError before
-    reading anything when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
+def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False):
+    """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
+    UVs use, tile by tile, tiles_io.split_tiles). Raises CanopyAOError before reading anything
+    when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
     if obj.type != "MESH":
         raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
                             "texel")
@@ -131,8 +133,26 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
     if margin < 0:
         raise CanopyAOError(f"Margin must be >= 0 texels, not {margin}")
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
-    pixels, tpos, tnrm, stats = rasterize(uvs, pos, nrm, res, res)
+    from .tiles_io import split_tiles
+    parts, outside = split_tiles(uvs) if udim else ([(1001, slice(None), (0, 0))], 0)
+    got, tiles, stats = [], [], {}
+    for number, rows, (du, dv) in parts:
+        tile_uvs = uvs[rows] - np.float32([du, dv]) if du or dv else uvs[rows]
+        got.append(rasterize(np.ascontiguousarray(tile_uvs),
+                             np.ascontiguousarray(pos[rows]), np.ascontiguousarray(nrm[rows]),
+                             res, res))
+        start = tiles[-1][2] if tiles else 0
+        tiles.append((number, start, start + len(got[-1][0])))
+        for k, v in got[-1][3].items():
+            stats[k] = stats.get(k, 0) + v
+    pixels, tpos, tnrm = (np.concatenate([g[i] for g in got]) if got else
+                          np.zeros((0,) + s, d) for i, s, d in
+                          ((0, (), np.int32), (1, (3,), np.float32), (2, (3,), np.float32)))
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
+    if outside:
+        stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
+                                 f"'{uv_map}' lie outside the UDIM tiles 1001–1999 (u in "
+                                 "[0, 10), v >= 0); they are not baked")
     if stats.get("overlapping_texels", 0) > 0:
         stats["warnings"].append(
             f"Object '{obj.name}': UV map '{uv_map}' overlaps ({stats['overlapping_texels']} "
@@ -142,7 +162,7 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
         stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
                                  f"map '{uv_map}' at {res}×{res}; raise the resolution or "
                                  "check the UVs lie in the 0–1 square")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, tiles)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):

@@ -198,6 +198,14 @@ OPTIONS = (
            group="output", cli="--uv"),
     Option("resolution", "int", 1024, "Resolution", "Texel mode: image size in texels",
            group="output", min=1, max=16384),
+    Option("udim", "bool", False, "UDIM Tiles",
+           "Texel mode: bake every UDIM tile the UVs use (tile 1001 + u + 10 v), one EXR per "
+           "tile with its own margin, loaded as one tiled image (<UDIM> in its file name)",
+           group="output"),
+    Option("atlas", "str", "", "Atlas",
+           "Texel mode: bake every object into one image of this name, for objects sharing "
+           "one UV atlas; texels two objects claim are reported (empty = an image per object)",
+           group="output"),
     Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder",
            group="output", subtype='DIR_PATH'),
     Option("show_proxies", "bool", True, "Show Proxies", "Show the fitted shells as empties "
