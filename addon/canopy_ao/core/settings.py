@@ -187,9 +187,9 @@ OPTIONS = (
            "Texel mode with a channel: the Blender image (square, Resolution texels) whose "
            "channel gets the AO; saved to its file if it has one", group="output"),
     Option("thickness", "bool", False, "Canopy Thickness",
-           "Also bake how deep each point lies in its tree's canopy (0 on the fitted shells' "
-           "outer surface, 1 at a shell's centre, scale-free; τ times it is the optical depth "
-           "out along the shell's radius) into a grey attribute or image, and, with Wire "
+           "Also bake how deep each point lies in its tree's canopy (0 on the fitted crown "
+           "ellipsoid's surface, 1 at its centre, scale-free; τ times it is the optical depth "
+           "out along its radius) into a grey attribute or image, and, with Wire "
            "Material, a render pass", group="output"),
     Option("thickness_name", "str", "CanopyThickness", "Thickness Name",
            "The thickness's attribute (per vertex), image name suffix (per texel) and AOV",
