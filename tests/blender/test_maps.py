@@ -20,13 +20,7 @@ def tree(tmp_path):
     ground = H.add_plane(size=6.0, subdivisions=11, name="Ground")
     bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=1.2,
                                          location=(0, 0, 1.6))
-    leaves = bpy.context.object
-    leaves.name = "Leaves"
-    ground.canopy_ao.role, leaves.canopy_ao.role = 'GROUND', 'CANOPY'
-    for ob in bpy.context.scene.objects:
-        ob.select_set(False)
-    bpy.context.view_layer.update()
-    return dict(ground=ground, leaves=leaves, image_dir=str(tmp_path))
+    return H.leaves_over_ground(ground, bpy.context.object, tmp_path)
 
 
 def opts(**kw):
