@@ -107,3 +107,20 @@ def test_command_line_takes_the_channel_and_the_thickness():
     with pytest.raises(SystemExit) as exc:
         cli.build_parser().parse_args(["--channel", "X"])
     assert exc.value.code == 2
+
+
+def test_a_texel_takes_the_crown_it_lies_in_whatever_the_crowns_rotation():
+    """Receivers without a vertex (texels) of a mesh holding two trees take the crown nearest
+    in its own unit frame, where the Ellipsoid's axes are its columns."""
+    import importlib
+    from canopy_ao.core.scene import Plan
+    bake = importlib.import_module("canopy_ao.core.bake")  # core.bake is also the function
+    long = _core.Ellipsoid(np.zeros(3, np.float32), _rotation(5).astype(np.float32),
+                           np.float32([4.0, 0.3, 0.3]))
+    ball = _core.Ellipsoid(np.float32([2.5, 2.5, 2.5]), np.eye(3, dtype=np.float32),
+                           np.float32([1.0, 1.0, 1.0]))
+    plan = Plan(settings=None, method="ellipsoid", tau=1.0,
+                fits={"A": (None, long, [long]), "B": (None, ball, [ball])})
+    tip = _on_shell(long, np.array([[0.95, 0.0, 0.0], [-0.95, 0.0, 0.0]]))
+    assert np.all(long.contains(tip.astype(np.float32)))
+    assert list(bake._nearest_crown(plan, ("A", "B"), tip)) == [0, 0]
