@@ -273,3 +273,25 @@ def test_cycles_checks_every_tile_and_each_atlas_object_on_its_own_texels(tree):
     _j, rep = run_bake(bpy.context, ["Ground"], opts(check_cycles=True, cycles_samples=16,
                                                      attribute="Packed", channel="B"))
     assert rep["objects"]["Ground"]["cycles"]["mae"] < 0.2
+
+
+def test_channel_into_a_saved_png_is_saved_and_the_other_bytes_stay(tree):
+    res = 16
+    img = bpy.data.images.new("Mask", res, res, alpha=True)
+    vals = np.random.default_rng(3).integers(0, 256, res * res * 4) / 255.0
+    img.pixels.foreach_set(vals.astype(np.float32))
+    path = os.path.join(tree["image_dir"], "mask.png")
+    img.filepath_raw = path
+    img.file_format = 'PNG'
+    img.save()
+    img.source = 'FILE'
+    img.reload()
+    before = _core.read_image(path)
+    run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res, channel="G",
+                                           pack_image="Mask", image_dir=tree["image_dir"]))
+    after = _core.read_image(path)
+    assert before.shape == after.shape == (res, res, 4)
+    keep = [0, 2, 3]
+    assert np.array_equal(np.round(after[..., keep] * 255), np.round(before[..., keep] * 255))
+    assert not np.array_equal(after[..., 1], before[..., 1])
+    assert not [f for f in os.listdir(tree["image_dir"]) if "previous" in f]  # no backup left
