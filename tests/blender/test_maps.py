@@ -144,13 +144,20 @@ def test_thickness_per_vertex_wired_as_a_pass(tree_scene_objects):
 
 def test_thickness_per_texel_writes_its_own_image(tree):
     _job, rep = run_bake(bpy.context, ["Leaves"], opts(
-        mode='TEXEL', resolution=32, thickness=True, image_dir=tree["image_dir"]))
+        mode='TEXEL', resolution=32, thickness=True, image_dir=tree["image_dir"],
+        wire_material=True))
     path = rep["objects"]["Leaves"]["texel"]["thickness_path"]
     assert os.path.exists(path) and path != rep["objects"]["Leaves"]["texel"]["path"]
     img = next(i for i in bpy.data.images if i.get("canopy_ao_map") == "CanopyThickness")
     px = np.empty(32 * 32 * 4, np.float32)
     img.pixels.foreach_get(px)
     assert 0.0 <= px.min() and px.max() <= 1.0
+    nt = tree["leaves"].material_slots[0].material.node_tree
+    (src,) = [n for n in nt.nodes if n.get("canopy_ao") == "thickness_source"]
+    (uv,) = [n for n in nt.nodes if n.get("canopy_ao") == "uv"]
+    assert src.image == img and src.inputs["Vector"].links[0].from_node == uv
+    (ao,) = [n for n in nt.nodes if n.get("canopy_ao") == "source"]
+    assert ao.image != img  # the AO keeps its own image
 
 
 def _uvs(obj):
