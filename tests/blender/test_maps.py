@@ -109,7 +109,10 @@ def test_channel_into_a_float_and_a_byte_image_keeps_the_other_channels(tree):
     assert ground.name  # the object itself is untouched by packing
 
 
-def test_texel_channel_needs_an_image_of_the_right_size(tree):
+def test_refusals_before_anything_is_written(tree):
+    for name in ("", "CanopyAO", "BakedAO"):  # no name, the AO's attribute, the AO's AOV
+        with pytest.raises(CanopyAOError, match="a name of its own"):
+            run_bake(bpy.context, ["Ground"], opts(thickness=True, thickness_name=name))
     with pytest.raises(CanopyAOError, match="no image named"):
         run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', channel="R", pack_image="Nope"))
     bpy.data.images.new("Small", 8, 8)
@@ -220,6 +223,11 @@ def test_udim_bake_writes_each_used_tile_with_its_margin(tree):
     assert rep["objects"]["Ground"]["texel"]["tiles"] == [1001]
     assert not os.path.exists(os.path.join(tree["image_dir"], "Ground_CanopyAO.1002.exr"))
     assert [t.number for t in image.tiles] == [1001]
+    # Without UDIM the same image of the object is a plain one again.
+    run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res,
+                                           image_dir=tree["image_dir"]))
+    assert image.source == 'FILE' and "<UDIM>" not in image.filepath
+    assert [i for i in bpy.data.images if i.get("canopy_ao_object") == "Ground"] == [image]
 
 
 def test_two_objects_into_one_atlas_each_write_their_own_texels(tree):

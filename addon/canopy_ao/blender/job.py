@@ -46,10 +46,10 @@ class BakeJob:
                     materials.check_aov_name(opts["thickness_name"])
             except ValueError as exc:
                 raise CanopyAOError(str(exc)) from None
-        if opts["thickness"] and opts["thickness_name"] in (opts["attribute"],
+        if opts["thickness"] and opts["thickness_name"] in ("", opts["attribute"],
                                                             opts["aov_name"]):
-            raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is also the "
-                                "AO's attribute or AOV; give it a name of its own")
+            raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
+                                "also the AO's attribute or AOV; give it a name of its own")
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()

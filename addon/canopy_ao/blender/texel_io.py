@@ -210,36 +210,51 @@ def write_exr(path, ao):
         raise CanopyAOError(f"Could not write '{path}': {exc}") from exc
 
 
-def _find_our_image(obj, suffix="CanopyAO"):
+def find_image(key, value, suffix="CanopyAO"):
+    """Our image whose property key is value (OBJ_KEY: the object's name) holding map suffix."""
     for img in bpy.data.images:
-        if img.get(TAG) and img.get(OBJ_KEY) == obj.name and \
-                img.get(MAP_KEY, "CanopyAO") == suffix:
+        if img.get(TAG) and img.get(key) == value and img.get(MAP_KEY, "CanopyAO") == suffix:
             return img
     return None
 
 
-def load_image(obj, path, suffix="CanopyAO"):
-    """(image, undo): obj's image of ours, (re)loaded from path; undo() puts back what was."""
-    img = _find_our_image(obj, suffix)
+def _retile(img, path, source, numbers=None):
+    """Point img at path with source 'FILE' or 'TILED' (which finds name.<tile>.exr beside it
+    and sets the <UDIM> token), keeping only the tiles in numbers: a tile no longer baked must
+    not stay."""
+    img.source = 'FILE'
+    img.filepath = path
+    img.source = source
+    img.reload()
+    if source == 'TILED' and numbers is not None:
+        for tile in [t for t in img.tiles if t.number not in numbers]:
+            img.tiles.remove(tile)
+
+
+def load_image(obj, path, suffix="CanopyAO", key=OBJ_KEY, name=None, numbers=None,
+               tiled=False):
+    """(image, undo): our image of obj (or, key=tiles_io.ATLAS_KEY, of the atlas named obj),
+    (re)loaded from path, tiled when asked (path: the first tile's file); undo() puts back
+    what was."""
+    value = obj if isinstance(obj, str) else obj.name
+    img = find_image(key, value, suffix)
     if img is not None:
-        old = img.filepath
+        old = (img.filepath, img.source, [t.number for t in img.tiles])
 
         def undo():
-            img.filepath = old
-            img.reload()
-        img.filepath = path
-        img.reload()
+            _retile(img, *old)
     else:
         # Never touches a user image of the same name: load() makes a new datablock and Blender
         # gives it a free name.
         img = bpy.data.images.load(path, check_existing=False)
-        img.name = image_name(obj, suffix)
+        img.name = name or f"{value}_{suffix}"
         img[TAG] = True
-        img[OBJ_KEY] = obj.name
+        img[key] = value
         img[MAP_KEY] = suffix
 
         def undo():
             bpy.data.images.remove(img)
+    _retile(img, path, 'TILED' if tiled else 'FILE', numbers)
     img.colorspace_settings.name = "Non-Color"  # AO is data, not a colour to convert
     return img, undo
 

@@ -10,7 +10,6 @@ tile is rasterised and dilated on its own and its margin never bleeds into a nei
 import os
 from types import SimpleNamespace
 
-import bpy
 import numpy as np
 
 from . import cycles_check, texel_io
@@ -35,50 +34,6 @@ def split_tiles(uvs):
         rows = (tris[:, None] * 3 + np.arange(3)).ravel()
         out.append((int(n), rows, ((n - 1001) % 10, (n - 1001) // 10)))
     return out, int(np.count_nonzero(~ok))
-
-
-def _find(key, value, suffix):
-    for img in bpy.data.images:
-        if img.get(texel_io.TAG) and img.get(key) == value and \
-                img.get(texel_io.MAP_KEY, "CanopyAO") == suffix:
-            return img
-    return None
-
-
-def _retile(img, path, source, numbers=None):
-    """Point img at path with the given source; a tiled one finds name.<tile>.exr beside it
-    (and sets the <UDIM> token), and keeps only the tiles in numbers (a tile no longer baked
-    must not stay)."""
-    img.source = 'FILE'
-    img.filepath = path
-    img.source = source
-    img.reload()
-    if source == 'TILED' and numbers is not None:
-        for tile in [t for t in img.tiles if t.number not in numbers]:
-            img.tiles.remove(tile)
-
-
-def _load(key, value, name, suffix, first_path, numbers, tiled):
-    """(image, undo): our image (found by key = value and its map), (re)loaded from the first
-    tile's file, tiled when asked; undo() puts back what was."""
-    img = _find(key, value, suffix)
-    if img is not None:
-        old = (img.filepath, img.source, [t.number for t in img.tiles])
-
-        def undo():
-            _retile(img, *old)
-    else:
-        img = bpy.data.images.load(first_path, check_existing=False)
-        img.name = name
-        img[texel_io.TAG] = True
-        img[key] = value
-        img[texel_io.MAP_KEY] = suffix
-
-        def undo():
-            bpy.data.images.remove(img)
-    _retile(img, first_path, 'TILED' if tiled else 'FILE', numbers)
-    img.colorspace_settings.name = "Non-Color"
-    return img, undo
 
 
 def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, atlas=False,
@@ -119,9 +74,9 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
         stats["tiles"][n], stats["claimed"][n] = (img, mask), claims
         stats["paths"].append(path)
     stats["shared_texels"] = int(sum(np.count_nonzero(c > 1) for c in stats["claimed"].values()))
-    name = f"{owner if atlas else owner.name}_{suffix}"
-    image, undo = _load(ATLAS_KEY if atlas else texel_io.OBJ_KEY, owner if atlas else owner.name,
-                        name, suffix, stats["paths"][0], numbers, tiled)
+    image, undo = texel_io.load_image(owner, stats["paths"][0], suffix,
+                                      ATLAS_KEY if atlas else texel_io.OBJ_KEY,
+                                      numbers=numbers, tiled=tiled)
     undo_image.append(undo)
     return image, stats
 
