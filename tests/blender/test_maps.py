@@ -115,6 +115,11 @@ def test_refusals_before_anything_is_written(tree):
             run_bake(bpy.context, ["Ground"], opts(thickness=True, thickness_name=name))
     with pytest.raises(CanopyAOError, match="no image named"):
         run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', channel="R", pack_image="Nope"))
+    uv = _uvs(tree["ground"])
+    _set_uvs(tree["ground"], uv - 3.0)  # every triangle left of tile 1001
+    with pytest.raises(CanopyAOError, match="no triangle of UV map 'UVMap' lies in a UDIM"):
+        run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', udim=True))
+    _set_uvs(tree["ground"], uv)
     bpy.data.images.new("Small", 8, 8)
     with pytest.raises(CanopyAOError, match="Resolution to 8"):
         run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=16, channel="R",

@@ -135,6 +135,10 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
     from .tiles_io import split_tiles
     parts, outside = split_tiles(uvs) if udim else ([(1001, slice(None), (0, 0))], 0)
+    if not parts:
+        raise CanopyAOError(f"Object '{obj.name}': no triangle of UV map '{uv_map}' lies in a "
+                            "UDIM tile (1001–1999: u in [0, 10), v >= 0); move its UVs there "
+                            "or bake without UDIM Tiles")
     got, tiles, stats = [], [], {}
     for number, rows, (du, dv) in parts:
         tile_uvs = uvs[rows] - np.float32([du, dv]) if du or dv else uvs[rows]
