@@ -1,6 +1,7 @@
 """Measure the cost model's constants (addon/canopy_ao/core/cost.py, SECONDS_PER_UNIT).
 
-    /usr/bin/python3 bench/cost_constants.py [--scene round_tree] [--repeats 5]
+    /usr/bin/python3 bench/cost_constants.py [--scene round_tree] [--quick] [--samples 64]
+                                             [--repeats 3]
 
 Bakes every receiver of a scene with each rung on ONE thread, takes the best of a few runs
 (the least disturbed by other work on the machine), and divides by the work the cost model
@@ -29,9 +30,11 @@ UNIT_OF = {"ellipsoid": "shell", "medium": "medium", "grid": "voxel_step",
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scene", default="round_tree")
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--quick", action="store_true", help="the scene's quick size")
+    ap.add_argument("--samples", type=int, default=64, help="rays per point (the default's)")
+    ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
-    scene = cs.make_scene(args.scene, quick=True)
+    scene = cs.make_scene(args.scene, quick=args.quick)
     items = [core.SceneItem(p.name, p.role.upper(), p.tree or "T", p.vertices,
                             cs.vertex_normals(p.vertices, p.triangles), p.triangles)
              for p in scene]
@@ -40,7 +43,7 @@ def main():
     try:
         rows = []
         for method in ("sphere", "ellipsoid", "shells", "medium", "grid", "raytrace"):
-            s = core.BakeSettings(method=method, tau=1.5, samples=16)
+            s = core.BakeSettings(method=method, tau=1.5, samples=args.samples)
             plan = core.prepare(items, s)
             if method in ("raytrace",) or plan.tracer is None:
                 plan.tracer = plan.tracer or lighting.build_tracer(items)

@@ -409,6 +409,30 @@ def c_write_read(g, core, tmp):
     return call, check_image
 
 
+def c_properties(g, core, tmp):
+    """The remaining methods and properties: volume, pickling, repr, the objects' sizes."""
+    import pickle
+
+    def call():
+        e, sph = g.ellipsoid(core), g.sphere(core)
+        assert np.isfinite(e.volume()) and e.volume() > 0
+        for obj in (e, sph):  # unpickling re-orthonormalises the axes: equal to ~1 ulp
+            back = pickle.loads(pickle.dumps(obj))
+            for field in ("center", "radius", "radii", "axes"):
+                if hasattr(obj, field):
+                    assert np.allclose(getattr(back, field), getattr(obj, field), rtol=1e-6,
+                                       atol=1e-6), f"pickled {field} differs"
+        v, t = g.mesh()
+        grid, tracer = core.DensityGrid(v, t, g.integer(1, 16)), core.RayTracer(v, t)
+        field = core.OccluderField(g.shells(core), g.tau())
+        assert np.isfinite(grid.voxel_size) and grid.levels >= 1 and len(grid.shape) == 3
+        assert np.all(np.isfinite(grid.origin)) and np.isfinite(grid.total_area)
+        assert tracer.vertex_count == len(v) and np.isfinite(tracer.auto_offset)
+        assert field.max_candidates <= len(field)
+        return [repr(x) for x in (grid, tracer)]
+    return call, None
+
+
 def c_threads(g, core, tmp):
     def call():
         previous = core.set_max_threads(g.integer(0, 4))
@@ -460,32 +484,55 @@ def worker(seed, only):
     sys.path.insert(0, ADDON)
     from canopy_ao import _core as core
     core.medium_ao(0.5, 0.5, 1.0)  # build the medium table before the first timed call
-    sys.stdout.write("ready\n")
+    sys.stdout.write(Runner.PREFIX + "ready\n")
     sys.stdout.flush()
     with tempfile.TemporaryDirectory() as tmp:
         for line in sys.stdin:
             case = int(line)
             name, status, detail = run_case(core, tmp, seed, case, only)
-            sys.stdout.write(json.dumps([case, name, status, detail]) + "\n")
+            sys.stdout.write(Runner.PREFIX + json.dumps([case, name, status, detail]) + "\n")
             sys.stdout.flush()
 
 
 # === Parent: feeds cases, enforces the time limit, attributes hangs and crashes
 class Runner:
-    def __init__(self, seed, timeout, only=None):
-        self.seed, self.timeout, self.only = seed, timeout, only
+    """Feeds case numbers to a worker process (cmd) one at a time, one JSON answer line each
+    ([case, name, status, detail], after PREFIX); the worker prints PREFIX + "ready" once it
+    has started (untimed). Lines without PREFIX are the worker's own noise (Blender's)."""
+
+    PREFIX = "@@fuzz "
+
+    def __init__(self, cmd, timeout, start_timeout=180.0, env=None):
+        self.cmd, self.timeout, self.start_timeout, self.env = cmd, timeout, start_timeout, env
         self.child = None
 
+    def _line(self, timeout):
+        """The next PREFIX line's payload, "" if the worker died, None on timeout. Reads the
+        pipe's file descriptor itself (a buffered reader could hold a complete line that
+        select() would never report)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            while b"\n" in self.buffer:
+                line, self.buffer = self.buffer.split(b"\n", 1)
+                text = line.decode("utf-8", "replace") + "\n"
+                if text.startswith(self.PREFIX):
+                    return text[len(self.PREFIX):]
+            left = deadline - time.monotonic()
+            ready, _, _ = select.select([self.child.stdout], [], [], max(left, 0))
+            if not ready:
+                return None
+            chunk = os.read(self.child.stdout.fileno(), 65536)
+            if not chunk:
+                return ""
+            self.buffer += chunk
+
     def start(self):
-        cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--seed", str(self.seed)]
-        if self.only:
-            cmd += ["--only", self.only]
-        self.child = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                      stderr=subprocess.DEVNULL, text=True, bufsize=1)
-        ready, _, _ = select.select([self.child.stdout], [], [], 120)  # start-up, untimed
-        if not ready or self.child.stdout.readline() != "ready\n":
+        self.child = subprocess.Popen(self.cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                      stderr=subprocess.DEVNULL, env=self.env)
+        self.buffer = b""
+        if self._line(self.start_timeout) != "ready\n":
             self.stop()
-            raise RuntimeError("the fuzz worker did not start (is canopy_ao._core built?)")
+            raise RuntimeError(f"the fuzz worker did not start: {' '.join(self.cmd)}")
 
     def stop(self):
         if self.child is not None:
@@ -495,18 +542,15 @@ class Runner:
             self.child.stdout.close()
             self.child = None
 
-    def run(self, case):
+    def run(self, case, name):
         if self.child is None:
             self.start()
-        names = [self.only] if self.only else sorted(CASES)
-        name = names[case % len(names)]
-        self.child.stdin.write(f"{case}\n")
+        self.child.stdin.write(f"{case}\n".encode())
         self.child.stdin.flush()
-        ready, _, _ = select.select([self.child.stdout], [], [], self.timeout)
-        if not ready:
+        line = self._line(self.timeout)
+        if line is None:
             self.stop()
             return name, "hang", f"no answer within {self.timeout} s"
-        line = self.child.stdout.readline()
         if not line:
             code = self.child.wait()
             self.stop()
@@ -515,14 +559,18 @@ class Runner:
         return name, status, detail
 
 
-def fuzz(cases, seed=1, timeout=20.0, only=None, first=0, verbose=False):
-    """Runs cases [first, first + cases); returns {name: [tried, failed, ok]}, {outcome: count}
-    and the failures [(case, name, outcome, detail)]."""
-    runner = Runner(seed, timeout, only)
+def module_runner(seed, timeout, only=None):
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", "--seed", str(seed)]
+    return Runner(cmd + (["--only", only] if only else []), timeout)
+
+
+def tally(runner, names, cases, first=0, verbose=False):
+    """Runs cases [first, first + cases) through runner; names(case) = the case's function.
+    Returns {name: [tried, failed, ok]}, {outcome: count}, [(case, name, outcome, detail)]."""
     by_name, failures, kinds = {}, [], {}
     try:
         for case in range(first, first + cases):
-            name, status, detail = runner.run(case)
+            name, status, detail = runner.run(case, names(case))
             row = by_name.setdefault(name, [0, 0, 0])
             row[0] += 1
             row[2] += status == "ok"
@@ -535,6 +583,25 @@ def fuzz(cases, seed=1, timeout=20.0, only=None, first=0, verbose=False):
     finally:
         runner.stop()
     return by_name, kinds, failures
+
+
+def print_table(by_name, kinds, label, seed, seconds):
+    tried = sum(r[0] for r in by_name.values())
+    failed = sum(r[1] for r in by_name.values())
+    print(f"\n{'function':22s} {'tried':>7s} {'ok':>7s} {'refused':>7s} {'failed':>7s}")
+    for name, (t, f, ok) in sorted(by_name.items()):
+        print(f"{name:22s} {t:7d} {ok:7d} {t - ok - f:7d} {f:7d}")
+    print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
+    print(f"{label}: {tried} cases tried, {failed} failed (crashes {kinds.get('crash', 0)}, "
+          f"hangs {kinds.get('hang', 0)}), seed {seed}, {seconds:.0f} s")
+    return failed
+
+
+def fuzz(cases, seed=1, timeout=20.0, only=None, first=0, verbose=False):
+    """Runs module cases [first, first + cases); see tally()."""
+    names = [only] if only else sorted(CASES)
+    return tally(module_runner(seed, timeout, only), lambda c: names[c % len(names)], cases,
+                 first, verbose)
 
 
 def main(argv=None):
@@ -552,15 +619,7 @@ def main(argv=None):
     first, cases = (a.case, 1) if a.case is not None else (0, a.cases)
     t0 = time.time()
     by_name, kinds, failures = fuzz(cases, a.seed, a.timeout, a.only, first, verbose=True)
-    tried = sum(r[0] for r in by_name.values())
-    failed = sum(r[1] for r in by_name.values())
-    print(f"\n{'function':22s} {'tried':>7s} {'ok':>7s} {'refused':>7s} {'failed':>7s}")
-    for name, (t, f, ok) in sorted(by_name.items()):
-        print(f"{name:22s} {t:7d} {ok:7d} {t - ok - f:7d} {f:7d}")
-    print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
-    print(f"module fuzz: {tried} cases tried, {failed} failed "
-          f"(crashes {kinds.get('crash', 0)}, hangs {kinds.get('hang', 0)}), seed {a.seed}, "
-          f"{time.time() - t0:.0f} s")
+    failed = print_table(by_name, kinds, "module fuzz", a.seed, time.time() - t0)
     return 1 if failed else 0
 
 

@@ -18,6 +18,12 @@ mkdir -p "$out"
 out=$(cd "$out" && pwd)
 
 scripts/install_deps.sh
+version=$(scripts/blender_version.sh)
+if [[ $(printf '%s\n' "$version" 4.2 | sort -V | head -n1) != 4.2 ]]; then
+  echo "build_extension.sh: extensions need Blender 4.2 or later (this Blender: $version);" \
+    "on older Blenders use scripts/install_addon.sh" >&2
+  exit 1
+fi
 scripts/build.sh >/dev/null
 build=${CANOPY_AO_BUILD_DIR:-build}
 python=$(cat "$build/python_executable")

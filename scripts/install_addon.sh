@@ -76,7 +76,7 @@ fi
 
 if [ "$enable" = 1 ]; then
   # Without --factory-startup: enable in (and save) the user's own preferences.
-  BLENDER_USER_SCRIPTS="$(dirname "$dest")" "$blender" -b --python-expr \
+  BLENDER_USER_SCRIPTS="$(dirname "$dest")" "$blender" -b --python-exit-code 1 --python-expr \
     'import addon_utils, bpy, sys
 mod = addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
 if mod is None:

@@ -48,7 +48,9 @@ step blender -b --factory-startup --python examples/make_scene.py -- \
   --scene "$scene" --out "out/$scene.blend" "${quick[@]}"
 
 echo "== Baking Canopy AO headless (method: $method), checked against Cycles"
-step blender -b "out/$scene.blend" --addons canopy_ao --python-expr \
+# --python-exit-code 1: a failing expression (say, the add-on not found) must fail the step;
+# Blender alone would exit 0.
+step blender -b "out/$scene.blend" --addons canopy_ao --python-exit-code 1 --python-expr \
   "import canopy_ao.cli; canopy_ao.cli.main()" -- \
   --all --method "$method" --wire-material --check-cycles --save \
   --report "out/$scene.report.json"

@@ -23,11 +23,25 @@ run_leg() {
   if [[ $leg == host ]]; then
     CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh
   else
-    "${as_root[@]}" scripts/chroot.sh "$leg" setup &&
-      CANOPY_AO_BUILD_DIR="build-$leg" "${as_root[@]}" \
+    local ok=0
+    wait "${setup_pid[$leg]}" || ok=$?
+    cat "$setup_logs/$leg"
+    ((ok == 0)) || { echo "test.sh: the $leg chroot could not be set up" >&2; return 1; }
+    CANOPY_AO_BUILD_DIR="build-$leg" "${as_root[@]}" \
         scripts/chroot.sh "$leg" run /canopy-ao/scripts/test_suite.sh
   fi
 }
+
+# Chroots that are not ready yet are made in the background while the earlier legs run
+# (debootstrap and apt are mostly waiting on the archive); each leg then waits for its own.
+declare -A setup_pid
+setup_logs=$(mktemp -d)
+trap 'rm -rf "$setup_logs"' EXIT
+for leg in "${legs[@]}"; do
+  [[ $leg == host ]] && continue
+  "${as_root[@]}" scripts/chroot.sh "$leg" setup >"$setup_logs/$leg" 2>&1 &
+  setup_pid[$leg]=$!
+done
 
 passed=0 failed=0 summary=()
 for leg in "${legs[@]}"; do

@@ -7,10 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$PWD
 
-version=$(blender -b --factory-startup --python-expr \
-  'import bpy; print("CANOPY_AO_BV=%d.%d" % bpy.app.version[:2])' 2>/dev/null |
-  sed -n 's/^CANOPY_AO_BV=//p')
-[[ -n $version ]] || { echo "test_extension.sh: could not ask Blender for its version" >&2; exit 1; }
+version=$(scripts/blender_version.sh)
 if [[ $(printf '%s\n' "$version" 4.2 | sort -V | head -n1) != 4.2 ]]; then
   echo "== Extension test skipped: Blender $version has no extensions (4.2+)"
   exit 0
@@ -35,7 +32,7 @@ blender -b --factory-startup --python examples/make_scene.py -- \
   --scene round_tree --quick --out "$tmp/scene.blend" >"$tmp/scene.log" 2>&1 ||
   { cat "$tmp/scene.log" >&2; exit 1; }
 cd "$tmp"  # nothing of the repository on sys.path
-blender -b --factory-startup "$tmp/scene.blend" --python-expr \
+blender -b --factory-startup "$tmp/scene.blend" --python-exit-code 1 --python-expr \
   "import bl_ext.user_default.canopy_ao.cli as cli; cli.main()" -- \
   --all --method sphere --report "$tmp/report.json" >"$tmp/bake.log" 2>&1 ||
   { cat "$tmp/bake.log" >&2; echo "bake through the extension failed" >&2; exit 1; }

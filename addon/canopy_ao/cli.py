@@ -40,8 +40,10 @@ def _add_option(p, o):
                        default=None, help=o.help)
     elif o.kind == "enum":
         ids = [i[0].lower() for i in o.items]
+        each = "; ".join(f"{i[0].lower()}: {i[2]}" for i in o.items if len(i) > 2 and i[2])
         p.add_argument(o.flag, dest=o.name, type=_arg_type(o), default=None,
-                       metavar="{" + ",".join(ids) + "}", help=text)
+                       metavar="{" + ",".join(ids) + "}",
+                       help=f"{text}. {each}" if each else text)
     else:
         p.add_argument(o.flag, dest=o.name, type=_arg_type(o), default=None,
                        metavar="auto|N" if o.none_prop else o.flag.lstrip("-").upper(),

@@ -28,7 +28,8 @@ namespace canopy_ao::py_bind {
 namespace py = pybind11;
 
 // Only exact float32 / int32 C-contiguous arrays pass: anything else would mean a silent copy
-// (float64 positions from Blender are 40× slower to move, DESIGN 9).
+// (float64 positions from Blender are 40× slower to move, docs/DESIGN.md, 'Facts measured in
+// Blender').
 using FloatArray = py::array;
 using IntArray = py::array;
 

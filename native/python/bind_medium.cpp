@@ -134,7 +134,8 @@ void bind_medium(py::module_& m) {
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
       "ao_medium_ellipsoid(positions, normals, ellipsoid, tau) -> float32 (N,)\n\n"
-      "ao_medium_sphere after mapping the ellipsoid to the unit sphere (DESIGN 3.2). "
+      "ao_medium_sphere after mapping the ellipsoid to the unit sphere (docs/DESIGN.md, "
+      "'The method ladder'). "
       "Approximation: exact for spheres; for an elongated ellipsoid it is the medium whose "
       "optical depth centre-to-surface is tau along every axis, with the cosine lobe taken in "
       "the mapped frame.");
@@ -187,7 +188,8 @@ void bind_medium(py::module_& m) {
   py::class_<DensityGrid>(m, "DensityGrid",
                           "Leaf area voxelised into an extinction grid (sigma = area / (2 * "
                           "voxel volume)) with a mip pyramid; AO by line integrals through it "
-                          "(DESIGN 3.6). Build once, query many times: the query cost does not "
+                          "(docs/DESIGN.md, 'The method ladder'). Build once, query many "
+                          "times: the query cost does not "
                           "depend on the triangle count.")
       .def(py::init(&make_grid), py::arg("vertices"), py::arg("triangles"),
            py::arg("resolution") = 48,

@@ -78,7 +78,8 @@ void bind_models(py::module_& m) {
       },
       py::arg("positions"), py::arg("normals"), py::arg("ellipsoid"), py::arg("tau"),
       py::arg("band") = 0.1,
-      "Canopy-shell AO for one ellipsoid: mapped to the unit sphere (DESIGN 3.2), then as "
+      "Canopy-shell AO for one ellipsoid: mapped to the unit sphere (docs/DESIGN.md, "
+      "'The method ladder'), then as "
       "ao_canopy_sphere. Returns float32 (N,) in [0, 1].");
 
   m.def(

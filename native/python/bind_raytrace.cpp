@@ -35,27 +35,106 @@ RayTraceOptions options_arg(const py::object& samples, double distance, const py
   return o;
 }
 
-std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::array& triangles) {
+std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::array& triangles,
+                                       const py::object& prototypes = py::none(),
+                                       const py::object& instance_prototypes = py::none(),
+                                       const py::object& instance_matrices = py::none()) {
   const PointsView v = points_arg(vertices, "vertices", /*allow_empty=*/true);
   std::size_t m = 0;
   const std::int32_t* t = triangles_arg(triangles, "triangles", v.size, &m);
+  // Instanced meshes; `keep` holds their arrays until the build has copied them.
+  std::vector<Prototype> protos;
+  std::vector<py::array> keep;
+  std::vector<Instance> placed;
+  if (!prototypes.is_none()) {
+    for (const py::handle item : prototypes) {
+      const auto pair = py::reinterpret_borrow<py::sequence>(item);
+      if (py::len(pair) != 2) {
+        throw py::value_error("prototypes must be (vertices, triangles) pairs");
+      }
+      keep.push_back(pair[0].cast<py::array>());
+      keep.push_back(pair[1].cast<py::array>());
+      const py::array& pv = keep[keep.size() - 2];
+      const py::array& pt = keep.back();
+      Prototype p;
+      p.vertices = points_arg(pv, "prototype vertices", /*allow_empty=*/true);
+      p.triangles = triangles_arg(pt, "prototype triangles", p.vertices.size, &p.triangle_count);
+      protos.push_back(p);
+    }
+  }
+  if (instance_prototypes.is_none() != instance_matrices.is_none()) {
+    throw py::value_error("give instance_prototypes and instance_matrices together");
+  }
+  if (!instance_prototypes.is_none()) {
+    const auto ip = instance_prototypes.cast<py::array>();
+    const auto im = instance_matrices.cast<py::array>();
+    require_dtype(ip, "instance_prototypes", py::dtype::of<std::int32_t>(), "int32");
+    require_dtype(im, "instance_matrices", py::dtype::of<float>(), "float32");
+    if (ip.ndim() != 1 || im.ndim() != 3 || im.shape(0) != ip.shape(0) || im.shape(1) != 4 ||
+        im.shape(2) != 4) {
+      throw py::value_error("instance_prototypes must be int32 (K,) and instance_matrices "
+                            "float32 (K, 4, 4), got " + shape_str(ip) + " and " +
+                            shape_str(im));
+    }
+    const auto* idx = static_cast<const std::int32_t*>(ip.data());
+    const auto* mat = static_cast<const float*>(im.data());
+    placed.resize(static_cast<std::size_t>(ip.shape(0)));
+    for (std::size_t k = 0; k < placed.size(); ++k) {
+      if (idx[k] < 0) {
+        throw py::value_error("instance_prototypes[" + std::to_string(k) + "] is negative");
+      }
+      placed[k].prototype = static_cast<std::uint32_t>(idx[k]);
+      std::copy(mat + 16 * k, mat + 16 * (k + 1), placed[k].matrix);
+    }
+  }
   py::gil_scoped_release release;
-  return std::make_unique<RayTracer>(v, t, m);
+  return std::make_unique<RayTracer>(v, t, m, protos, placed);
+}
+
+/// An optional int32 (N,) array of own-primitive ids (None → nullptr). Values are range-checked
+/// by RayTracer::ao (std::invalid_argument → ValueError).
+const std::int32_t* ids_arg(const py::object& ids, const char* name, std::size_t n) {
+  if (ids.is_none()) return nullptr;
+  if (!py::isinstance<py::array>(ids)) {
+    throw py::value_error(std::string(name) + " must be None or an int32 numpy array");
+  }
+  const auto a = py::reinterpret_borrow<py::array>(ids);
+  require_dtype(a, name, py::dtype::of<std::int32_t>(), "int32");
+  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != n) {
+    std::ostringstream s;
+    s << name << " must have shape (" << n << ",) like points, got " << shape_str(a);
+    throw py::value_error(s.str());
+  }
+  return static_cast<const std::int32_t*>(a.data());
 }
 
 py::array_t<float> trace(const RayTracer& tracer, const py::array& points,
-                         const py::array& normals, const RayTraceOptions& o) {
+                         const py::array& normals, const RayTraceOptions& o,
+                         const py::object& vertex_ids = py::none(),
+                         const py::object& triangle_ids = py::none()) {
   const Receivers r = receivers_arg(points, normals, "points");
-  py::array_t<float> out = new_floats(r.positions.size);
+  const PointsView p = r.positions, n = r.normals;
+  OwnPrimitives own;
+  own.vertex_ids = ids_arg(vertex_ids, "vertex_ids", p.size);
+  own.triangle_ids = ids_arg(triangle_ids, "triangle_ids", p.size);
+  py::array_t<float> out = new_floats(p.size);
   float* dst = out.mutable_data();
   {
     py::gil_scoped_release release;
-    tracer.ao(r.positions, r.normals, o, dst);
+    tracer.ao(p, n, own, o, dst);
   }
   return out;
 }
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+
+Sampling sampling_arg(const std::string& name) {
+  if (name == "lattice") return Sampling::kLattice;
+  if (name == "sobol") return Sampling::kSobol;
+  if (name == "independent") return Sampling::kIndependent;
+  throw py::value_error("sampling must be 'lattice', 'sobol' or 'independent', got '" + name +
+                        "'");
+}
 
 }  // namespace
 
@@ -64,19 +143,34 @@ void bind_raytrace(py::module_& m) {
                         "An Embree scene of two-sided triangles for ray-traced AO, built once "
                         "(expensive: reuse it for many queries).")
       .def(py::init(&make_tracer), py::arg("vertices"), py::arg("triangles"),
-           "RayTracer(vertices, triangles)\n\n"
+           py::arg("prototypes") = py::none(), py::arg("instance_prototypes") = py::none(),
+           py::arg("instance_matrices") = py::none(),
+           "RayTracer(vertices, triangles, prototypes=None, instance_prototypes=None, "
+           "instance_matrices=None)\n\n"
            "vertices: float32 (V, 3); triangles: int32 (M, 3), indices in [0, V). M may be 0 "
-           "(nothing occludes: AO = 1). The data are copied. Releases the GIL while the BVH "
-           "builds. ValueError on bad input, CanopyAOError if Embree fails.")
+           "(nothing occludes: AO = 1). Instanced meshes (Embree instances: each prototype's "
+           "BVH built once): prototypes, a sequence of (vertices float32 (P, 3), triangles "
+           "int32 (Q, 3)); instance_prototypes int32 (K,), the prototype of each instance; "
+           "instance_matrices float32 (K, 4, 4), row-major world-from-prototype, affine. "
+           "Instances occlude like the own mesh but carry no receivers (vertex_ids and "
+           "triangle_ids refer to the own mesh). The data are copied. Releases the GIL while "
+           "the BVH builds. ValueError on bad input, CanopyAOError if Embree fails.")
       .def(
           "ao",
           [](const RayTracer& self, const py::array& points, const py::array& normals,
-             const py::object& samples, double distance, const py::object& seed, double offset) {
-            return trace(self, points, normals, options_arg(samples, distance, seed, offset));
+             const py::object& samples, double distance, const py::object& seed,
+             double offset, const py::object& vertex_ids, const py::object& triangle_ids,
+             const std::string& sampling) {
+            RayTraceOptions o = options_arg(samples, distance, seed, offset);
+            o.sampling = sampling_arg(sampling);
+            return trace(self, points, normals, o, vertex_ids, triangle_ids);
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("offset") = -1.0,
-          "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0) -> float32 (N,)\n\n"
+          py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
+          py::arg("sampling") = "lattice",
+          "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
+          "triangle_ids=None, sampling='lattice') -> float32 (N,)\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
           "hemisphere of its normal (float32 (N, 3), normalised here; a zero normal gives 1) "
@@ -84,9 +178,19 @@ void bind_raytrace(py::module_& m) {
           "inf = unlimited). Stratified directions rotated per point from (row index, seed): "
           "deterministic, independent of the thread count. Origins move `offset` along the "
           "normal (< 0 = automatic: 1e-5 of the scene diagonal + 1e-6 of its largest "
-          "coordinate; see .auto_offset). Releases the GIL.")
+          "coordinate; see .auto_offset).\n\n"
+          "Receivers on the mesh (as Cycles: a ray skips only what it starts on): vertex_ids, "
+          "int32 (N,), the tracer's vertex each point is (-1 = none): every triangle using it "
+          "is skipped; triangle_ids, int32 (N,), the triangle each point lies on (a texel's; -1 "
+          "= none): that triangle is skipped. Such a point's rays start on its own surface "
+          "(a hair inside its own triangle, the vertex's one facing the normal most squarely; "
+          "no normal offset unless offset >= 0 is given), so a surface it touches (the ground "
+          "under a blade root) still occludes. Ids outside their range: ValueError.\n\n"
+          "sampling: 'lattice' (a Fibonacci lattice rotated per point), 'sobol' (Owen-scrambled "
+          "Sobol' per point) or 'independent' (i.i.d. rays, the baseline). Releases the GIL.")
       .def_property_readonly("vertex_count", &RayTracer::vertex_count)
       .def_property_readonly("triangle_count", &RayTracer::triangle_count)
+      .def_property_readonly("instance_count", &RayTracer::instance_count)
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,
                              "The origin offset used when offset < 0, in scene units.")
       .def("__repr__", [](const RayTracer& self) {

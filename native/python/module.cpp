@@ -16,6 +16,7 @@ void bind_models(py::module_& m);
 void bind_raytrace(py::module_& m);
 void bind_texel(py::module_& m);
 void bind_medium(py::module_& m);
+void bind_features(py::module_& m);
 }  // namespace canopy_ao::py_bind
 
 PYBIND11_MODULE(_core, m) {
@@ -74,4 +75,5 @@ PYBIND11_MODULE(_core, m) {
   py_bind::bind_raytrace(m);
   py_bind::bind_texel(m);
   py_bind::bind_medium(m);
+  py_bind::bind_features(m);
 }

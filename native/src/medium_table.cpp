@@ -209,7 +209,8 @@ double medium_ao_quadrature(double r, double cos_beta, double tau, int samples) 
   std::vector<double> kw(samples), e(samples);
   for (int k = 0; k < samples; ++k) kw[k] = azimuth_lobe(q.mu[k], c, s) * q.w[k];
   transmittances(q, tau, e.data());
-  return std::exp(-tau * effective_chord(q, kw.data(), e.data(), tau));
+  // A chord that round-off makes slightly negative would give AO > 1.
+  return std::min(1.0, std::exp(-tau * effective_chord(q, kw.data(), e.data(), tau)));
 }
 
 double MediumTable::radius_of_node(int ir) {

@@ -70,7 +70,8 @@ float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity,
 
 float occluder_visibility_medium(Vec3 x, Vec3 n, const Ellipsoid& shell,
                                  const MediumTable::Slice& slice, float distance) {
-  // The unit frame of DESIGN 3.2, as the in-shell models: x' = diag(1/r) Qᵀ (x − C), normal by
+  // The unit frame of docs/DESIGN.md, 'The method ladder', as the in-shell models: x' = diag(1/r)
+  // Qᵀ (x − C), normal by
   // the inverse transpose (an affine map keeps the tangent half-space, so "wholly below the
   // horizon" is exact). Measured against the same table on occluder_visibility's equivalent
   // sphere (r = d/r_eq): that one darkened real-mesh grounds almost as much as the old law.

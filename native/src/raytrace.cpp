@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <mutex>
+#include <numeric>
+#include <type_traits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -19,7 +21,7 @@ namespace {
 
 constexpr float kTwoPi = 6.28318530717958647692f;
 // Rays per embree::occluded call (a stream on Embree 3, 8-wide packets on Embree 4): Embree 3's
-// streams are fastest from ~64 rays (DESIGN 9). A batch is flushed once it holds kMinStream rays
+// streams are fastest from ~64 rays (docs/DESIGN.md, 'Facts measured in Blender'). A batch is flushed once it holds kMinStream rays
 // and its last point is complete, so at 64 samples a batch is one point's rays (one origin).
 // Measured on Embree 3: as fast as 256-ray streams mixing four points (within the ±5% noise
 // here), and as fast as a bare per-point rtcOccluded1M loop.
@@ -102,6 +104,86 @@ struct SampleSet {
   }
 };
 
+// --- Owen-scrambled Sobol' points (Burley, "Practical Hash-based Owen Scrambling", JCGT 9(4),
+// 2020): the first two Sobol' dimensions, shuffled and scrambled by a nested-uniform hash per
+// point. Any prefix of 2^k points is a (0, k, 2)-net (stratified in every elementary interval),
+// and any prefix stays well spread, whatever N.
+inline std::uint32_t reverse_bits(std::uint32_t x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+  x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+/// Burley's improved Laine–Karras hash: each bit flips depending only on the bits below it.
+inline std::uint32_t laine_karras(std::uint32_t x, std::uint32_t seed) {
+  x ^= x * 0x3d20adeau;
+  x += seed;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
+  return x;
+}
+
+/// Owen scrambling of a 32-bit fixed-point number in [0, 1): bits from the most significant.
+inline std::uint32_t owen_scramble(std::uint32_t x, std::uint32_t seed) {
+  return reverse_bits(laine_karras(reverse_bits(x), seed));
+}
+
+/// Sobol' dimension 2 (dimension 1 is reverse_bits: van der Corput), 32-bit fixed point.
+inline std::uint32_t sobol2(std::uint32_t i) {
+  std::uint32_t r = 0;
+  for (std::uint32_t v = 1u << 31; i; i >>= 1, v ^= v >> 1) {
+    if (i & 1u) r ^= v;
+  }
+  return r;
+}
+
+/// One point's `n` cosine-weighted directions in its tangent frame (x, y on the unit disk, z =
+/// height: Malley's method, u ∈ [0,1) → radius sqrt(u), height sqrt(1 − u)), from (point
+/// index, seed) alone.
+void point_directions(Sampling sampling, const SampleSet& set, std::size_t index,
+                      std::uint32_t seed, int n, float* xs, float* ys, float* zs) {
+  const std::uint64_t h =
+      mix64(static_cast<std::uint64_t>(index) + mix64(0x9e3779b97f4a7c15ULL ^ seed));
+  constexpr float k24 = 1.0f / 16777216.0f;
+  if (sampling == Sampling::kLattice) {
+    // The shared Fibonacci lattice, Cranley–Patterson-rotated by (du, dv): the shift in v is
+    // one 2-D rotation of the stored (cos, sin), not a sincos per ray.
+    float du, dv;
+    point_shift(index, seed, &du, &dv);
+    const float cr = std::cos(kTwoPi * dv), sr = std::sin(kTwoPi * dv);
+    for (int s = 0; s < n; ++s) {
+      float u = set.u[s] + du;
+      u -= u >= 1.0f ? 1.0f : 0.0f;
+      const float r = std::sqrt(u);
+      zs[s] = std::sqrt(std::max(0.0f, 1.0f - u));
+      xs[s] = r * (set.cos_phi[s] * cr - set.sin_phi[s] * sr);  // r cos(φ_s + 2π dv)
+      ys[s] = r * (set.sin_phi[s] * cr + set.cos_phi[s] * sr);
+    }
+    return;
+  }
+  const auto shuffle = static_cast<std::uint32_t>(h), s0 = static_cast<std::uint32_t>(h >> 32);
+  const auto s1 = static_cast<std::uint32_t>(mix64(h) >> 32);
+  for (int s = 0; s < n; ++s) {
+    float u, v;
+    if (sampling == Sampling::kSobol) {
+      const std::uint32_t i = owen_scramble(static_cast<std::uint32_t>(s), shuffle);
+      u = static_cast<float>(owen_scramble(reverse_bits(i), s0) >> 8) * k24;
+      v = static_cast<float>(owen_scramble(sobol2(i), s1) >> 8) * k24;
+    } else {  // independent: a counter-based hash of (point, sample)
+      const std::uint64_t r = mix64(h + 0x9e3779b97f4a7c15ULL * static_cast<std::uint64_t>(s + 1));
+      u = static_cast<float>(r >> 40) * k24;
+      v = static_cast<float>((r >> 8) & 0xffffffu) * k24;
+    }
+    const float r = std::sqrt(u);
+    xs[s] = r * std::cos(kTwoPi * v);
+    ys[s] = r * std::sin(kTwoPi * v);
+    zs[s] = std::sqrt(std::max(0.0f, 1.0f - u));
+  }
+}
+
 /// Branchless orthonormal basis around unit n (Duff et al., JCGT 6(1) 2017, Listing 3).
 inline void onb(Vec3 n, Vec3* t, Vec3* b) {
   const float sign = std::copysign(1.0f, n.z);
@@ -109,6 +191,63 @@ inline void onb(Vec3 n, Vec3* t, Vec3* b) {
   const float c = n.x * n.y * a;
   *t = {1.0f + sign * n.x * n.x * a, sign * c, -sign * n.x};
   *b = {c, sign + n.y * n.y * a, -n.y};
+}
+
+// === Own primitives
+/// What a query hands to the filter: Embree passes filters a pointer to `base`, the first
+/// member, so the filter can cast it back (standard layout).
+struct TraceContext {
+  embree::QueryContext base;
+  const std::int32_t* own_vertex = nullptr;    // per query point (ray id), −1 = none
+  const std::int32_t* own_triangle = nullptr;  // per query point (ray id), −1 = none
+  const std::uint32_t* indices = nullptr;      // 3M: the tracer's triangles
+};
+static_assert(std::is_standard_layout<TraceContext>::value, "cast from the Embree context");
+
+/// Occlusion filter on every triangle geometry: rejects a hit on the ray's own receiver's
+/// triangles (ray id = query point), so traversal goes on past them. O(1) per hit: a triangle is
+/// a vertex's own when one of its three indices is that vertex.
+void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
+  const auto* c = reinterpret_cast<const TraceContext*>(args->context);
+  if (c->own_vertex == nullptr && c->own_triangle == nullptr) return;
+  for (unsigned k = 0; k < args->N; ++k) {
+    if (args->valid[k] == 0) continue;
+    const unsigned point = RTCRayN_id(args->ray, args->N, k);
+    const unsigned prim = RTCHitN_primID(args->hit, args->N, k);
+    if (c->own_triangle && c->own_triangle[point] == static_cast<std::int32_t>(prim)) {
+      args->valid[k] = 0;
+      continue;
+    }
+    if (c->own_vertex && c->own_vertex[point] >= 0) {
+      const auto v = static_cast<std::uint32_t>(c->own_vertex[point]);
+      const std::uint32_t* t = c->indices + 3 * static_cast<std::size_t>(prim);
+      if (t[0] == v || t[1] == v || t[2] == v) args->valid[k] = 0;
+    }
+  }
+}
+
+/// The start of a receiver lying on its own triangle: x moved towards `target` (that
+/// triangle's centroid) by 1e-3 of the way, at least `precision` (float spacing of the scene's
+/// coordinates), at most half the way. x itself when target = x.
+inline Vec3 own_surface_origin(Vec3 x, Vec3 target, float precision) {
+  const Vec3 d = target - x;
+  const float len = length(d);
+  if (!(len > 0.0f)) return x;
+  const float step = std::min(0.5f * len, std::max(1e-3f * len, precision));
+  return x + d * (step / len);
+}
+
+void check_ids(const std::int32_t* ids, std::size_t n, std::size_t limit, const char* name,
+               const char* what) {
+  if (ids == nullptr) return;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (ids[i] < -1 || (ids[i] >= 0 && static_cast<std::size_t>(ids[i]) >= limit)) {
+      std::ostringstream s;
+      s << name << "[" << i << "] = " << ids[i] << " is neither -1 (none) nor a " << what
+        << " index in [0, " << limit << ")";
+      throw std::invalid_argument(s.str());
+    }
+  }
 }
 
 void check_points(PointsView p, const char* name) {
@@ -124,20 +263,115 @@ void check_points(PointsView p, const char* name) {
   }
 }
 
+/// Attaches triangles (shared buffers: they must outlive the scene) to `scene`; `filter` may be
+/// null. Returns Embree's error state through the caller's check().
+void attach_triangles(RTCDevice device, RTCScene scene, const float* vertices,
+                      std::size_t vertex_count, const std::uint32_t* indices,
+                      std::size_t triangle_count, RTCFilterFunctionN filter) {
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  if (geom == nullptr) return;  // the error callback has the reason
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices, 0,
+                             3 * sizeof(float), vertex_count);
+  rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices, 0,
+                             3 * sizeof(std::uint32_t), triangle_count);
+  if (filter) rtcSetGeometryOccludedFilterFunction(geom, filter);
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);  // the scene holds its own reference
+}
+
+/// The indices of `triangles` (validated), then, when the device culls back faces, each
+/// triangle again with the opposite winding (two-sided occluders: Debian's Embree does not
+/// cull; a build that does gets both windings). Returns the triangle count per winding.
+std::size_t two_sided_indices(const std::int32_t* triangles, std::size_t count, bool culls,
+                              std::vector<std::uint32_t>* out) {
+  out->resize((culls ? 6 : 3) * count);
+  for (std::size_t i = 0; i < 3 * count; ++i) (*out)[i] = static_cast<std::uint32_t>(triangles[i]);
+  if (culls) {
+    std::uint32_t* flipped = out->data() + 3 * count;
+    for (std::size_t j = 0; j < count; ++j) {
+      flipped[3 * j] = (*out)[3 * j];
+      flipped[3 * j + 1] = (*out)[3 * j + 2];
+      flipped[3 * j + 2] = (*out)[3 * j + 1];
+    }
+  }
+  return count;
+}
+
+void check_mesh(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+                const std::string& what) {
+  check_points(vertices, (what + "vertices").c_str());
+  if (triangle_count > 0 && triangles == nullptr) {
+    throw std::invalid_argument(what + "triangles is null");
+  }
+  if (vertices.size > 0xffffffffu || triangle_count > 0x7fffffffu) {
+    throw std::invalid_argument(what + "mesh too large for 32-bit indices");
+  }
+  for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
+    if (triangles[i] < 0 || static_cast<std::size_t>(triangles[i]) >= vertices.size) {
+      std::ostringstream s;
+      s << what << "triangles row " << i / 3 << " has vertex index " << triangles[i]
+        << ", outside [0, " << vertices.size << ")";
+      throw std::invalid_argument(s.str());
+    }
+  }
+}
+
 }  // namespace
 
 // === Impl
 struct RayTracer::Impl {
+  /// A prototype's own scene, instanced by the main one (buffers first: they outlive it).
+  struct Prototype {
+    std::vector<float> vertices;  // 3V + 1 of padding
+    std::vector<std::uint32_t> indices;
+    ScenePtr scene;
+  };
+
   // Declaration order is destruction order reversed: the scene goes before the device, both
   // before the buffers Embree shares and the error record its callback writes to.
   std::unique_ptr<ErrorRecord> errors = std::make_unique<ErrorRecord>();
   std::vector<float> vertices;       // 3V floats + 1 of padding (Embree reads 16 bytes)
   std::vector<std::uint32_t> indices;  // 3M (6M when the device culls back faces)
+  std::vector<std::unique_ptr<Prototype>> prototypes;  // instanced meshes (occluders only)
+  std::size_t instance_count = 0;
+  // The triangles using each vertex (CSR): vertex v's are tris_of[first_tri[v] .. first_tri[v+1]).
+  std::vector<std::uint32_t> first_tri, tris_of;
   std::size_t vertex_count = 0;
   std::size_t triangle_count = 0;
   float auto_offset = 0;
+  float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
   DevicePtr device;
   ScenePtr scene;
+
+  Vec3 vertex(std::uint32_t i) const {
+    return {vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]};
+  }
+  Vec3 centroid(std::uint32_t tri) const {
+    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+    return (vertex(t[0]) + vertex(t[1]) + vertex(t[2])) / 3.0f;
+  }
+  /// Where vertex v's rays aim their start (see own_surface_origin): the centroid of the
+  /// triangle using v whose plane faces unit normal n most squarely (the first such on ties;
+  /// zero-area triangles never), so the start stays on the surface, not inside the solid a
+  /// convex corner bounds. v itself when no triangle with area uses it.
+  Vec3 vertex_target(std::uint32_t v, Vec3 n) const {
+    float best = -1.0f;
+    std::uint32_t pick = 0;
+    for (std::uint32_t k = first_tri[v]; k < first_tri[v + 1]; ++k) {
+      const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tris_of[k]);
+      const Vec3 a = vertex(t[0]);
+      const Vec3 c = cross(vertex(t[1]) - a, vertex(t[2]) - a);
+      const float len = length(c);
+      if (!(len > 0.0f)) continue;
+      const float facing = std::fabs(dot(c, n)) / len;
+      if (facing > best) {
+        best = facing;
+        pick = tris_of[k];
+      }
+    }
+    return best >= 0.0f ? centroid(pick) : vertex(v);
+  }
 
   /// Throws canopy_ao::Error if Embree reported anything since the last check.
   void check(const char* what) const {
@@ -159,38 +393,38 @@ struct RayTracer::Impl {
     throw Error(s.str());
   }
 
-  void attach_triangles(const std::uint32_t* index_data) {
-    RTCGeometry geom = rtcNewGeometry(device.get(), RTC_GEOMETRY_TYPE_TRIANGLE);
-    check("rtcNewGeometry");
-    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                               vertices.data(), 0, 3 * sizeof(float), vertex_count);
-    rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, index_data, 0,
-                               3 * sizeof(std::uint32_t), triangle_count);
-    rtcCommitGeometry(geom);
-    rtcAttachGeometry(scene.get(), geom);
-    rtcReleaseGeometry(geom);  // the scene holds its own reference
-    check("geometry setup");
-  }
 };
 
 // === Constructor
 RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
                      std::size_t triangle_count, const RayTracerBuildOptions& build)
+    : RayTracer(vertices, triangles, triangle_count, {}, {}, build) {}
+
+RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
+                     std::size_t triangle_count, const std::vector<Prototype>& prototypes,
+                     const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
-  check_points(vertices, "vertices");
-  if (triangle_count > 0 && triangles == nullptr) {
-    throw std::invalid_argument("triangles is null");
+  check_mesh(vertices, triangles, triangle_count, "");
+  for (std::size_t k = 0; k < prototypes.size(); ++k) {
+    const Prototype& p = prototypes[k];
+    check_mesh(p.vertices, p.triangles, p.triangle_count,
+               "prototype " + std::to_string(k) + ": ");
   }
-  if (vertices.size > 0xffffffffu || triangle_count > 0x7fffffffu) {
-    throw std::invalid_argument("mesh too large for 32-bit indices");
-  }
-  for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
-    if (triangles[i] < 0 || static_cast<std::size_t>(triangles[i]) >= vertices.size) {
-      std::ostringstream s;
-      s << "triangles row " << i / 3 << " has vertex index " << triangles[i] << ", outside [0, "
-        << vertices.size << ")";
+  for (std::size_t k = 0; k < instances.size(); ++k) {
+    const Instance& in = instances[k];
+    std::ostringstream s;
+    s << "instance " << k << ": ";
+    if (in.prototype >= prototypes.size()) {
+      s << "prototype " << in.prototype << " outside [0, " << prototypes.size() << ")";
       throw std::invalid_argument(s.str());
+    }
+    for (float x : in.matrix) {
+      if (!std::isfinite(x)) throw std::invalid_argument(s.str() + "non-finite matrix entry");
+    }
+    const float* r = in.matrix + 12;  // the last row of an affine matrix: 0 0 0 1
+    if (r[0] != 0.0f || r[1] != 0.0f || r[2] != 0.0f || r[3] != 1.0f) {
+      throw std::invalid_argument(s.str() + "matrix is not affine (last row must be 0 0 0 1)");
     }
   }
   m.vertex_count = vertices.size;
@@ -211,6 +445,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     }
   }
   m.auto_offset = vertices.size ? 1e-5f * length(hi - lo) + 1e-6f * max_abs : 0.0f;
+  m.precision = 1e-6f * max_abs;
 
   // 1. The device, with the error callback registered once so every call can be checked.
   m.device.reset(rtcNewDevice(nullptr));
@@ -220,7 +455,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   }
   rtcSetDeviceErrorFunction(m.device.get(), record_error, m.errors.get());
 
-  // 2. The scene: default flags (ROBUST costs a third of the speed, DESIGN 9).
+  // 2. The scene: default flags (ROBUST costs a third of the speed, docs/DESIGN.md, 'Facts measured in Blender').
   m.scene.reset(rtcNewScene(m.device.get()));
   m.check("rtcNewScene");
   rtcSetSceneFlags(m.scene.get(), build.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
@@ -233,29 +468,68 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   if (vertices.size) {
     std::copy(vertices.data, vertices.data + 3 * vertices.size, m.vertices.begin());
   }
+  const bool culls =
+      rtcGetDeviceProperty(m.device.get(), RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0;
   if (triangle_count > 0) {
-    // Two-sided occluders: Debian's Embree does not cull back faces; if a build does, add
-    // every triangle a second time with the opposite winding.
-    const bool culls =
-        rtcGetDeviceProperty(m.device.get(), RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0;
-    m.indices.resize((culls ? 6 : 3) * triangle_count);
-    for (std::size_t i = 0; i < 3 * triangle_count; ++i) {
-      m.indices[i] = static_cast<std::uint32_t>(triangles[i]);
-    }
-    m.attach_triangles(m.indices.data());
-    if (culls) {
-      std::uint32_t* flipped = m.indices.data() + 3 * triangle_count;
-      for (std::size_t j = 0; j < triangle_count; ++j) {
-        flipped[3 * j] = m.indices[3 * j];
-        flipped[3 * j + 1] = m.indices[3 * j + 2];
-        flipped[3 * j + 2] = m.indices[3 * j + 1];
+    two_sided_indices(triangles, triangle_count, culls, &m.indices);
+    // The triangles using each vertex, in triangle order (where a vertex receiver starts).
+    m.first_tri.assign(vertices.size + 1, 0);
+    for (std::size_t i = 0; i < 3 * triangle_count; ++i) ++m.first_tri[m.indices[i] + 1];
+    for (std::size_t v = 0; v < vertices.size; ++v) m.first_tri[v + 1] += m.first_tri[v];
+    m.tris_of.resize(3 * triangle_count);
+    std::vector<std::uint32_t> fill(m.first_tri.begin(), m.first_tri.end() - 1);
+    for (std::size_t j = 0; j < triangle_count; ++j) {
+      for (int k = 0; k < 3; ++k) {
+        m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
-      m.attach_triangles(flipped);
     }
+    // Both windings share primitive ids, so one filter on the original indices serves both.
+    for (int w = 0; w < (culls ? 2 : 1); ++w) {
+      attach_triangles(m.device.get(), m.scene.get(), m.vertices.data(), vertices.size,
+                       m.indices.data() + 3 * triangle_count * w, triangle_count,
+                       skip_own_primitives);
+    }
+    m.check("geometry setup");
   }
 
-  // 4. The BVH build, on the caller's thread cap (Embree's TBB tasks join this arena).
   tbb::task_arena arena(max_threads());
+  // 4a. Instanced meshes (Embree instances: RTC_GEOMETRY_TYPE_INSTANCE): one scene per
+  // prototype, built once, placed by each instance's matrix. They only occlude: no receiver
+  // lies on them, so they have no filter.
+  for (const Prototype& p : prototypes) {
+    auto pm = std::make_unique<Impl::Prototype>();
+    pm->vertices.assign(3 * p.vertices.size + 1, 0.0f);
+    if (p.vertices.size) std::copy(p.vertices.data, p.vertices.data + 3 * p.vertices.size,
+                                   pm->vertices.begin());
+    two_sided_indices(p.triangles, p.triangle_count, culls, &pm->indices);
+    pm->scene.reset(rtcNewScene(m.device.get()));
+    m.check("rtcNewScene (prototype)");
+    rtcSetSceneFlags(pm->scene.get(),
+                     build.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+    rtcSetSceneBuildQuality(pm->scene.get(), build.high_quality ? RTC_BUILD_QUALITY_HIGH
+                                                                : RTC_BUILD_QUALITY_MEDIUM);
+    for (int w = 0; w < (culls && p.triangle_count ? 2 : 1) && p.triangle_count; ++w) {
+      attach_triangles(m.device.get(), pm->scene.get(), pm->vertices.data(), p.vertices.size,
+                       pm->indices.data() + 3 * p.triangle_count * w, p.triangle_count,
+                       nullptr);
+    }
+    arena.execute([&] { rtcCommitScene(pm->scene.get()); });
+    m.check("prototype setup");
+    m.prototypes.push_back(std::move(pm));
+  }
+  for (const Instance& in : instances) {
+    RTCGeometry geom = rtcNewGeometry(m.device.get(), RTC_GEOMETRY_TYPE_INSTANCE);
+    m.check("rtcNewGeometry (instance)");
+    rtcSetGeometryInstancedScene(geom, m.prototypes[in.prototype]->scene.get());
+    rtcSetGeometryTransform(geom, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, in.matrix);
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(m.scene.get(), geom);
+    rtcReleaseGeometry(geom);
+  }
+  m.instance_count = instances.size();
+  m.check("instance setup");
+
+  // 4. The BVH build, on the caller's thread cap (Embree's TBB tasks join this arena).
   arena.execute([&] { rtcCommitScene(m.scene.get()); });
   m.check("rtcCommitScene");
 }
@@ -267,10 +541,16 @@ RayTracer& RayTracer::operator=(RayTracer&&) noexcept = default;
 float RayTracer::auto_offset() const { return impl_->auto_offset; }
 std::size_t RayTracer::vertex_count() const { return impl_->vertex_count; }
 std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
+std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
 
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
                    float* out) const {
+  ao(points, normals, OwnPrimitives{}, options, out);
+}
+
+void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& own,
+                   const RayTraceOptions& options, float* out) const {
   const Impl& m = *impl_;
   if (points.size != normals.size) {
     std::ostringstream s;
@@ -292,15 +572,21 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
   check_points(points, "points");
   check_points(normals, "normals");
   if (points.size > 0 && out == nullptr) throw std::invalid_argument("out is null");
+  check_ids(own.vertex_ids, points.size, m.vertex_count, "vertex_ids", "vertex");
+  check_ids(own.triangle_ids, points.size, m.triangle_count, "triangle_ids", "triangle");
+  if ((own.vertex_ids || own.triangle_ids) && points.size > 0xffffffffu) {
+    throw std::invalid_argument("too many points for 32-bit ray ids");
+  }
 
   const std::size_t n = points.size;
-  if (m.triangle_count == 0) {
+  if (m.triangle_count == 0 && m.instance_count == 0) {
     std::fill(out, out + n, 1.0f);
     return;
   }
 
   const int samples = options.samples;
-  const float offset = options.offset < 0 ? m.auto_offset : options.offset;
+  const bool automatic = options.offset < 0;
+  const float offset = automatic ? m.auto_offset : options.offset;
   const float tfar = options.distance;  // +inf is fine for Embree
   const SampleSet set(samples);
   const float inv_samples = 1.0f / static_cast<float>(samples);
@@ -313,12 +599,16 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
     alignas(64) RTCRay rays[kStream];
     std::uint32_t owner[kStream];
     std::vector<int> open(end - begin, 0);
+    std::vector<float> xs(samples), ys(samples), zs(samples);
     std::size_t filled = 0;
-    embree::QueryContext context;
-    embree::init_context(&context);  // incoherent: AO rays go every way
+    TraceContext context;
+    embree::init_context(&context.base);  // incoherent: AO rays go every way
+    context.own_vertex = own.vertex_ids;
+    context.own_triangle = own.triangle_ids;
+    context.indices = m.indices.data();
 
     auto flush = [&] {
-      embree::occluded(scene, &context, rays, filled);
+      embree::occluded(scene, &context.base, rays, filled);
       for (std::size_t r = 0; r < filled; ++r) {
         // Embree sets tfar to -inf on an occluded ray.
         open[owner[r]] += rays[r].tfar >= 0.0f ? 1 : 0;
@@ -337,32 +627,37 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
       const Vec3 nn = normalize(raw / big);
       Vec3 t, b;
       onb(nn, &t, &b);
-      const Vec3 o = points[i] + nn * offset;
-      float du, dv;
-      point_shift(i, options.seed, &du, &dv);
-      const float cr = std::cos(kTwoPi * dv), sr = std::sin(kTwoPi * dv);
+      // The start (see raytrace.h, "Origins"): on the receiver's own surface, else offset
+      // along the normal.
+      const std::int32_t ov = own.vertex_ids ? own.vertex_ids[i] : -1;
+      const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
+      Vec3 o;
+      if (automatic && ov >= 0) {
+        o = own_surface_origin(points[i], m.vertex_target(static_cast<std::uint32_t>(ov), nn),
+                               m.precision);
+      } else if (automatic && ot >= 0) {
+        o = own_surface_origin(points[i], m.centroid(static_cast<std::uint32_t>(ot)),
+                               m.precision);
+      } else {
+        o = points[i] + nn * offset;
+      }
+      point_directions(options.sampling, set, i, options.seed, samples, xs.data(), ys.data(),
+                       zs.data());
       const std::uint32_t local = static_cast<std::uint32_t>(i - begin);
       for (int s = 0; s < samples; ++s) {
-        // Malley's method: u uniform on [0,1) → radius sqrt(u) on the disk, height sqrt(1−u).
-        float u = set.u[s] + du;
-        u -= u >= 1.0f ? 1.0f : 0.0f;
-        const float r = std::sqrt(u);
-        const float z = std::sqrt(std::max(0.0f, 1.0f - u));
-        const float c = set.cos_phi[s] * cr - set.sin_phi[s] * sr;  // cos(φ_s + 2π dv)
-        const float sn = set.sin_phi[s] * cr + set.cos_phi[s] * sr;
-        const float x = r * c, y = r * sn;
+        const float x = xs[s], y = ys[s], z = zs[s];
         RTCRay& ray = rays[filled];
+        ray.dir_x = t.x * x + b.x * y + nn.x * z;
+        ray.dir_y = t.y * x + b.y * y + nn.y * z;
+        ray.dir_z = t.z * x + b.z * y + nn.z * z;
         ray.org_x = o.x;
         ray.org_y = o.y;
         ray.org_z = o.z;
         ray.tnear = 0.0f;
-        ray.dir_x = t.x * x + b.x * y + nn.x * z;
-        ray.dir_y = t.y * x + b.y * y + nn.y * z;
-        ray.dir_z = t.z * x + b.z * y + nn.z * z;
         ray.time = 0.0f;
         ray.tfar = tfar;
         ray.mask = 0xffffffffu;
-        ray.id = 0;
+        ray.id = static_cast<unsigned>(i);  // the filter's key to the receiver's own primitives
         ray.flags = 0;
         owner[filled] = local;
         if (++filled == kStream) flush();
@@ -392,7 +687,13 @@ std::vector<float> RayTracer::ao_at_vertices(PointsView normals,
       << normals.size;
     throw std::invalid_argument(s.str());
   }
-  return ao(PointsView{impl_->vertices.data(), impl_->vertex_count}, normals, options);
+  std::vector<std::int32_t> self(impl_->vertex_count);
+  std::iota(self.begin(), self.end(), 0);
+  OwnPrimitives own;
+  own.vertex_ids = self.data();
+  std::vector<float> out(impl_->vertex_count);
+  ao(PointsView{impl_->vertices.data(), impl_->vertex_count}, normals, own, options, out.data());
+  return out;
 }
 
 // === One-off

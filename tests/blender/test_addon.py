@@ -307,8 +307,8 @@ def test_module_missing_path(monkeypatch):
 
 def _run_cli(user_scripts, blend, *args):
     env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
-    cmd = [bpy.app.binary_path, "-b", "--factory-startup", blend, "--python-expr",
-           "import canopy_ao.cli; canopy_ao.cli.main()", "--", *args]
+    cmd = [bpy.app.binary_path, "-b", "--factory-startup", blend, "--python-exit-code", "1",
+           "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()", "--", *args]
     return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
 
 

@@ -42,6 +42,8 @@ def _render_aov(scene, aov_name, tmp_path):
     scene.render.resolution_y = 16
     scene.render.resolution_percentage = 100
     scene.render.filter_size = 0.01  # no pixel filter blur across the object's edge
+    if hasattr(scene.render, "compositor_device"):  # 4.2+: headless there is no GPU to use
+        scene.render.compositor_device = "CPU"
     tree = _compositor_tree(scene)
     tree.nodes.clear()
     rl = tree.nodes.new("CompositorNodeRLayers")

@@ -129,7 +129,7 @@ def test_raster_counts_shared_edges_once():
     uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]], dtype=np.float32)
     pos = np.concatenate([uvs, np.zeros((6, 1), np.float32)], axis=1)
     nrm = np.tile(np.array([[0, 0, 1]], np.float32), (6, 1))
-    pixels, tpos, tnrm, stats = texel.rasterize(uvs, pos, nrm, 8, 8)
+    pixels, tpos, tnrm, stats, _tri = texel.rasterize(uvs, pos, nrm, 8, 8)
     assert np.array_equal(pixels, np.arange(64))
     assert stats["overlapping_texels"] == 0
     assert np.allclose(tpos[:, 0], ((pixels % 8) + 0.5) / 8)

@@ -8,6 +8,7 @@
 
 #include "canopy_ao/density_grid.h"
 #include "canopy_ao/medium_table.h"
+#include "canopy_ao/occlusion_features.h"
 #include "canopy_ao/parallel.h"
 #include "canopy_ao/raytrace.h"
 
@@ -329,4 +330,123 @@ TEST(DensityGrid, BadInputThrows) {
   bad = {};
   bad.sigma_scale = NAN;
   EXPECT_THROW(run_ao(g, pos, nrm, bad), std::invalid_argument);
+}
+
+// === Occlusion features (occlusion_features.h): the sweeps against the grid's own marcher.
+
+namespace {
+std::vector<float> features(const OcclusionFeatures& f, const std::vector<float>& pos,
+                            const std::vector<float>& nrm, TreeFrame fr = {}) {
+  std::vector<float> out(pos.size() / 3 * OcclusionFeatures::kCount);
+  f.compute({pos.data(), pos.size() / 3}, {nrm.data(), nrm.size() / 3}, fr, out.data());
+  return out;
+}
+}  // namespace
+
+TEST_F(DensityBall, OcclusionFeaturesGridAOAtTheCentreIsExpMinusTau) {
+  // Uniform medium with σR = 2: every direction from the centre has optical depth 2.
+  const DensityGrid g = ball_->grid(48);
+  const OcclusionFeatures f(g);
+  const auto o = features(f, {0, 0, 0}, {0, 0, 1});
+  EXPECT_NEAR(o[1], std::exp(-2.0f), 0.03f);
+  EXPECT_NEAR(o[0], std::exp(-1.0f), 0.04f);  // σ scale ½
+  EXPECT_NEAR(o[2], std::exp(-4.0f), 0.02f);  // σ scale 2
+  EXPECT_NEAR(o[3], std::exp(-2.0f), 0.03f);  // sky view: the same depth upward
+}
+
+TEST_F(DensityBall, OcclusionFeaturesAgreeWithTheGridMarcherInsideAndOutside) {
+  // Two implementations of the same line integrals (sweeps here, DDA + mips there): receivers
+  // inside the ball, on its rim and outside it (the outside path enters the grid per direction).
+  const DensityGrid g = ball_->grid(48);
+  const OcclusionFeatures f(g, {64});
+  std::vector<float> pos, nrm;
+  Rng rng(3);
+  for (int i = 0; i < 40; ++i) {
+    const float r = 1.6f * rng.uniform();
+    const Vec3 p = rng.unit() * r, n = rng.unit();
+    pos.insert(pos.end(), {p.x, p.y, p.z});
+    nrm.insert(nrm.end(), {n.x, n.y, n.z});
+  }
+  DensityAOOptions o;
+  o.directions = 2048;
+  o.self_skip = 0;
+  const auto ref = run_ao(g, pos, nrm, o);
+  const auto got = features(f, pos, nrm);
+  double err = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    err += std::fabs(got[i * OcclusionFeatures::kCount + 1] - ref[i]);
+    EXPECT_NEAR(got[i * OcclusionFeatures::kCount + 1], ref[i], 0.08f) << "receiver " << i;
+  }
+  EXPECT_LT(err / ref.size(), 0.03);
+}
+
+TEST(OcclusionFeatures, EmptyGridIsOpenSkyAndShapeFeaturesFollowTheFrame) {
+  Mesh m;
+  const DensityGrid g = m.grid(8);
+  const OcclusionFeatures f(g);
+  TreeFrame fr;
+  fr.center = {1, 0, 0};
+  fr.radius = 2;
+  fr.z_min = 0;
+  fr.z_max = 4;
+  const auto o = features(f, {3, 0, 1}, {1, 0, 0}, fr);
+  for (int k : {0, 1, 2, 3}) EXPECT_FLOAT_EQ(o[k], 1.0f);
+  EXPECT_FLOAT_EQ(o[5], 0.0f);   // no leaves here
+  EXPECT_FLOAT_EQ(o[6], 0.0f);   // normal horizontal
+  EXPECT_FLOAT_EQ(o[7], 1.0f);   // facing away from the axis
+  EXPECT_FLOAT_EQ(o[8], 0.25f);  // a quarter up the tree
+  EXPECT_FLOAT_EQ(o[9], 1.0f);   // at the tree's radius
+}
+
+TEST_F(DensityBall, OcclusionFeaturesDoNotDependOnTheThreadCount) {
+  const DensityGrid g = ball_->grid(32);
+  std::vector<float> pos, nrm;
+  Rng rng(5);
+  for (int i = 0; i < 3000; ++i) {
+    const Vec3 p = rng.in_ball() * 1.3f, n = rng.unit();
+    pos.insert(pos.end(), {p.x, p.y, p.z});
+    nrm.insert(nrm.end(), {n.x, n.y, n.z});
+  }
+  const int prev = set_max_threads(1);
+  const auto one = features(OcclusionFeatures(g), pos, nrm);
+  set_max_threads(0);
+  const auto all = features(OcclusionFeatures(g), pos, nrm);
+  set_max_threads(prev);
+  EXPECT_EQ(one, all);
+}
+
+TEST(OcclusionFeatures, BadInputThrows) {
+  Mesh m;
+  m.quad({0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0});
+  const DensityGrid g = m.grid(8);
+  EXPECT_THROW(OcclusionFeatures(g, {5}), std::invalid_argument);
+  EXPECT_THROW(OcclusionFeatures(g, {257}), std::invalid_argument);
+  const OcclusionFeatures f(g);
+  TreeFrame bad;
+  bad.radius = 0;
+  std::vector<float> out(OcclusionFeatures::kCount);
+  const std::vector<float> p = {0, 0, 0}, n = {0, 0, 1}, nan = {NAN, 0, 0};
+  EXPECT_THROW(f.compute({p.data(), 1}, {n.data(), 1}, bad, out.data()), std::invalid_argument);
+  EXPECT_THROW(f.compute({nan.data(), 1}, {n.data(), 1}, {}, out.data()), std::invalid_argument);
+}
+
+TEST(OcclusionFeatures, LinearModelExpandsAndPredictsAsDocumented) {
+  // F = 3 features: φ = [1, z0, z1, z2, z0², z1², z2², z1·z0, z1·z2] (products with feature 1).
+  const int F = 3;
+  ASSERT_EQ(expanded_size(F), 9);
+  const float x[F] = {3, 5, 7}, mean[F] = {1, 1, 1}, scale[F] = {2, 4, 3};
+  float phi[9];
+  expand_features(x, 1, F, mean, scale, phi);
+  const float z0 = 1, z1 = 1, z2 = 2;
+  const float want[9] = {1, z0, z1, z2, z0 * z0, z1 * z1, z2 * z2, z1 * z0, z1 * z2};
+  for (int p = 0; p < 9; ++p) EXPECT_FLOAT_EQ(phi[p], want[p]) << p;
+  float w[9] = {0.1f, 0.2f, 0, 0, 0, 0, 0, 0, 0};
+  float ao = -1;
+  predict_features(x, 1, F, mean, scale, w, &ao);
+  EXPECT_FLOAT_EQ(ao, 0.3f);
+  w[0] = 5;  // clamped to [0, 1]
+  predict_features(x, 1, F, mean, scale, w, &ao);
+  EXPECT_FLOAT_EQ(ao, 1.0f);
+  const float zero_scale[F] = {1, 0, 1};
+  EXPECT_THROW(predict_features(x, 1, F, mean, zero_scale, w, &ao), std::invalid_argument);
 }

@@ -47,7 +47,7 @@ def test_buried_points_are_kept_out_of_the_fit(monkeypatch):
     assert cal["buried_points_left_out"] >= 100, cal
     assert abs(bias) < 0.08, bias
     # Fitted to them too (what calibration did before), τ darkens every open leaf.
-    monkeypatch.setattr(ladder, "buried", lambda plan, it, p, n: np.zeros(len(p), bool))
+    monkeypatch.setattr(ladder, "buried", lambda plan, it, p, n, own=None: np.zeros(len(p), bool))
     bias_all, rep_all = _bias_on_open(items, buried, s)
     assert bias_all < bias - 0.05, (bias_all, bias)
     assert rep_all["tau"] > rep["tau"]

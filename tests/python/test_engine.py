@@ -22,7 +22,7 @@ import tree_scene as ts  # noqa: E402
 if not core.core_status()[0]:
     pytest.skip(core.core_status()[1], allow_module_level=True)
 
-ROLE = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
+ROLE = ts.ROLE
 
 
 def items(with_grass=True, offset=(0.0, 0.0, 0.0), tree="T", suffix=""):

@@ -253,3 +253,9 @@ def test_a_path_that_cannot_reach_the_file_system_as_given_is_refused(tmp_path, 
     with pytest.raises(ValueError, match="path"):
         core.read_image(bad)
     assert os.listdir(tmp_path) == []
+
+
+def test_medium_quadrature_stays_in_the_unit_interval():
+    # On the surface facing out, round-off made the chord slightly negative: AO 1.0000000000000002.
+    for cos_beta in (1.0, 3e38):
+        assert 0.0 <= core.medium_ao_quadrature(1.0, cos_beta, 2.9316827441133224, 296) <= 1.0

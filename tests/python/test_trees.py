@@ -62,6 +62,7 @@ def test_one_collection_bakes_as_two_trees():
     assert objs["LeavesA"]["tree"] == objs["WoodA"]["tree"] != objs["LeavesB"]["tree"]
     assert objs["LeavesB"]["tree"] == objs["WoodB"]["tree"]
     assert objs["LeavesA"]["tree_source"] == "collection" and objs["LeavesA"]["tree_why"]
+    assert objs["LeavesA"]["predicted_seconds"] > 0  # the cost model's, per object
     for w, g in zip(want, got):
         assert np.abs(w.ao - g.ao).max() < 1e-5, w.name
 

@@ -8,6 +8,10 @@ grass (optional): upright blades 0.3 high on z = 0 away from the tree.
 import numpy as np
 
 
+# The role each of scene()'s objects plays in a bake.
+ROLE = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
+
+
 def cylinder(radius=0.15, height=2.0, segments=12):
     a = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     ring = np.stack([radius * np.cos(a), radius * np.sin(a)], axis=1)

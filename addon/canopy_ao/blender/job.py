@@ -19,8 +19,9 @@ CHUNK = 1 << 16
 
 
 class BakeJob:
-    """One bake: gather and check (nothing changed on failure), prepare, evaluate one target at
-    a time, then commit every write at once, so a cancelled or failed bake changes nothing."""
+    """One bake: gather the targets' receivers and check (nothing changed on failure),
+    prepare, evaluate the receivers one chunk per step, then commit every write at once, so a
+    cancelled or failed bake changes nothing."""
 
     def __init__(self, context, object_names, opts):
         """opts: option name -> value (properties.scene_options, cli.options_from_args);
@@ -116,7 +117,8 @@ class BakeJob:
         try:
             t.ao[a:b] = core.evaluate_receivers(
                 self.plan, t.item, t.positions[a:b], t.normals[a:b],
-                vertices=slice(a, b) if t.kind == "vertex" else None)
+                vertices=slice(a, b) if t.kind == "vertex" else None,
+                triangles=t.triangles[a:b] if t.triangles is not None else None)
         except CanopyAOError as exc:
             raise CanopyAOError(f"{t.item.name}: {exc}") from exc
         if self.opts["thickness"]:

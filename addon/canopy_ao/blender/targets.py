@@ -15,6 +15,7 @@ class Target:
     def __init__(self, item, obj, positions, normals):
         self.item, self.obj = item, obj
         self.positions, self.normals = positions, normals
+        self.triangles = None  # texels: each one's triangle in the item's mesh (own rays)
         self.ao = np.ones(len(positions), np.float32)
         self.thickness = None  # float32 like ao when the bake also makes the thickness
         self.seconds = 0.0
@@ -84,6 +85,11 @@ class TexelTarget(Target):
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
                                      opts["resolution"], udim=opts["udim"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
+        # The raster's loop triangles are the item's own when the counts agree (the same
+        # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
+        tris = self.rx.triangles
+        if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
+            self.triangles = tris
         if opts["channel"] != "RGBA":
             self.pack = bpy.data.images.get(opts["pack_image"])
             if self.pack is None:

@@ -92,16 +92,18 @@ def gather_corner_triangles(obj, depsgraph, uv_map):
 
 
 def rasterize(uvs, positions, normals, width, height):
-    """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict):
-    one receiver point per covered texel, ascending pixel index j * width + i, by the native
-    rasteriser (conservative coverage: islands thinner than a texel keep texels)."""
+    """(pixels int32 (T,), positions float32 (T, 3), normals float32 (T, 3), stats dict,
+    triangles int32 (T,)): one receiver point per covered texel, ascending pixel index
+    j * width + i, by the native rasteriser (conservative coverage: islands thinner than a
+    texel keep texels); triangles: the loop triangle (corner row // 3) each texel lies on."""
     ts = _core.rasterize_uv(uvs, positions, normals, resolution=(width, height),
                             conservative=True)
     # The TexelSet's arrays are read-only views of its own buffers: copy what the bake keeps.
     stats = {k: int(v) for k, v in dict(ts.stats).items()}
     return (np.array(ts.pixels, dtype=np.int32),
             np.array(ts.positions, dtype=np.float32).reshape(-1, 3),
-            np.array(ts.normals, dtype=np.float32).reshape(-1, 3), stats)
+            np.array(ts.normals, dtype=np.float32).reshape(-1, 3), stats,
+            np.array(ts.triangles, dtype=np.int32))
 
 
 @dataclass
@@ -115,6 +117,7 @@ class TexelReceivers:
     positions: np.ndarray
     normals: np.ndarray
     stats: dict = field(default_factory=dict)  # raster counts, "warnings", "notes"
+    triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
     tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
 
 
@@ -142,16 +145,17 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
     got, tiles, stats = [], [], {}
     for number, rows, (du, dv) in parts:
         tile_uvs = uvs[rows] - np.float32([du, dv]) if du or dv else uvs[rows]
-        got.append(rasterize(np.ascontiguousarray(tile_uvs),
-                             np.ascontiguousarray(pos[rows]), np.ascontiguousarray(nrm[rows]),
-                             res, res))
+        px, tp, tn, st, tt = rasterize(np.ascontiguousarray(tile_uvs),
+                                       np.ascontiguousarray(pos[rows]),
+                                       np.ascontiguousarray(nrm[rows]), res, res)
+        if not isinstance(rows, slice):  # the tile's triangle k is the mesh's rows[3k] // 3
+            tt = (rows[0::3] // 3).astype(np.int32)[tt]
+        got.append((px, tp, tn, tt))
         start = tiles[-1][2] if tiles else 0
-        tiles.append((number, start, start + len(got[-1][0])))
-        for k, v in got[-1][3].items():
+        tiles.append((number, start, start + len(px)))
+        for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
-    pixels, tpos, tnrm = (np.concatenate([g[i] for g in got]) if got else
-                          np.zeros((0,) + s, d) for i, s, d in
-                          ((0, (), np.int32), (1, (3,), np.float32), (2, (3,), np.float32)))
+    pixels, tpos, tnrm, ttri = (np.concatenate([g[i] for g in got]) for i in range(4))
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
     if outside:
         stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
@@ -166,7 +170,7 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
                                  f"map '{uv_map}' at {res}×{res}; raise the resolution or "
                                  "check the UVs lie in the 0–1 square")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, tiles)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):

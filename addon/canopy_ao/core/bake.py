@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import ladder, lighting, native, proxies, trees
+from . import cost, ladder, lighting, native, proxies, regression, trees
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import ItemResult, Plan, SceneItem, split_trees
 from .ladder import DEFAULT_TAU
@@ -41,19 +41,33 @@ def prepare(items, settings: BakeSettings) -> Plan:
     # Grass has no proxies to calibrate, but auto still weighs its law against rays.
     grass_only_auto = (settings.method == "auto" and not plan.fits
                        and any(it.role == "GRASS" for it in items))
-    needs_tracer = settings.method == "raytrace" or grass_only_auto or (
+    needs_tracer = settings.method in ("raytrace", "hybrid") or grass_only_auto or (
         settings.method == "auto" or settings.tau is None) and bool(plan.fits)
     if needs_tracer:
         t0 = time.perf_counter()
         try:
-            plan.tracer = lighting.build_tracer(whole)
+            plan.tracer = lighting.build_tracer(whole, plan.tracer_bases)
         except CanopyAOError as exc:
-            if settings.method == "raytrace":
+            if settings.method in ("raytrace", "hybrid"):
                 raise
             plan.notes.append(f"calibration skipped: {exc}")
         plan.timings["tracer"] = time.perf_counter() - t0
 
-    if settings.method == "grid":
+    if settings.method == "regression" or (settings.method == "auto" and settings.ray_free
+                                           and plan.fits and plan.tracer is not None):
+        t0 = time.perf_counter()
+        try:
+            plan.regression = regression.RegressionRung(
+                items, settings.distance, points=regression.POINTS,
+                samples=settings.calibration_samples, seed=settings.seed)
+        except CanopyAOError as exc:
+            if settings.method == "regression":
+                raise
+            plan.notes.append(f"regression rung not considered: {exc}")
+        if settings.method == "regression":
+            plan.calibration = plan.regression.report
+        plan.timings["regression"] = time.perf_counter() - t0
+    if settings.method in ("grid", "hybrid"):
         t0 = time.perf_counter()
         plan.grid = lighting.build_grid(whole)
         plan.timings["grid"] = time.perf_counter() - t0
@@ -73,7 +87,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
 
 @refusals_are_user_errors
 def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
-                       vertices=None) -> np.ndarray:
+                       vertices=None, triangles=None) -> np.ndarray:
     """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
     texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
     and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
@@ -82,14 +96,21 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     An item holding several trees (item.tree_names) lights each receiver with its own tree's:
     ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the
     vertex's tree; without it (texels) each receiver takes the tree whose fitted crown is
-    nearest (in the crown's own unit frame)."""
+    nearest (in the crown's own unit frame). ``triangles`` (int32 (N,), texels: the item's
+    triangle each lies on, -1 = unknown) lets the exact rung's rays skip only that one."""
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
         return np.ones(len(p), np.float32)
+    if vertices is not None:
+        own = {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
+    elif triangles is not None:
+        own = {"triangle_ids": np.asarray(triangles, np.int32)}
+    else:
+        own = None
     if item.tree_labels is None or len(item.tree_names) <= 1:
         ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
-                                      plan.taus())
+                                      plan.taus(), own)
     else:
         labels = (item.tree_labels[vertices] if vertices is not None
                   else _nearest_crown(plan, item.tree_names, p))
@@ -99,7 +120,8 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
             if len(sel):
                 ao[sel] = lighting.evaluate_points(
                     plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
-                    np.ascontiguousarray(n[sel]), plan.method, plan.taus())
+                    np.ascontiguousarray(n[sel]), plan.method, plan.taus(),
+                    {k: v[sel] for k, v in own.items()} if own else None)
     if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     return ao
@@ -174,9 +196,18 @@ def report(plan: Plan, results) -> dict:
         "objects": {r.name: {"role": r.role, "tree": r.tree, "tree_source": r.tree_source,
                              "tree_why": r.tree_why, "method": r.method,
                              "vertices": r.vertices, "seconds": r.seconds,
+                             "predicted_seconds": _predicted(plan, r),
                              "ao_mean": float(r.ao.mean()) if r.vertices else None}
                     for r in results},
     }
+
+
+def _predicted(plan: Plan, r: ItemResult):
+    """The cost model's seconds for this result's receivers (cost.py), None off the model."""
+    try:
+        return cost.predict(plan, r.method, r.vertices)["seconds"]
+    except (ValueError, KeyError):
+        return None
 
 
 def bake(items, settings: BakeSettings, progress=None):

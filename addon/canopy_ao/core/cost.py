@@ -1,6 +1,5 @@
 """What a rung costs, predicted from counted work (no clock), so "auto" makes the same choice
-on a quiet machine and under load (docs/DESIGN.md, 'Auto: the cheapest rung that is good
-enough').
+on a quiet machine and under load (docs/DESIGN.md, 'Auto mode').
 
 Work per receiver, counted from the plan:
 - sphere, ellipsoid, reeves_blau: 1 in-shell evaluation + one per occluder (every other
@@ -9,7 +8,10 @@ Work per receiver, counted from the plan:
 - medium: as shells, each a medium-table lookup (a costlier unit);
 - grid: DensityAOOptions.directions line integrals, each ~kExactVoxels + 2 log2(resolution)
   voxel steps (exact DDA near, mip steps growing with distance: density_grid.h);
-- raytrace: samples rays, each ~log2(triangles) BVH steps.
+- raytrace: samples rays, each ~log2(triangles) BVH steps;
+- regression: one trilinear look-up of the swept optical depth per feature direction
+  (occlusion_features.h), counted as a voxel step each;
+- hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps.
 Predicted seconds = Σ work × the unit's constant / threads; the constants are seconds per
 unit on one core of the machine that measured them, fixed here (machine speed scales them all
 alike; the choice depends on their ratios and on the time budget).
@@ -21,23 +23,29 @@ import math
 
 from .native import _core
 
-# Seconds per unit of work on one core, measured with
+# Seconds per unit of work on one core. Ratios measured with
 #   nice /usr/bin/python3 bench/cost_constants.py
-# (round tree, quick size: 25,872 receivers, each rung's evaluation of every receiver timed
-# best of 5 on one thread, divided by the units counted below; 2-core shared machine,
-# 2026-12-01: 1.6e-8, 8.1e-8, 7.1e-8, 4.6e-8). Re-measure when a kernel changes speed by 2×.
+# (round tree, 90,372 receivers, 64 rays, each rung's evaluation of every receiver timed best
+# of 3 on one thread, divided by the units counted below): 1.2e-8-2.6e-8 per shell (sphere to
+# shells), 4.7e-8 per medium shell, 4.9e-8 per voxel step, 4.8e-8 per BVH step, 2026-12-01 on
+# the shared 2-core machine at load average 10. Scaled by 0.36 to a quiet machine: the same
+# tree's rays took 0.70 s for 80,000 vertices × 64 rays on 2 threads quiet (the README's
+# example bake), 1.74e-8 per BVH step against 4.8e-8 under that load. Re-measure when a kernel
+# changes speed by 2×.
 SECONDS_PER_UNIT = {
-    "shell": 1.6e-8,         # one analytic shell evaluation (in-shell model or occluder)
-    "medium": 8.0e-8,        # one medium-table shell evaluation
-    "voxel_step": 7.0e-8,    # one step of a density-grid line integral
-    "bvh_step": 4.5e-8,      # one BVH level of one Embree ray (rays: samples × log2 M)
+    "shell": 6.0e-9,         # one analytic shell evaluation (in-shell model or occluder)
+    "medium": 1.7e-8,        # one medium-table shell evaluation
+    "voxel_step": 1.8e-8,    # one step of a density-grid line integral
+    "bvh_step": 1.75e-8,     # one BVH level of one Embree ray (rays: samples × log2 M)
 }
 FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: analytic 1 + "
            "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "
-           "directions × (exact voxels + 2 log2 resolution), raytrace samples × log2 triangles")
+           "directions × (exact voxels + 2 log2 resolution), regression feature directions, raytrace "
+           "samples × log2 triangles, hybrid raytrace + grid")
 GRID_DIRECTIONS = 32         # DensityAOOptions.directions (the add-on's default)
 GRID_RESOLUTION = 48         # DensityGridOptions.resolution (the add-on's default)
 GRID_EXACT_VOXELS = 4        # DensityGrid::kExactVoxels
+FEATURE_DIRECTIONS = 24      # OcclusionFeatures' default directions (core/regression.py)
 
 
 def work(plan, method: str, receivers: int) -> tuple[str, float]:
@@ -55,10 +63,17 @@ def work(plan, method: str, receivers: int) -> tuple[str, float]:
     if method == "grid":
         steps = GRID_EXACT_VOXELS + 2 * math.log2(GRID_RESOLUTION)
         return "voxel_step", receivers * float(GRID_DIRECTIONS) * steps
+    if method == "regression":
+        return "voxel_step", receivers * float(FEATURE_DIRECTIONS)
     if method == "raytrace":
         m = plan.tracer.triangle_count if plan.tracer is not None else 1
         depth = math.log2(max(int(m), 2))
         return "bvh_step", receivers * float(plan.settings.samples) * depth
+    if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
+        _u, rays = work(plan, "raytrace", receivers)
+        _u, steps = work(plan, "grid", receivers)
+        ratio = SECONDS_PER_UNIT["voxel_step"] / SECONDS_PER_UNIT["bvh_step"]
+        return "bvh_step", rays + steps * ratio
     raise ValueError(f"no cost model for method {method!r}")
 
 

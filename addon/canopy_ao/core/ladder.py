@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from . import cost, native
-from .lighting import evaluate_points, trace
+from .lighting import evaluate_points, own_ids, trace
 from .scene import RECEIVER_ROLES, Plan
 
 # (name, label, help) of each rung; settings.OPTIONS offers them in this order.
@@ -29,6 +29,10 @@ RUNGS = (
                               "AO of a uniform medium (tabulated)"),
     ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
     ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
+    ("regression", "Regression", "Ray-free: 1024 ray-traced points fitted on cheap per-vertex "
+                                 "features of the density grid and the tree's shape; no rays "
+                                 "beyond them, cost independent of the leaf count"),
+    ("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels, the grid beyond"),
     ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
 )
 METHODS = tuple(r[0] for r in RUNGS)
@@ -51,7 +55,7 @@ def triangles_needed(method: str, tau, role: str) -> bool:
     analytic models with a given τ need positions and normals only."""
     if role == "IGNORE":
         return False
-    if method in ("raytrace", "grid", "auto") or tau is None:
+    if method in ("raytrace", "grid", "regression", "hybrid", "auto") or tau is None:
         return True
     return role == "GRASS"
 
@@ -78,7 +82,14 @@ BURIED_RAYS = 16
 BURIED_SCALE = 1e-2
 
 
-def buried(plan: Plan, item, p, n) -> np.ndarray:
+def sample_ids(plan: Plan, item, idx):
+    """The tracer-mesh vertex ids of an item's sample vertices idx (a part of an item names
+    the whole item's vertices: scene.parts), or None."""
+    whole = item.vertex_map[idx] if item.vertex_map is not None else idx
+    return own_ids(plan, item.name, {"vertex_ids": whole})
+
+
+def buried(plan: Plan, item, p, n, own=None) -> np.ndarray:
     """bool (N,): points p, n of item enclosed by the surface they sit on (a leaf's base inside
     a branch tube: ray-traced AO 0 whatever the model), by a trace of BURIED_RAYS rays with the
     distance BURIED_SCALE × the item's bounding-box diagonal."""
@@ -87,8 +98,7 @@ def buried(plan: Plan, item, p, n) -> np.ndarray:
     size = float(np.linalg.norm(np.ptp(item.positions, axis=0)))
     if not size > 0:
         return np.zeros(len(p), bool)
-    short = plan.tracer.ao(p, n, samples=BURIED_RAYS, distance=BURIED_SCALE * size,
-                           seed=plan.settings.seed)
+    short = trace(plan, p, n, BURIED_RAYS, own=own, distance=BURIED_SCALE * size)
     return np.asarray(short) <= 0.0
 
 
@@ -144,23 +154,24 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     for it, idx in picks:
         p = np.ascontiguousarray(it.positions[idx])
         n = np.ascontiguousarray(it.normals[idx])
-        refs.append(trace(plan, p, n, s.calibration_samples))
-        groups.append((it, p, n))
+        own = sample_ids(plan, it, idx)
+        refs.append(trace(plan, p, n, s.calibration_samples, own=own))
+        groups.append((it, p, n, own))
     ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
     # Buried points (a leaf's base inside its twig): kept out of the fit, which they would
-    # darken everything else to match (docs/DESIGN.md, 'Auto: the cheapest rung that is good
-    # enough').
-    keep = ~np.concatenate([buried(plan, it, p, n) for it, p, n in groups]) if groups \
+    # darken everything else to match (docs/DESIGN.md, 'Auto mode').
+    keep = ~np.concatenate([buried(plan, it, p, n, own) for it, p, n, own in groups]) if groups \
         else np.zeros(0, bool)
     t_trace = time.perf_counter() - t0
 
     def err(method, tau):
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
-            got = [trace(plan, p, n, s.samples, seed=s.seed + 7919) for _it, p, n in groups]
+            got = [trace(plan, p, n, s.samples, seed=s.seed + 7919, own=own)
+                   for _it, p, n, own in groups]
         else:
             got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
-                   for it, p, n in groups]
+                   for it, p, n, _own in groups]
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
 
@@ -238,7 +249,9 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
             candidates.append("medium")
             if plan.grid is not None:
                 candidates.append("grid")
-            if plan.tracer is not None:
+            if plan.regression is not None:
+                candidates.append("regression")
+            if plan.tracer is not None and not settings.ray_free:
                 # The exact rung tops the ladder: on small or sparse scenes a few rays per vertex
                 # beat every proxy within the time budget; on big ones the budget rules it out.
                 candidates.append("raytrace")
@@ -253,7 +266,7 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
     elif analytic:
         plan.method = "ellipsoid" if settings.method == "auto" else settings.method
         plan.notes.append("no CANOPY object: no proxies fitted")
-        if grass_only_auto and plan.tracer is not None:
+        if grass_only_auto and plan.tracer is not None and not settings.ray_free:
             # The grass law (Hegeman Eq. 9) against the exact rung, on the same sample.
             plan.method, plan.tau, plan.calibration = calibrate(
                 plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)

@@ -71,17 +71,21 @@ def _in_shell(p, n, tree_fit, method, tau):
 
 
 def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
-                    p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
+                    p: np.ndarray, n: np.ndarray, method: str, tau: float,
+                    own=None) -> np.ndarray:
     """AO for receiver points p, n of an item: the scene's own objects (below) times the
-    instanced trees of attach_forest, if any (V = Π (1 − occ), so the fields multiply)."""
-    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau)
+    instanced trees of attach_forest, if any (V = Π (1 − occ), so the fields multiply).
+    own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
+    in its item (-1 = none), so the exact rung's rays skip only what they start on."""
+    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
     if plan.forest is not None and len(p):
         ao = np.clip(ao * plan.forest.ao(p, n), 0.0, 1.0).astype(np.float32, copy=False)
     return ao
 
 
 def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | None,
-                           p: np.ndarray, n: np.ndarray, method: str, tau: float) -> np.ndarray:
+                           p: np.ndarray, n: np.ndarray, method: str, tau: float,
+                           own=None) -> np.ndarray:
     """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree.
 
     Any receiver inside a tree's shells (its own canopy, a trunk, but also ground or grass that
@@ -91,9 +95,13 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if len(p) == 0:
         return np.ones(0, np.float32)
     if method == "raytrace":
-        return trace(plan, p, n, plan.settings.samples)
+        return trace(plan, p, n, plan.settings.samples, own=own_ids(plan, grass_key, own))
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
+    if method == "regression":
+        return plan.regression.ao(role, tree, p, n)
+    if method == "hybrid":
+        return _grass(plan, role, grass_key, p, n, _hybrid_ao(plan, p, n))
     ao = np.ones(len(p), np.float32)
     dist = plan.settings.distance
     shells = {t: own_shells(plan, t, method) for t in plan.fits}
@@ -149,13 +157,31 @@ def _grass(plan: Plan, role, grass_key, p, n, ao):
     return np.clip(ao, 0.0, 1.0, out=ao)
 
 
-def trace(plan: Plan, p, n, samples, seed=None):
-    """Ray-traced AO of points p, n against the scene's triangles (the exact rung)."""
+def own_ids(plan: Plan, name, own):
+    """An item's own ids (see evaluate_points) shifted into the tracer's mesh, or None when the
+    item is not in it (or its name is not unique there). -1 (none) stays -1."""
+    base = plan.tracer_bases.get(name)
+    if not own or base is None:
+        return None
+    out = {}
+    for key, first in zip(("vertex_ids", "triangle_ids"), base):
+        ids = own.get(key)
+        if ids is not None:
+            ids = np.asarray(ids, np.int64)
+            out[key] = np.ascontiguousarray(np.where(ids >= 0, ids + first, -1), np.int32)
+    return out or None
+
+
+def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None):
+    """Ray-traced AO of points p, n against the scene's triangles (the exact rung). own: the
+    tracer-mesh ids of own_ids, so each ray skips only its receiver's own triangles, as Cycles'
+    does (docs/DESIGN.md, 'The method ladder'). distance: the AO distance (default: the
+    settings'; 0 = unlimited)."""
     if plan.tracer is None:
         raise CanopyAOError("ray tracing needs the scene's triangles; none were given")
-    d = plan.settings.distance
+    d = plan.settings.distance if distance is None else distance
     return plan.tracer.ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
-                          seed=plan.settings.seed if seed is None else int(seed))
+                          seed=plan.settings.seed if seed is None else int(seed), **(own or {}))
 
 
 def _grid_ao(plan, p, n):
@@ -166,24 +192,47 @@ def _grid_ao(plan, p, n):
     return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
 
 
-def _scene_triangles(items):
-    """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32)."""
-    verts, tris, base = [], [], 0
+# The hybrid's near distance in voxels of the density grid: the grid resolves occlusion beyond
+# a few voxels, rays the contact shadows inside them (scale-free: the voxel is the grid's box /
+# its resolution). Chosen on the design Sapling trees, bench/real_assets.py.
+HYBRID_VOXELS = 2.0
+
+
+def _hybrid_ao(plan, p, n):
+    """Near exact, far statistical (native ao_near_far): settings.samples rays out to
+    HYBRID_VOXELS grid voxels, the density grid beyond."""
+    d = plan.settings.distance
+    near = HYBRID_VOXELS * float(plan.grid.voxel_size)
+    return np.asarray(_core.ao_near_far(plan.tracer, plan.grid, p, n, near,
+                                        samples=int(plan.settings.samples),
+                                        distance=float(d) if d > 0 else math.inf,
+                                        seed=plan.settings.seed), dtype=np.float32)
+
+
+def _scene_triangles(items, bases=None):
+    """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32).
+    bases: a dict to fill with item name -> (its first vertex, its first triangle) there (None
+    for a name seen twice: it cannot say which mesh it means)."""
+    verts, tris, base, tri_base = [], [], 0, 0
     for it in items:
         if it.role == "IGNORE" or not len(it.triangles):
             continue
+        if bases is not None:
+            bases[it.name] = None if it.name in bases else (base, tri_base)
         verts.append(it.positions)
         tris.append(it.triangles + base)
         base += len(it.positions)
+        tri_base += len(it.triangles)
     if not verts:
         raise CanopyAOError("the scene has no triangles")
     return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
 
 
-def build_tracer(items):
-    """The Embree ray tracer over every non-ignored item's triangles."""
-    return _core.RayTracer(*_scene_triangles(items))
+def build_tracer(items, bases=None):
+    """The Embree ray tracer over every non-ignored item's triangles; bases as
+    _scene_triangles."""
+    return _core.RayTracer(*_scene_triangles(items, bases))
 
 
 def build_grid(items):

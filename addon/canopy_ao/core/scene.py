@@ -30,6 +30,9 @@ class SceneItem:
     tree_labels: np.ndarray | None = None
     tree_names: tuple = ()
     tree_why: str = ""
+    # A part of an item (scene.parts): its vertices' indices in the item it was cut from, so a
+    # ray can still name its receiver's vertex in the tracer's mesh (built from whole items).
+    vertex_map: np.ndarray | None = None
 
     def __post_init__(self):
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
@@ -58,7 +61,11 @@ class Plan:
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
     grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     tracer: object = None
+    # item name -> (its first vertex, its first triangle) in the tracer's mesh, or None when two
+    # items share the name (lighting.own_ids: a ray skips only its receiver's own triangles)
+    tracer_bases: dict = field(default_factory=dict)
     grid: object = None
+    regression: object = None  # regression.RegressionRung, method "regression"
     calibration: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
@@ -104,7 +111,7 @@ def parts(item: SceneItem):
             tris = remap[item.triangles[keep]]
         out.append((SceneItem(item.name, item.role, tree, item.positions[idx],
                               item.normals[idx], tris, tree_source=item.tree_source,
-                              tree_why=item.tree_why), idx))
+                              tree_why=item.tree_why, vertex_map=idx), idx))
     return out
 
 

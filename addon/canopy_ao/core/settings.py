@@ -144,6 +144,9 @@ OPTIONS = (
            "Auto: stop climbing the ladder once a rung's RMSE on the ray-traced sample is below "
            "this (0.06 is about an MAE of 0.05, an error an artist does not see)",
            min=0.0, max=1.0, cli="--target-error"),
+    Option("ray_free", "bool", False, "Ray-free",
+           "Auto: only rungs that trace no rays beyond the calibration sample (up to the "
+           "regression rung), so the bake costs the same whatever the leaf count"),
     Option("shells", "int", 4, "Shells", "Ellipsoid shells per tree for the shells and leaf "
            "medium methods (k-means clusters)", min=1, max=64, advanced=True),
     Option("trim", "float", 0.0, "Trim", "Fraction of the canopy's points left out of the "

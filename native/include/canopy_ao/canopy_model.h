@@ -1,6 +1,6 @@
 // Canopy AO — the canopy-shell model: Hegeman et al. 2006, "Approximate Ambient Occlusion For
-// Trees", Eq. 4–6, with the scale-free optical depth τ of DESIGN 3.1, ellipsoids (DESIGN 3.2)
-// and several shells (DESIGN 3.3).
+// Trees", Eq. 4–6, with the scale-free optical depth τ, ellipsoids and several shells
+// (docs/DESIGN.md, 'The method ladder').
 //
 // Inside a shell of radius R (work in the unit frame, R = 1), receiver x with unit normal n:
 //   c = dot(C − x, n)            signed height of the centre above the tangent plane
@@ -53,7 +53,7 @@ struct CanopyOptions {
   float band = 0.1f;
 };
 
-/// How several shells combine (DESIGN 3.3).
+/// How several shells combine (docs/DESIGN.md, 'The method ladder').
 enum class ShellCombine {
   Product,  ///< V = Π over all shells of that shell's V (in-shell inside, occluder outside).
   Nearest,  ///< Hegeman §5: the shell whose centre is closest to x alone (gives seams).

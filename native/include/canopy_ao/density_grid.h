@@ -1,4 +1,5 @@
-// Canopy AO — leaf-density grid (DESIGN 3.6): the leaf (and branch) area voxelised into an
+// Canopy AO — leaf-density grid (docs/DESIGN.md, 'The method ladder'): the leaf (and branch) area
+// voxelised into an
 // extinction field, AO from a few cosine-weighted line integrals through it. Between the fitted
 // proxies (one uniform medium per shell) and ray tracing (every leaf): it models how the leaves
 // are really spread, at a cost per receiver that does not depend on the leaf count.
@@ -12,7 +13,8 @@
 // edge, ≥ 2 per voxel, capped at 32) and depositing each one's area at its centroid, so big
 // triangles (a ground plane) land in every voxel they cross and total area is conserved exactly.
 //
-// AO (DESIGN 2): AO(x, n) = mean over K cosine-weighted directions ω of exp(−∫_0^D σ(x + tω) dt)
+// AO (docs/DESIGN.md, 'What AO means here'): AO(x, n) = mean over K cosine-weighted directions ω
+// of exp(−∫_0^D σ(x + tω) dt)
 // — cosine-weighted directions make the cosine weighting a plain average. The K directions are
 // a fixed golden-angle spiral on the unit disc lifted to the hemisphere (Malley), rotated about n
 // by a per-point angle from a hash of (point index, seed): deterministic, decorrelated noise.

@@ -1,4 +1,5 @@
-// Canopy AO — minimum-volume enclosing ellipsoid of a point cloud (DESIGN 3.2, 4).
+// Canopy AO — minimum-volume enclosing ellipsoid of a point cloud (docs/DESIGN.md, 'The method
+// ladder', 'Fitting the proxies').
 //
 // Method "khachiyan": Khachiyan's barycentric coordinate-ascent for the minimum-volume enclosing
 // ellipsoid (L. G. Khachiyan, "Rounding of polytopes in the real number model of computation",

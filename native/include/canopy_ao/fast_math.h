@@ -1,7 +1,7 @@
 // Canopy AO — elementary functions that GCC auto-vectorises.
 //
 // libm's expf is a call GCC cannot vectorise (without -ffast-math and libmvec), which costs the
-// one-sphere model a factor ~8 (DESIGN 9: 170 M vs 1.3 G vertices/s per core). These versions
+// one-sphere model a factor ~8 (docs/DESIGN.md, 'Facts measured in Blender': 170 M vs 1.3 G vertices/s per core). These versions
 // are branch-free straight-line code: inlined into a simple loop they become vector code, AVX2/FMA
 // where the loop is in an AVX2 function (CANOPY_AO_TARGET_AVX2, canopy_model.cpp's kernels).
 //
@@ -114,7 +114,10 @@ inline bool cpu_has_avx2_fma() {
 /// 8 AoS xyz points (24 floats at q, unaligned) → x, y, z registers: the transpose of an N×3
 /// array done in registers (6 half-loads, 5 in-lane shuffles), without a trip through memory.
 /// Used by the canopy models and by the benchmark's bare-loop ceiling (same loads in both).
-CANOPY_AO_TARGET_AVX2 inline void load8_aos(const float* q, __m256& x, __m256& y, __m256& z) {
+// always_inline: GCC does not inline a function with its own target attribute into a caller
+// whose target comes from a pragma (the flag sets differ slightly), and a call per 8 points
+// costs the model a quarter of its speed (measured).
+CANOPY_AO_TARGET_AVX2 __attribute__((always_inline)) inline void load8_aos(const float* q, __m256& x, __m256& y, __m256& z) {
   __m256 m03 = _mm256_castps128_ps256(_mm_loadu_ps(q));
   __m256 m14 = _mm256_castps128_ps256(_mm_loadu_ps(q + 4));
   __m256 m25 = _mm256_castps128_ps256(_mm_loadu_ps(q + 8));

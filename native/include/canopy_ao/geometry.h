@@ -4,7 +4,10 @@
 //  - points and normals are float32, packed xyz (an N×3 row-major array), world space;
 //  - AO / visibility values are in [0, 1]: 1 = fully open sky, 0 = fully blocked;
 //  - bad input throws std::invalid_argument (Python: ValueError); library failures throw
-//    canopy_ao::Error (Python: canopy_ao.CanopyAOError, a RuntimeError).
+//    canopy_ao::Error (Python: canopy_ao.CanopyAOError, a RuntimeError);
+//  - accepted range (checked at the Python boundary, native/python/arrays.h): coordinates
+//    within ±1e9, lengths in [1e-9, 1e10], τ in [0, 1e4], normals of any finite length. Within
+//    it every function returns finite values; C++ callers outside it get no such promise.
 #pragma once
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Canopy AO — grass (Hegeman et al. 2006, Eq. 9; DESIGN 3.5).
+// Canopy AO — grass (Hegeman et al. 2006, Eq. 9; docs/DESIGN.md, 'The method ladder').
 //
 //   V = (Pz / 2h) (1 + cos θ),  clamped to [floor, 1]
 // Pz = dot(x, up) − ground_height (height above the ground along `up`), h the blade height,

@@ -1,12 +1,14 @@
 // Canopy AO — exact expected AO inside (and around) a shell filled with a uniform random medium
-// of leaves, tabulated so it costs one table lookup per vertex (DESIGN 3.1–3.3, "richer rungs").
+// of leaves, tabulated so it costs one table lookup per vertex (docs/DESIGN.md, 'The method
+// ladder').
 //
 // Model. A sphere (centre C, radius R) is filled with randomly oriented small leaves of area
 // density ρ (leaf area per volume). A ray of length l through it is transmitted with probability
 // exp(−σ l), σ = ρ/2 (the mean projected area of a randomly oriented flat leaf is half its area).
 // The expected cosine-weighted AO of a receiver at x with unit normal n is
 //
-//     AO(x, n) = (1/π) ∫_{ω·n>0} exp(−σ L(x, ω)) (ω·n) dω          (DESIGN 2, D = ∞)
+//     AO(x, n) = (1/π) ∫_{ω·n>0} exp(−σ L(x, ω)) (ω·n) dω          (docs/DESIGN.md, 'What AO
+// means here', D = ∞)
 //
 // with L the length of the ray's segment inside the sphere (for x outside the sphere: the chord
 // it cuts, 0 if it misses). By symmetry AO depends only on
@@ -98,7 +100,8 @@ class MediumTable {
 void ao_medium_sphere(PointsView positions, PointsView normals, const Sphere& sphere, float tau,
                       float* out);
 
-/// Ellipsoid: mapped to the unit sphere as DESIGN 3.2 (x' = diag(1/r) Qᵀ(x − C), normals by the
+/// Ellipsoid: mapped to the unit sphere as docs/DESIGN.md, 'The method ladder' (x' = diag(1/r)
+/// Qᵀ(x − C), normals by the
 /// inverse transpose) and looked up with the same τ. Approximation: exact for a medium whose
 /// optical depth from the centre to the surface is τ along every axis (σ scaled by 1/radius per
 /// direction) *and* whose cosine lobe is taken in the mapped frame; for a real uniform medium in

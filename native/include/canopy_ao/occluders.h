@@ -1,4 +1,5 @@
-// Canopy AO — large occluders: shells seen from outside as sphere occluders (DESIGN 3.4;
+// Canopy AO — large occluders: shells seen from outside as sphere occluders (docs/DESIGN.md, 'The
+// method ladder';
 // Hegeman 2006 Eq. 7–8, Shanmugam & Arikan 2007 Eq. 2–5).
 //
 // One occluder. A solid sphere whose centre is at angle θ from the receiver's normal and whose
@@ -20,7 +21,8 @@
 // table (medium_table.h) integrates: a ball of uniform random medium, τ per radius, so the
 // expected visibility is exactly medium_ao(r, cosβ, τ) (each direction transmits exp(−σ·chord),
 // horizon included) — chords near the rim are short, which the single mean-chord opacity above
-// ignores. Ellipsoids are mapped to the unit sphere (DESIGN 3.2). Its blocked fraction is ≤ the
+// ignores. Ellipsoids are mapped to the unit sphere (docs/DESIGN.md, 'The method ladder'). Its
+// blocked fraction is ≤ the
 // opaque unit sphere's ≤ 1/|x'|² ≤ (r_max/d)² (up to the table's < 1e-3 interpolation), so
 // the cut-off below stays conservative. Measured (bench/forest.py --check, 36 real round trees,
 // ground vs Embree): bias −0.133 (solid × opacity) → −0.079 (medium); most of the gain is the
@@ -113,7 +115,8 @@ float occluder_visibility(Vec3 x, Vec3 n, const Ellipsoid& shell, float opacity,
                           float distance = std::numeric_limits<float>::infinity());
 
 /// Visibility of one receiver outside one shell under the medium law (OccluderLaw::Medium):
-/// the receiver is mapped into the shell's unit frame (DESIGN 3.2, as ao_medium_ellipsoid) and
+/// the receiver is mapped into the shell's unit frame (docs/DESIGN.md, 'The method ladder', as
+/// ao_medium_ellipsoid) and
 /// the shell is the uniform random medium of medium_table.h (τ per radius), so
 /// V = medium_ao(|x'|, n'·x'/|x'|, τ) — exact for spheres; exactly 1 when the shell is wholly
 /// below the horizon. `slice` = MediumTable::get().slice(τ). 1 if x is inside or n = 0.

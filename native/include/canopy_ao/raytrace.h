@@ -1,8 +1,8 @@
 // Canopy AO — ray-traced ambient occlusion with Embree (3 or 4): the exact answer (up to sampling
 // noise), the reference every approximate model is checked against, and the source of
-// calibration samples (DESIGN 3.7, 5).
+// calibration samples (docs/DESIGN.md, 'The method ladder' and 'Auto mode').
 //
-// What it computes (DESIGN 2, Cycles' meaning, DESIGN 9):
+// What it computes (docs/DESIGN.md, 'What AO means here': Cycles' meaning):
 //
 //     AO(x, n) = (1/π) ∫_hemisphere(n) V_D(x, ω) (ω·n) dω        in [0, 1], 1 = open sky
 //
@@ -19,19 +19,42 @@
 // estimate is unbiased, stratified, and depends only on (its row index, seed, its own data):
 // never on the thread count, the block split or other points. No rand(), no global state.
 //
-// Origins: x + offset · n̂, rays from t = 0 to t = distance. offset < 0 (the default) means
-// automatic: 1e-5 × the scene's bounding-box diagonal + 1e-6 × the largest absolute vertex
-// coordinate (float precision of the hit test, which grows with the extent and with the
-// distance from the origin). A leaf's own vertex therefore does not see its own triangle. The
-// offset is also a bias (occluders nearer than it along the normal are missed): pass an
-// explicit one below the smallest gap that matters, e.g. for a tiny tree on a huge ground.
+// Origins (docs/DESIGN.md, 'Baselines and references': skip only the receiver's own triangles,
+// as Cycles does). A receiver may name the triangles it lies on (OwnPrimitives): a vertex of
+// the tracer's mesh (every triangle using that vertex is its own) or a triangle (a texel's). Its
+// rays then ignore those triangles (an Embree filter on the primitive id) and start on the
+// surface itself: nothing else is skipped, so a blade root standing on the ground sees the
+// ground below its horizon. The start moves a hair (1e-3 of the way, at least the float
+// spacing of the coordinates, at most half) towards the centroid of one own triangle: a
+// texel's, or of a vertex's triangles the one facing its normal most squarely (so the start
+// stays on the surface, not inside the solid a convex corner bounds). That puts it strictly on
+// its own side of any surface it touches (the ground under a root, the branch under a leaf)
+// without crossing anything farther away. Rays go from t = 0: a face lying exactly in the plane
+// of another (a trunk's bottom cap in the ground) does not see it. A back-off that made such faces block darkened Sapling Tree Gen's
+// overlapping branch pieces by 0.16 on average, unverified against Cycles, so it was left out.
+// Checked against Cycles' own vertex bake (Blender 3.4, 1024 samples): blade roots on the ground
+// leaning either way and the top ring of a capped trunk agree within 0.004; the base ring of a
+// trunk whose bottom cap lies in the ground plane reads 0.167 where Cycles gives 0.128 (not
+// settled why: Cycles averages a vertex's corners, and its cap corner, in the ground plane,
+// seems to see nothing; tracing per corner got that ring to 0.11 but the top ring to 0.78).
+// The old normal offset gave 1.0, 0.71 and 0.83 there.
 //
-// Edge cases (measured, never NaN, never a crash — DESIGN 8):
+// A receiver without own primitives (an arbitrary point, or offset ≥ 0 given explicitly)
+// starts at x + offset · n̂ instead. offset < 0 (the default) means automatic: 1e-5 × the
+// scene's bounding-box diagonal + 1e-6 × the largest absolute vertex coordinate (float
+// precision of the hit test, which grows with the extent and with the distance from the
+// origin). A leaf's own vertex therefore does not see its own triangle, but such an offset also
+// skips a surface the point lies on whenever the normal leans into it, and misses occluders
+// nearer than it along the normal: name the own primitives where they are known.
+//
+// Edge cases (measured, never NaN, never a crash — docs/DESIGN.md, 'How we check ourselves'):
 //  - empty mesh (0 triangles, any vertex count including 0): nothing occludes, AO = 1 everywhere;
 //  - zero-length normal: no hemisphere is defined; AO = 1 (documented fallback);
 //  - normals need not be unit length: they are normalised;
 //  - non-finite vertex, point or normal coordinates: std::invalid_argument;
 //  - triangle index outside [0, V): std::invalid_argument;
+//  - an own vertex id outside [0, V) or own triangle id outside [0, M) (other than −1 = none):
+//    std::invalid_argument;
 //  - samples < 1, distance ≤ 0 or NaN, offset NaN: std::invalid_argument;
 //  - a failure reported by Embree (out of memory, ...): canopy_ao::Error with Embree's message.
 //
@@ -51,6 +74,21 @@
 namespace canopy_ao {
 
 // === Options
+/// Each point's cosine-weighted sample set. Measured on Sapling Tree Gen trees (MAE against a
+/// 4096-ray reference, bench/bench_sampling.py): the lattice is as good as the Owen-scrambled
+/// Sobol' net at 16 rays and 1–6 % better at 64–256; both cut the error of independent rays
+/// by 15–40 % at 16 rays (figures in bench/README.md).
+enum class Sampling {
+  /// The shared Fibonacci lattice, Cranley–Patterson-rotated per point (the default; above).
+  kLattice,
+  /// Owen-scrambled Sobol' (0, 2)-sequence, hashed per point (Burley, "Practical Hash-based
+  /// Owen Scrambling", JCGT 9(4), 2020): stratified in every elementary interval at 2^k rays,
+  /// and any prefix of a point's rays is itself well spread.
+  kSobol,
+  /// Independent uniform rays (a counter-based hash per point and ray): the baseline.
+  kIndependent,
+};
+
 /// Per-call settings of the ray-traced AO. Defaults match the Python API.
 struct RayTraceOptions {
   /// Cosine-weighted rays per point (≥ 1). The standard error at AO = a is at most
@@ -64,8 +102,21 @@ struct RayTraceOptions {
   /// Seed of the per-point rotations. Same seed → bit-identical results; another seed → other
   /// noise with the same expectation.
   std::uint32_t seed = 0;
-  /// Ray origin offset along the normal, scene units (≥ 0), or < 0 for automatic (see above).
+  /// Ray origin offset along the normal, scene units (≥ 0), or < 0 for automatic (see above:
+  /// the own-surface start where own primitives are given, else the automatic normal offset).
   float offset = -1.0f;
+  /// Which sample set (see Sampling; all unbiased, deterministic, thread-count independent).
+  Sampling sampling = Sampling::kLattice;
+};
+
+/// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no
+/// receiver has one); otherwise it holds one int32 per query point, −1 = none:
+///  - vertex_ids[i]: an index into the tracer's vertices; every triangle using it is skipped;
+///  - triangle_ids[i]: an index into the tracer's triangles; that triangle is skipped.
+/// Both may be given for the same point (the union is skipped; the vertex sets the start).
+struct OwnPrimitives {
+  const std::int32_t* vertex_ids = nullptr;
+  const std::int32_t* triangle_ids = nullptr;
 };
 
 /// How the Embree scene is built (tuning, not semantics: results are the same up to float
@@ -73,8 +124,23 @@ struct RayTraceOptions {
 struct RayTracerBuildOptions {
   /// RTC_BUILD_QUALITY_HIGH (spatial splits: slower build, faster traversal) instead of MEDIUM.
   bool high_quality = false;
-  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed, DESIGN 9).
+  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed, docs/DESIGN.md, 'Facts measured in Blender').
   bool robust = false;
+};
+
+/// A mesh placed many times by Instance (an instanced tree): #V by 3 vertices, #M by 3 vertex
+/// indices in [0, V), as the RayTracer's own mesh.
+struct Prototype {
+  PointsView vertices;
+  const std::int32_t* triangles = nullptr;
+  std::size_t triangle_count = 0;
+};
+
+/// One placement of a Prototype: `matrix` is the row-major 4 × 4 world-from-prototype
+/// transform (affine: last row 0 0 0 1; any scale, rotation, shear or mirroring).
+struct Instance {
+  std::uint32_t prototype = 0;
+  float matrix[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
 };
 
 // === Ray tracer
@@ -88,6 +154,15 @@ class RayTracer {
   /// Throws std::invalid_argument on bad input, canopy_ao::Error if Embree fails.
   RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
             const RayTracerBuildOptions& build = {});
+  /// Same, plus instanced meshes (Embree instances, RTC_GEOMETRY_TYPE_INSTANCE): each
+  /// prototype's BVH is built once, each instance places it by its matrix, so a forest of
+  /// copies costs one tree's memory. Instanced triangles occlude like the own mesh's (two-sided,
+  /// same AO) but carry no receivers: OwnPrimitives ids always refer to the own mesh. Throws
+  /// std::invalid_argument for a bad prototype mesh, an instance's prototype outside
+  /// [0, #prototypes), a non-finite or non-affine matrix.
+  RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+            const std::vector<Prototype>& prototypes, const std::vector<Instance>& instances,
+            const RayTracerBuildOptions& build = {});
   ~RayTracer();
   RayTracer(RayTracer&&) noexcept;
   RayTracer& operator=(RayTracer&&) noexcept;
@@ -99,16 +174,21 @@ class RayTracer {
   /// be unit length; a zero normal gives 1. `out` must hold N floats.
   void ao(PointsView points, PointsView normals, const RayTraceOptions& options,
           float* out) const;
+  /// Same, skipping each receiver's own primitives (OwnPrimitives: N entries per given array).
+  void ao(PointsView points, PointsView normals, const OwnPrimitives& own,
+          const RayTraceOptions& options, float* out) const;
   /// Same, returning a new vector of N values in [0, 1].
   std::vector<float> ao(PointsView points, PointsView normals,
                         const RayTraceOptions& options = {}) const;
-  /// AO at every vertex of the mesh itself (#V values), with the given #V by 3 vertex normals.
+  /// AO at every vertex of the mesh itself (#V values), with the given #V by 3 vertex normals;
+  /// each vertex is its own receiver (OwnPrimitives::vertex_ids = 0, 1, ..., V−1).
   std::vector<float> ao_at_vertices(PointsView normals, const RayTraceOptions& options = {}) const;
 
   /// The offset used when RayTraceOptions::offset < 0.
   float auto_offset() const;
   std::size_t vertex_count() const;
   std::size_t triangle_count() const;
+  std::size_t instance_count() const;
 
  private:
   struct Impl;

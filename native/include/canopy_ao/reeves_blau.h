@@ -1,5 +1,6 @@
 // Canopy AO — the Reeves–Blau baseline (Reeves & Blau 1985, as compared in Hegeman 2006 §3;
-// DESIGN 3.7): light falls off exponentially with depth inside the canopy, whatever the normal.
+// docs/DESIGN.md, 'The method ladder'): light falls off exponentially with depth inside the
+// canopy, whatever the normal.
 //
 //   V = exp(−τ · depth / R),  depth = max(R − |x − C|, 0)
 // evaluated in the ellipsoid's unit frame (R = 1, |x'| = |diag(1/r) Qᵀ(x − C)|), so that τ has

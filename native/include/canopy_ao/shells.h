@@ -1,4 +1,5 @@
-// Canopy AO — k shells: cluster the canopy points, fit one proxy per cluster (DESIGN 3.3).
+// Canopy AO — k shells: cluster the canopy points, fit one proxy per cluster (docs/DESIGN.md,
+// 'The method ladder').
 //
 // Clustering: k-means++ seeding (Arthur & Vassilvitskii, "k-means++: the advantages of careful
 // seeding", SODA 2007) from a SplitMix64 stream seeded with `seed` (same seed → same result, on

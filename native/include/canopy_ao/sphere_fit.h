@@ -1,4 +1,5 @@
-// Canopy AO — exact minimum enclosing sphere of a point cloud (DESIGN 4).
+// Canopy AO — exact minimum enclosing sphere of a point cloud (docs/DESIGN.md, 'Fitting the
+// proxies').
 //
 // Algorithm: Welzl's move-to-front recursion with Gärtner's pivoting and his numerically stable
 // incremental "push" of boundary points (B. Gärtner, "Fast and Robust Smallest Enclosing Balls",

@@ -1,0 +1,269 @@
+"""The ray-free "regression" rung: a ridge fit of the traced calibration sample on cheap
+per-vertex occlusion features, carried over to every vertex. No bpy.
+
+Why (docs/DESIGN.md, "The method ladder"): the leaf-density grid follows where the leaves are but
+misses what is below a voxel (a leaf shaded by its neighbour or by its own branch); the
+calibration sample measures exactly that, per scene. The features and the model's evaluation are
+native (``_core.OcclusionFeatures``, ``_core.predict_features``: occlusion_features.h); here are
+the sample, the fit and the bookkeeping.
+
+Cost: grids O(triangles), one Embree BVH and ``points`` × ``samples`` calibration rays, then a
+fixed number of grid lookups per vertex, whatever the leaf count. No rays beyond the sample.
+
+Fit, per (tree, role) group with enough sample points (else per role, else scene-wide):
+standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ chosen
+by 5-fold cross-validation on the sample. Buried sample points (every ray stops within
+``BURIED_FRACTION`` of the object's size: a leaf base inside its branch) are kept out of the fit —
+their AO of 0 says nothing about the rest of the leaf; the model predicts them like any vertex.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import native
+from .native import CanopyAOError
+from .scene import RECEIVER_ROLES
+
+OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
+BURIED_FRACTION = 0.01   # of the receiver's object bbox diagonal
+BURIED_RAYS = 32
+LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
+MIN_GROUP = 96           # sample points a group needs for its own fit
+POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
+
+
+def _merged(items):
+    verts, tris, off = [], [], 0
+    for it in items:
+        verts.append(it.positions)
+        tris.append(it.triangles + off)
+        off += len(it.positions)
+    if not verts:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)
+    return (np.ascontiguousarray(np.concatenate(verts), np.float32),
+            np.ascontiguousarray(np.concatenate(tris), np.int32))
+
+
+def tree_frame(points):
+    """(center (3,), radius, z_min, z_max) of a tree from its points: the vertical axis through
+    the median xy, the 95th-percentile horizontal distance from it."""
+    p = np.asarray(points, np.float64)
+    c = np.median(p, axis=0)
+    r = np.hypot(p[:, 0] - c[0], p[:, 1] - c[1])
+    radius = float(np.percentile(r, 95)) if len(r) else 1.0
+    extent = float(np.linalg.norm(p.max(0) - p.min(0))) if len(p) else 1.0
+    radius = max(radius, 1e-3 * extent, 1e-9)
+    return c.astype(np.float32), radius, float(p[:, 2].min()), float(p[:, 2].max())
+
+
+def ridge(X, y, lambdas=LAMBDAS, folds=5, seed=0):
+    """Weights of a ridge fit (intercept column 0 not penalised), λ by k-fold CV. Returns
+    (weights float64 (P,), λ, CV mean absolute error)."""
+    X = np.asarray(X, np.float64)
+    y = np.asarray(y, np.float64)
+    n, p = X.shape
+    pen = np.eye(p)
+    pen[0, 0] = 0.0
+
+    def solve(A, b, lam):
+        return np.linalg.solve(A.T @ A + lam * len(A) * pen, A.T @ b)
+
+    fold = np.random.default_rng(seed).permutation(n) % folds
+    best = (np.inf, lambdas[0])
+    for lam in lambdas:
+        err = 0.0
+        for f in range(folds):
+            tr, te = fold != f, fold == f
+            if tr.sum() <= 1 or te.sum() == 0:
+                continue
+            w = solve(X[tr], y[tr], lam)
+            err += float(np.abs(np.clip(X[te] @ w, 0, 1) - y[te]).sum())
+        err /= max(n, 1)
+        if err < best[0]:
+            best = (err, lam)
+    return solve(X, y, best[1]), best[1], best[0]
+
+
+class Model:
+    """One fitted group: feature mean/scale and the expanded weights (float32, native layout)."""
+
+    def __init__(self, feats, target):
+        _core = native.require()
+        self.mean = feats.mean(0).astype(np.float32)
+        sd = feats.std(0)
+        self.scale = np.where(sd > 1e-6, sd, 1.0).astype(np.float32)
+        X = _core.expand_features(np.ascontiguousarray(feats, np.float32), self.mean, self.scale)
+        w, self.lam, self.cv_mae = ridge(X, target)
+        self.weights = w.astype(np.float32)
+        self.n = len(target)
+
+    def predict(self, feats):
+        return np.asarray(native.require().predict_features(np.ascontiguousarray(feats, np.float32),
+                                                 self.mean, self.scale, self.weights))
+
+
+def _sample(groups, count, seed):
+    """{group: sorted row indices} of about `count` points in all, every group some, larger
+    groups more (∝ sqrt of their size: small groups such as a trunk are not starved)."""
+    rng = np.random.default_rng(seed)
+    sizes = {g: n for g, n in groups.items() if n > 0}
+    if not sizes:
+        return {}
+    w = {g: np.sqrt(n) for g, n in sizes.items()}
+    tot = sum(w.values())
+    out = {}
+    for g, n in sizes.items():
+        k = min(n, max(1, int(round(count * w[g] / tot))))
+        out[g] = np.sort(rng.choice(n, size=k, replace=False))
+    return out
+
+
+class RegressionRung:
+    """The fitted rung for one scene: build once (grid, sweeps, calibration sample, fits), then
+    :meth:`ao` for any receiver points of an item, in any number of calls.
+
+    items: SceneItems (roles upper case; IGNORE skipped). distance: the AO distance of the
+    calibration rays (0 = unlimited). points × samples: the calibration sample's size. The
+    sample is traced against every non-ignored triangle with each point's own vertex named,
+    so a receiver skips only the triangles it starts on (as Cycles)."""
+
+    def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
+                 directions=24, seed=0):
+        _core = native.require()
+        t0 = time.perf_counter()
+        items = [it for it in items if it.role != "IGNORE"]
+        occ = [it for it in items if it.role in OCCLUDER_ROLES]
+        if not occ:
+            raise CanopyAOError("method 'regression' needs a CANOPY, TRUNK or GRASS object")
+        grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
+        self._features = _core.OcclusionFeatures(grid, directions=directions)
+        t_grid = time.perf_counter()
+
+        # Frames: one per tree (its leaves and branches), the occluders' for everything else.
+        self._scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
+        self._frames = {}
+        for tree in sorted({it.tree for it in items if it.tree}):
+            pts = [it.positions for it in items
+                   if it.tree == tree and it.role in ("CANOPY", "TRUNK")]
+            self._frames[tree] = tree_frame(np.concatenate(pts)) if pts else self._scene_frame
+
+        # Calibration sample, stratified by (tree, role); traced with each point's own vertex.
+        receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
+        traced = occ + [it for it in items if it.role == "GROUND"]
+        bases, base = {}, 0
+        for it in traced:
+            bases[it.name] = base
+            base += len(it.positions)
+        tracer = _core.RayTracer(*_merged(traced))
+        groups = {}
+        for it in receivers:
+            groups.setdefault((it.tree, it.role), []).append(it)
+        picks = _sample({g: sum(len(it.positions) for it in its) for g, its in groups.items()},
+                        points, seed)
+        d = float(distance) if distance and distance > 0 else float("inf")
+        sample = {}
+        for g, idx in picks.items():
+            its = groups[g]
+            offs = np.cumsum([0] + [len(it.positions) for it in its])
+            owner = np.searchsorted(offs, idx, side="right") - 1
+            P = np.concatenate([it.positions for it in its])[idx]
+            N = np.concatenate([it.normals for it in its])[idx]
+            ids = (np.array([bases[it.name] for it in its])[owner] + idx - offs[owner]).astype(
+                np.int32)
+            diag = np.array([_diag(it.positions) for it in its])[owner]
+            ao = _trace(tracer, P, N, samples, d, seed + 1, ids)
+            buried = _near_ao(tracer, P, N, diag, ids) <= 0.0
+            F = self._compute(its[0].tree, P, N)
+            sample[g] = dict(features=F[~buried], ao=ao[~buried], buried=int(buried.sum()))
+        t_cal = time.perf_counter()
+
+        # Fit per group, falling back to the role's pooled sample, then to everything.
+        by_role = {}
+        for g, s_ in sample.items():
+            by_role.setdefault(g[1], []).append(s_)
+
+        def pool(ss):
+            return (np.concatenate([s_["features"] for s_ in ss]),
+                    np.concatenate([s_["ao"] for s_ in ss]))
+
+        self._models, self.fits, cache = {}, {}, {}
+        for g in groups:
+            s_ = sample.get(g)
+            if s_ is not None and len(s_["ao"]) >= MIN_GROUP:
+                src, (F, y) = "own", (s_["features"], s_["ao"])
+            elif sum(len(t["ao"]) for t in by_role.get(g[1], [])) >= MIN_GROUP:
+                src, (F, y) = f"role {g[1]}", pool(by_role[g[1]])
+            else:
+                src, (F, y) = "scene", pool(list(sample.values()))
+            if len(y) < 8:
+                raise CanopyAOError("method 'regression': fewer than 8 unburied calibration "
+                                    "points (is every receiver buried inside geometry?)")
+            ck = g if src == "own" else src
+            if ck not in cache:
+                cache[ck] = Model(F, y)
+            m = self._models[g] = cache[ck]
+            self.fits[f"{g[0] or '-'}/{g[1]}"] = dict(
+                source=src, points=int(m.n), lam=float(m.lam), cv_mae=round(float(m.cv_mae), 4),
+                buried=int(s_["buried"]) if s_ else 0)
+        self._fallback = cache[next(iter(cache))] if cache else None
+        t_fit = time.perf_counter()
+        self.report = dict(method="regression", groups=self.fits, resolution=resolution,
+                           directions=directions, calibration_samples=samples,
+                           calibration_points=int(sum(len(v) for v in picks.values())),
+                           timings=dict(grid=t_grid - t0, calibration=t_cal - t_grid,
+                                        fit=t_fit - t_cal))
+
+    def _compute(self, tree, p, n):
+        c, r, z0, z1 = self._frames.get(tree, self._scene_frame)
+        return self._features.compute(np.ascontiguousarray(p, np.float32),
+                                      np.ascontiguousarray(n, np.float32), c, r, z0, z1)
+
+    def ao(self, role, tree, p, n):
+        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree."""
+        if len(p) == 0:
+            return np.ones(0, np.float32)
+        model = self._models.get((tree, role))
+        if model is None:  # an item the sample did not see: its role's fit, else any
+            model = next((m for (t, r), m in self._models.items() if r == role), self._fallback)
+        return model.predict(self._compute(tree, p, n))
+
+
+def bake(items, distance=0.0, **options):
+    """({item name: float32 AO}, report) for every item by the regression rung (a one-off
+    RegressionRung; IGNORE items get 1)."""
+    t0 = time.perf_counter()
+    rung = RegressionRung(items, distance, **options)
+    out = {it.name: (rung.ao(it.role, it.tree, it.positions, it.normals)
+                     if it.role in RECEIVER_ROLES else np.ones(len(it.positions), np.float32))
+           for it in items}
+    rung.report["timings"]["total"] = time.perf_counter() - t0
+    return out, rung.report
+
+
+def _diag(p):
+    return float(np.linalg.norm(p.max(0) - p.min(0))) if len(p) else 0.0
+
+
+def _trace(tracer, P, N, samples, distance, seed, ids):
+    """Traced AO; points with an own vertex id (>= 0) skip only their own triangles."""
+    P, N = np.ascontiguousarray(P, np.float32), np.ascontiguousarray(N, np.float32)
+    if (ids >= 0).all():
+        try:
+            return np.asarray(tracer.ao(P, N, samples=int(samples), distance=distance,
+                                        seed=int(seed), vertex_ids=ids))
+        except TypeError:  # a tracer without own-triangle skipping: the offset path
+            pass
+    return np.asarray(tracer.ao(P, N, samples=int(samples), distance=distance, seed=int(seed)))
+
+
+def _near_ao(tracer, P, N, diag, ids):
+    """Traced AO out to BURIED_FRACTION × each point's object diagonal (0 = buried)."""
+    out = np.ones(len(P), np.float32)
+    for dg in np.unique(diag):
+        m = diag == dg
+        if dg <= 0:
+            continue
+        out[m] = _trace(tracer, P[m], N[m], BURIED_RAYS, BURIED_FRACTION * dg, 7, ids[m])
+    return out

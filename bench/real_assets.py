@@ -1,0 +1,235 @@
+"""Every rung on the real-generator scenes (Sapling Tree Gen trees, grass field, grove).
+
+    /usr/bin/python3 bench/real_assets.py [--scenes sap_callistemon ...] [--full] [--csv FILE]
+
+The scenes are the exports of examples/sapling_scenes.py (bench/out/real/<scene>[_quick].npz;
+build them first, in Blender — the command is printed when one is missing). Reference: Embree at
+1024 cosine-weighted rays per vertex, AO distance = the scene's diagonal (bench/real_scenes.py,
+cached); Cycles' own bake is a second reference when examples/sapling_scenes.py --bake-cycles N has
+been run (the highest N). Per scene, per method: MAE over all vertices and with buried vertices
+left out (leaf and branch vertices whose rays all stop within 1 % of their object's size),
+correlation (buried left out), MAE against the Cycles reference (buried left out), and wall time of the whole bake as a user waits for it (BVH,
+grids, fits and calibration included):
+
+- constant: the median reference AO of the unburied vertices for every vertex (an oracle
+  baseline: a rung that does not beat it has learnt nothing);
+- sphere, ellipsoid, shells, medium, grid: the engine's rungs, τ calibrated by the engine;
+- rays N: Embree at N = 1, 4, 16, 64, 256 rays (BVH build included);
+- regression: the ray-free rung (addon/canopy_ao/core/regression.py, occlusion_features.h):
+  1024 traced calibration points, then no rays;
+- hybrid c/N: ao_near_far with N rays out to near = c grid voxels, the grid beyond
+  (near is scale-free: the voxel is the grid's box / its resolution);
+- cycles N: Cycles' bake at N samples, when cached (time: the bake call).
+
+Designed on sap_callistemon, sap_white_birch, sap_small_maple (marked *); every other scene is
+held out. Times are wall-clock on a shared 2-core machine: compare ratios within one run.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(REPO, "addon"))
+sys.path.insert(0, os.path.join(REPO, "examples"))
+
+import numpy as np  # noqa: E402
+
+import real_scenes as rs  # noqa: E402
+from canopy_ao import _core, core  # noqa: E402
+from canopy_ao.core import regression  # noqa: E402
+from canopy_ao.core.metrics import compare  # noqa: E402
+
+DESIGN = ("sap_callistemon", "sap_white_birch", "sap_small_maple")
+TREES = DESIGN + ("sap_douglas_fir", "sap_small_pine", "sap_weeping_willow",
+                  "sap_quaking_aspen", "sap_japanese_maple", "sap_grove")
+SCENES = TREES + ("grass_field_real",)
+ENGINE_RUNGS = ("sphere", "ellipsoid", "shells", "medium", "grid")
+RAYS = (1, 4, 16, 64, 256)
+GRID_RESOLUTION = 48       # DensityGrid's default: the hybrid's far field
+HYBRID = ((2.0, 16), (2.0, 64), (8.0, 64))   # (near in voxels, rays); the ladder's: 2, 64
+
+
+_WARM = []
+
+
+def timed(fn):
+    t0 = time.perf_counter()
+    r = fn()
+    return r, time.perf_counter() - t0
+
+
+def engine_items(sc):
+    return [core.SceneItem(n, r.upper(), t, p, nn, tr) for n, r, t, p, nn, tr in sc.items()]
+
+
+def cycles_runs(sc):
+    """{samples: (ao over all vertices, seconds)} from sapling_scenes.py --bake-cycles."""
+    out = {}
+    stem = os.path.basename(sc.path)[:-4] + "_cycles_"
+    for f in sorted(os.listdir(os.path.dirname(sc.path))):
+        if f.startswith(stem) and f.endswith(".npz") and f[len(stem):-4].isdigit():
+            with np.load(os.path.join(os.path.dirname(sc.path), f)) as z:
+                if str(z["geometry"]) != sc.geometry:
+                    continue
+                out[int(f[len(stem):-4])] = (np.concatenate([z[f"ao/{n}"] for n in sc.names]),
+                                             float(z["seconds"]))
+    return dict(sorted(out.items()))
+
+
+def near_distance(sc, voxels):
+    """The hybrid's near distance: `voxels` voxels of the far grid (its box / resolution)."""
+    occ = sc.role != "ground"
+    ext = sc.V[occ].max(0) - sc.V[occ].min(0)
+    return voxels * float(ext.max()) / GRID_RESOLUTION
+
+
+def methods(sc):
+    """Yield (method, ao over all vertices, seconds, note)."""
+    items = engine_items(sc)
+    D = sc.distance
+    if not _WARM:  # the first bake of a process builds the medium table and thread pools
+        core.bake(items, core.BakeSettings(method="medium", distance=D))
+        _WARM.append(True)
+    for m in ENGINE_RUNGS:
+        try:
+            (res, rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
+                method=m, distance=D)))
+            yield m, np.concatenate([r.ao for r in res]), dt, f"tau {rep.get('tau', '')}"
+        except Exception as exc:  # a rung that refuses the scene says why
+            yield m, None, 0.0, f"failed: {exc}"
+    tracer, t_bvh = timed(lambda: _core.RayTracer(sc.V, sc.T))
+    for n in RAYS:
+        ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0))
+        yield f"rays {n}", ao, dt + t_bvh, ""
+    (per, rep), dt = timed(lambda: regression.bake(items, distance=D))
+    yield "regression", np.concatenate([per[n] for n in sc.names]), dt, \
+        " ".join(f"{k}:{v['source']}" for k, v in rep["groups"].items())
+    occ = np.isin(sc.role, ("canopy", "trunk", "grass"))
+    keep_t = np.all(occ[sc.T], axis=1)
+    grid, t_grid = timed(lambda: _core.DensityGrid(sc.V, np.ascontiguousarray(sc.T[keep_t]),
+                                                   resolution=GRID_RESOLUTION))
+    for c, n in HYBRID:
+        near = near_distance(sc, c)
+        ao, dt = timed(lambda: np.asarray(_core.ao_near_far(tracer, grid, sc.V, sc.N, near,
+                                                            samples=n, distance=D)))
+        yield f"hybrid {c:g}v/{n}", ao, dt + t_bvh + t_grid, f"near {near:.3g}"
+    for s, (ao, dt) in cycles_runs(sc).items():
+        yield f"cycles {s}", ao, dt, "Cycles bake"
+
+
+def run_scene(name, quick, writer):
+    sc = rs.load(name, quick)
+    ref, _ = rs.reference(sc)
+    bur = rs.buried(sc)
+    keep = ~bur
+    star = "*" if name in DESIGN else ""
+    print(f"\n== {name}{star}: {sc.n_vertices} vertices, {len(sc.T)} triangles, buried "
+          f"{bur.sum()} ({bur.sum() / max(1, np.isin(sc.role, ('canopy', 'trunk')).sum()):.0%} "
+          f"of leaf+branch vertices), mean AO {ref.mean():.3f}, AO distance {sc.distance:.3g}")
+    cyc = cycles_runs(sc)
+    cref = cyc[max(cyc)][0] if cyc else None  # the highest-sample Cycles bake: 2nd reference
+    ctitle = f"vs cy{max(cyc)}" if cyc else ""
+    print(f"{'method':16s} {'MAE all':>8s} {'MAE unb':>8s} {'corr':>6s} {'seconds':>8s} "
+          f"{ctitle:>8s}  note")
+    const = np.full_like(ref, np.median(ref[keep]))
+    rows = [("constant", const, 0.0, "median reference AO (oracle)")]
+    t64 = None
+    for row in [*rows, *methods(sc)]:
+        m, ao, dt, note = row
+        if ao is None:
+            print(f"{m:16s} {'-':>8s} {'-':>8s} {'-':>6s} {'-':>8s}  {note}")
+            continue
+        a, u = compare(ao, ref), compare(ao, ref, keep)
+        if m == "rays 64":
+            t64 = dt
+        vs_c = f"{compare(ao, cref, keep)['mae']:8.4f}" if cref is not None else ""
+        print(f"{m:16s} {a['mae']:8.4f} {u['mae']:8.4f} {u['corr']:6.3f} {dt:8.3f} {vs_c:>8s}  "
+              f"{note}", flush=True)
+        if writer is not None:
+            writer.writerow(dict(scene=name, design=bool(star), vertices=sc.n_vertices,
+                                 method=m, mae_all=a["mae"], mae_unburied=u["mae"],
+                                 corr=u["corr"], bias=u["bias"], seconds=dt,
+                                 mae_vs_cycles=compare(ao, cref, keep)["mae"]
+                                 if cref is not None else "",
+                                 t64=t64 if t64 else "", note=note))
+        if m == "regression":
+            for role in ("canopy", "trunk", "ground", "grass"):
+                r = compare(ao, ref, keep & (sc.role == role))
+                if r["n"]:
+                    print(f"  {role:14s} {'':8s} {r['mae']:8.4f} {r['corr']:6.3f} "
+                          f"{'':8s}  bias {r['bias']:+.3f}")
+
+
+def markdown(rows):
+    """The README's table from the CSV rows: per scene, the rungs that matter for the targets."""
+    out = ["| scene | vertices | constant | best proxy rung | grid | rays 16 | rays 64 | "
+           "regression (ray-free) | hybrid 2 voxels / 64 rays |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    scenes = []
+    for r in rows:
+        if r["scene"] not in scenes:
+            scenes.append(r["scene"])
+    for sc in scenes:
+        m = {r["method"]: r for r in rows if r["scene"] == sc}
+        t64 = float(m["rays 64"]["seconds"])
+
+        def cell(name, ratio=True):
+            r = m.get(name)
+            if r is None or r["mae_unburied"] == "":
+                return "–"
+            txt = (f"{float(r['mae_all']):.3f} / {float(r['mae_unburied']):.3f}, "
+                   f"r {float(r['corr']):.2f}, {float(r['seconds']):.2g} s")
+            return txt + (f" ({float(r['seconds']) / t64:.2f}×)" if ratio else "")
+        proxies = [k for k in ENGINE_RUNGS if k != "grid" and k in m and m[k]["mae_unburied"]]
+        best = min(proxies, key=lambda k: float(m[k]["mae_unburied"])) if proxies else None
+        star = "*" if m["rays 64"]["design"] == "True" else ""
+        out.append(f"| {sc}{star} | {m['rays 64']['vertices']} | "
+                   f"{float(m['constant']['mae_all']):.3f} / "
+                   f"{float(m['constant']['mae_unburied']):.3f} | "
+                   f"{best + ': ' + cell(best, False) if best else '–'} | {cell('grid', False)} | "
+                   f"{cell('rays 16', False)} | {cell('rays 64', False)} | {cell('regression')} | "
+                   f"{cell('hybrid 2v/64')} |")
+    return "\n".join(out)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="real_assets.py", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
+    ap.add_argument("--full", action="store_true", help="full-size exports instead of quick")
+    ap.add_argument("--csv", help="also write every row to this CSV file")
+    ap.add_argument("--markdown", metavar="FILE.md",
+                    help="only format an earlier --csv run as the README's table, into FILE.md")
+    a = ap.parse_args(argv)
+    if a.markdown:
+        if not a.csv:
+            ap.error("--markdown needs --csv (the run to format)")
+        with open(a.csv, newline="") as fh:
+            text = markdown(list(csv.DictReader(fh)))
+        with open(a.markdown, "w") as fh:
+            fh.write(text + "\n")
+        print(text)
+        return 0
+    fh = open(a.csv, "w", newline="") if a.csv else None
+    writer = None
+    if fh:
+        writer = csv.DictWriter(fh, ["scene", "design", "vertices", "method", "mae_all",
+                                     "mae_unburied", "corr", "bias", "seconds", "mae_vs_cycles", "t64",
+                                     "note"])
+        writer.writeheader()
+    try:
+        for s in a.scenes:
+            run_scene(s, not a.full, writer)
+    finally:
+        if fh:
+            fh.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,131 @@
+"""The real-generator scenes (examples/sapling_scenes.py) as numpy, their references, buried vertices.
+
+Shared by bench/real_assets.py and the tests; needs ``canopy_ao._core`` but no Blender.
+
+- :func:`load` reads ``bench/out/real/<scene>[_quick].npz`` into a :class:`RealScene`.
+- :func:`reference` is Embree AO per vertex at many rays (cached beside the scene, keyed by its
+  geometry hash and the tracer's build), the AO distance the scene's diagonal (Cycles' meaning).
+- :func:`buried` marks leaf and branch vertices whose rays all stop within a tiny distance — a
+  fraction :data:`BURIED_FRACTION` of their object's bounding-box diagonal, so the test is
+  scale-free: leaf bases inside the branch tube, and branch bases inside their parent's tube
+  (Sapling bevels each branch separately; ray-traced AO 0 there, whatever the model). Every
+  error figure is reported over all vertices and with these left out.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, os.path.join(REPO, "addon"))
+
+import numpy as np  # noqa: E402
+
+from canopy_ao import _core  # noqa: E402
+
+REAL = os.path.join(HERE, "out", "real")
+REF_SEED = 12345
+BURIED_FRACTION = 0.01   # of the object's bbox diagonal
+BURIED_RAYS = 32
+
+
+class RealScene:
+    """Objects of one exported scene, merged: V (N,3), N (N,3), T (M,3), role/tree/object per vertex."""
+
+    def __init__(self, path):
+        self.path = path
+        with np.load(path) as z:
+            self.names = [str(n) for n in z["names"]]
+            self.parts = {}
+            for n in self.names:
+                self.parts[n] = dict(positions=z[f"{n}/positions"].astype(np.float32),
+                                     normals=z[f"{n}/normals"].astype(np.float32),
+                                     triangles=z[f"{n}/triangles"].astype(np.int32),
+                                     role=str(z[f"{n}/role"]), tree=str(z[f"{n}/tree"]))
+            self.distance = float(z["distance"])
+            self.geometry = str(z["geometry"])
+            self.info = json.loads(str(z["info"]))
+        self.name = os.path.basename(path)[:-4]
+        offs = np.cumsum([0] + [len(self.parts[n]["positions"]) for n in self.names])
+        self.offsets = offs
+        self.V = np.concatenate([self.parts[n]["positions"] for n in self.names])
+        self.N = np.concatenate([self.parts[n]["normals"] for n in self.names])
+        self.T = np.concatenate([self.parts[n]["triangles"] + o
+                                 for n, o in zip(self.names, offs[:-1])]).astype(np.int32)
+        self.role = np.concatenate([np.full(b - a, self.parts[n]["role"], dtype=object)
+                                    for n, a, b in zip(self.names, offs[:-1], offs[1:])])
+        self.tree = np.concatenate([np.full(b - a, self.parts[n]["tree"], dtype=object)
+                                    for n, a, b in zip(self.names, offs[:-1], offs[1:])])
+        self.object = np.repeat(np.arange(len(self.names)), np.diff(offs))
+
+    @property
+    def n_vertices(self):
+        return len(self.V)
+
+    def items(self):
+        """(name, role, tree, positions, normals, triangles) per object."""
+        for n in self.names:
+            p = self.parts[n]
+            yield n, p["role"], p["tree"], p["positions"], p["normals"], p["triangles"]
+
+
+def scene_path(scene, quick=True, out_dir=REAL):
+    return os.path.join(out_dir, f"{scene}{'_quick' if quick else ''}.npz")
+
+
+def load(scene, quick=True, out_dir=REAL):
+    path = scene_path(scene, quick, out_dir)
+    if not os.path.exists(path):
+        raise FileNotFoundError(
+            f"{path} missing: run blender -b --factory-startup --python "
+            f"examples/sapling_scenes.py -- --scenes {scene}{' --quick' if quick else ''}")
+    return RealScene(path)
+
+
+def tracer_tag():
+    """Which ray tracer made a reference: receivers skip only their own triangles (as Cycles)."""
+    return "own-vertex"
+
+
+def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None)):
+    """AO at the scene's own vertices ``rows``, each skipping only its own triangles."""
+    ids = np.arange(sc.n_vertices, dtype=np.int32)[rows]
+    return np.asarray(tracer.ao(sc.V[rows], sc.N[rows], samples=samples, distance=distance,
+                                seed=seed, vertex_ids=ids), np.float32)
+
+
+def reference(sc: RealScene, samples=1024, tracer=None):
+    """(Embree AO over all vertices at ``samples`` rays, seconds), cached beside the scene."""
+    path = sc.path[:-4] + f"_embree_{samples}.npz"
+    tag = tracer_tag()
+    if os.path.exists(path):
+        with np.load(path) as z:
+            if str(z["geometry"]) == sc.geometry and str(z["tracer"]) == tag:
+                return z["ao"].astype(np.float32), float(z["seconds"])
+    t0 = time.perf_counter()
+    tracer = tracer or _core.RayTracer(sc.V, sc.T)
+    ao = trace_vertices(tracer, sc, samples, sc.distance, REF_SEED)
+    dt = time.perf_counter() - t0
+    np.savez_compressed(path, ao=ao, seconds=dt, samples=samples, geometry=sc.geometry,
+                        tracer=tag)
+    return ao, dt
+
+
+def buried(sc: RealScene, tracer=None):
+    """bool (N,): leaf and branch (canopy, trunk) vertices whose rays all stop within
+    BURIED_FRACTION of their object's bounding-box diagonal (AO traced to that distance is 0)."""
+    tracer = tracer or _core.RayTracer(sc.V, sc.T)
+    out = np.zeros(sc.n_vertices, bool)
+    for k, n in enumerate(sc.names):
+        p = sc.parts[n]
+        if p["role"] not in ("canopy", "trunk") or not len(p["positions"]):
+            continue
+        a, b = sc.offsets[k], sc.offsets[k + 1]
+        diag = float(np.linalg.norm(p["positions"].max(0) - p["positions"].min(0)))
+        near = trace_vertices(tracer, sc, BURIED_RAYS, max(BURIED_FRACTION * diag, 1e-9), 7,
+                              slice(a, b))
+        out[a:b] = near <= 0.0
+    return out

@@ -1,0 +1,373 @@
+// Canopy AO — per-vertex occlusion features and their linear model (occlusion_features.h).
+#include "canopy_ao/occlusion_features.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "canopy_ao/parallel.h"
+
+namespace canopy_ao {
+
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+constexpr int kGridAO = 1;  // the feature the products pair with (grid AO at s = 1)
+// The shape features (normal·up … distance from the mid-point) whose pairwise products join the
+// expansion when the features are OcclusionFeatures' own (F = kCount).
+constexpr int kShapeBegin = 6, kShapeEnd = 12;
+constexpr int kShapePairs = (kShapeEnd - kShapeBegin) * (kShapeEnd - kShapeBegin - 1) / 2;
+
+// Golden-angle spiral over the sphere: K nearly uniform directions, fixed (deterministic).
+std::vector<Vec3> sphere_directions(int k) {
+  std::vector<Vec3> d;
+  const float golden = kPi * (3.0f - std::sqrt(5.0f));
+  for (int i = 0; i < k; ++i) {
+    const float z = 1.0f - (2.0f * i + 1.0f) / k;
+    const float r = std::sqrt(std::max(0.0f, 1.0f - z * z));
+    d.push_back({r * std::cos(golden * i), r * std::sin(golden * i), z});
+  }
+  return d;
+}
+
+std::array<int, 3> level_dims(const DensityGrid& g, int level) {
+  std::array<int, 3> d = {g.nx(), g.ny(), g.nz()};
+  for (int l = 0; l < level; ++l) d = {(d[0] + 1) / 2, (d[1] + 1) / 2, (d[2] + 1) / 2};
+  return d;
+}
+
+inline std::size_t vidx(const int* n, int i, int j, int k) {
+  return (static_cast<std::size_t>(k) * n[1] + j) * n[0] + i;
+}
+
+// Lattice coordinates (voxel-centre units) of p.
+inline Vec3 lattice(Vec3 origin, float h, Vec3 p) { return (p - origin) / h; }
+
+inline bool inside_box(const int* n, Vec3 g) {
+  return g.x >= -0.5f && g.y >= -0.5f && g.z >= -0.5f && g.x <= n[0] - 0.5f &&
+         g.y <= n[1] - 0.5f && g.z <= n[2] - 0.5f;
+}
+
+}  // namespace
+
+// --- Precomputation ----------------------------------------------------------------------------
+
+OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int level,
+                                                   const std::vector<Vec3>& dirs) {
+  Field f;
+  const std::array<int, 3> d = level_dims(g, level);
+  f.n[0] = d[0], f.n[1] = d[1], f.n[2] = d[2];
+  f.h = g.voxel_size() * static_cast<float>(1 << level);
+  f.origin = g.origin() + Vec3{0.5f * f.h, 0.5f * f.h, 0.5f * f.h};
+  f.sigma = g.sigma_level(level);
+  const std::size_t V = f.sigma.size(), K = dirs.size();
+  const int* n = f.n;
+  const std::size_t stride[3] = {1, static_cast<std::size_t>(n[0]),
+                                 static_cast<std::size_t>(n[0]) * n[1]};
+  std::vector<std::vector<float>> per_dir(K);
+  parallel_for_blocks(K, 1, [&](std::size_t b, std::size_t e) {
+    for (std::size_t k = b; k < e; ++k) {
+      const Vec3 dk = dirs[k];
+      int m = 0;
+      for (int a = 1; a < 3; ++a)
+        if (std::fabs(dk[a]) > std::fabs(dk[m])) m = a;
+      // Lateral axes, the one with the smaller stride innermost (x whenever it is lateral).
+      const int a1 = m == 0 ? 1 : 0, a2 = m == 2 ? 1 : 2;
+      const int s = dk[m] > 0 ? 1 : -1;
+      const float am = std::fabs(dk[m]);
+      const float step = f.h / am;  // path length between slices
+      // The upstream point sits one slice away, shifted laterally by a constant (da, db) voxels
+      // (|da|, |db| <= 1): the same bilinear stencil for every voxel of the sweep.
+      const float da = dk[a1] / am, db = dk[a2] / am;
+      const int oa = static_cast<int>(std::floor(da)), ob = static_cast<int>(std::floor(db));
+      const float fa = da - oa, fb = db - ob;
+      const float wq[4] = {(1 - fa) * (1 - fb), fa * (1 - fb), (1 - fa) * fb, fa * fb};
+      const std::size_t sa = stride[a1], sb = stride[a2];
+      std::vector<float>& tau = per_dir[k];
+      tau.assign(V, 0.0f);
+      const float* sg = f.sigma.data();
+      float* tp = tau.data();
+      // Columns ia whose four upstream corners all lie inside the slice: no bounds checks.
+      const int ia_lo = std::max(0, -oa), ia_hi = std::min(n[a1] - 1, n[a1] - 2 - oa);
+      // INV: every slice upstream of `im` (the side d_k points to) is final.
+      for (int t = 0; t < n[m]; ++t) {
+        const int im = s > 0 ? n[m] - 1 - t : t;
+        const int up = im + s;
+        const std::size_t base = im * stride[m];
+        if (up < 0 || up >= n[m]) {  // the exit slice: half a step to the boundary
+          for (int ib = 0; ib < n[a2]; ++ib)
+            for (int ia = 0; ia < n[a1]; ++ia) {
+              const std::size_t c = base + ia * sa + ib * sb;
+              tp[c] = 0.5f * step * sg[c];
+            }
+          continue;
+        }
+        const std::size_t ubase = up * stride[m];
+        for (int ib = 0; ib < n[a2]; ++ib) {
+          auto checked = [&](int ia) {
+            const std::size_t c = base + ia * sa + ib * sb;
+            float tu = 0, su = 0;  // bilinear in the upstream slice, zero outside the grid
+            for (int q = 0; q < 4; ++q) {
+              const int ja = ia + oa + (q & 1), jb = ib + ob + (q >> 1);
+              if (ja < 0 || jb < 0 || ja >= n[a1] || jb >= n[a2]) continue;
+              const std::size_t u = ubase + ja * sa + jb * sb;
+              tu += wq[q] * tp[u];
+              su += wq[q] * sg[u];
+            }
+            tp[c] = tu + 0.5f * step * (sg[c] + su);
+          };
+          const bool row_inside = ib + ob >= 0 && ib + ob + 1 < n[a2];
+          if (!row_inside || ia_lo > ia_hi) {
+            for (int ia = 0; ia < n[a1]; ++ia) checked(ia);
+            continue;
+          }
+          for (int ia = 0; ia < ia_lo; ++ia) checked(ia);
+          const std::ptrdiff_t u0 = static_cast<std::ptrdiff_t>(ubase + (ib + ob) * sb) +
+                                    static_cast<std::ptrdiff_t>(oa) * static_cast<std::ptrdiff_t>(sa);
+          for (int ia = ia_lo; ia <= ia_hi; ++ia) {
+            const std::size_t c = base + ia * sa + ib * sb;
+            const std::size_t u = static_cast<std::size_t>(u0 + ia * static_cast<std::ptrdiff_t>(sa));
+            const float tu = wq[0] * tp[u] + wq[1] * tp[u + sa] + wq[2] * tp[u + sb] +
+                             wq[3] * tp[u + sa + sb];
+            const float su = wq[0] * sg[u] + wq[1] * sg[u + sa] + wq[2] * sg[u + sb] +
+                             wq[3] * sg[u + sa + sb];
+            tp[c] = tu + 0.5f * step * (sg[c] + su);
+          }
+          for (int ia = ia_hi + 1; ia < n[a1]; ++ia) checked(ia);
+        }
+      }
+    }
+  });
+  f.tau.resize(V * K);
+  parallel_for_blocks(V, 4096, [&](std::size_t b, std::size_t e) {
+    for (std::size_t v = b; v < e; ++v)
+      for (std::size_t k = 0; k < K; ++k) f.tau[v * K + k] = per_dir[k][v];
+  });
+  return f;
+}
+
+OcclusionFeatures::OcclusionFeatures(const DensityGrid& occluders,
+                                     const OcclusionFeatureOptions& options) {
+  if (options.directions < 6 || options.directions > 256) {
+    throw std::invalid_argument("directions must be in [6, 256], got " +
+                                std::to_string(options.directions));
+  }
+  dirs_ = sphere_directions(options.directions);
+  fine_ = sweep(occluders, 0, dirs_);
+}
+
+// --- Lookups -----------------------------------------------------------------------------------
+
+namespace {
+// The trilinear stencil at lattice point g (clamped to the lattice): 8 voxel indices, weights.
+void trilinear_stencil(const int* n, Vec3 g, std::size_t* idx, float* w) {
+  int i0[3];
+  float fr[3];
+  for (int a = 0; a < 3; ++a) {
+    const float x = std::clamp(g[a], 0.0f, static_cast<float>(n[a] - 1));
+    i0[a] = std::min(static_cast<int>(x), std::max(n[a] - 2, 0));
+    fr[a] = n[a] > 1 ? x - i0[a] : 0.0f;
+  }
+  for (int c = 0; c < 8; ++c) {
+    int v[3];
+    w[c] = 1;
+    for (int a = 0; a < 3; ++a) {
+      const int bit = (c >> a) & 1;
+      v[a] = std::min(i0[a] + bit, n[a] - 1);
+      w[c] *= bit ? fr[a] : 1 - fr[a];
+    }
+    idx[c] = vidx(n, v[0], v[1], v[2]);
+  }
+}
+}  // namespace
+
+float OcclusionFeatures::lerp3(const Field& f, const std::vector<float>& v, Vec3 g) {
+  std::size_t idx[8];
+  float w[8];
+  trilinear_stencil(f.n, g, idx, w);
+  float acc = 0;
+  for (int c = 0; c < 8; ++c) acc += w[c] * v[idx[c]];
+  return acc;
+}
+
+void OcclusionFeatures::taus_at(Vec3 p, float* tau) const {
+  const Field& f = fine_;
+  const int K = directions();
+  const Vec3 g = lattice(f.origin, f.h, p);
+  std::size_t idx[8];
+  float w[8];
+  if (inside_box(f.n, g)) {
+    trilinear_stencil(f.n, g, idx, w);
+    for (int k = 0; k < K; ++k) tau[k] = 0;
+    for (int c = 0; c < 8; ++c) {
+      const float* src = f.tau.data() + idx[c] * K;
+      for (int k = 0; k < K; ++k) tau[k] += w[c] * src[k];
+    }
+    return;
+  }
+  // Outside: the optical depth from where each direction enters the grid (slab test).
+  for (int k = 0; k < K; ++k) {
+    const Vec3 d = dirs_[k];
+    float t0 = 0, t1 = std::numeric_limits<float>::infinity();
+    bool miss = false;
+    for (int a = 0; a < 3 && !miss; ++a) {
+      const float lo = -0.5f, hi = f.n[a] - 0.5f;
+      if (std::fabs(d[a]) < 1e-12f) {
+        miss = g[a] < lo || g[a] > hi;
+        continue;
+      }
+      float ta = (lo - g[a]) / d[a], tb = (hi - g[a]) / d[a];
+      if (ta > tb) std::swap(ta, tb);
+      t0 = std::max(t0, ta);
+      t1 = std::min(t1, tb);
+    }
+    tau[k] = 0;
+    if (miss || t0 > t1) continue;
+    trilinear_stencil(f.n, g + d * t0, idx, w);
+    for (int c = 0; c < 8; ++c) tau[k] += w[c] * f.tau[idx[c] * K + k];
+  }
+}
+
+void OcclusionFeatures::compute(PointsView positions, PointsView normals, const TreeFrame& frame,
+                                float* out) const {
+  if (positions.size != normals.size)
+    throw std::invalid_argument("positions and normals must have the same number of rows");
+  if (!(frame.radius > 0) || !std::isfinite(frame.radius) || !is_finite(frame.center) ||
+      !std::isfinite(frame.z_min) || !std::isfinite(frame.z_max) || frame.z_max < frame.z_min)
+    throw std::invalid_argument("frame needs a finite radius > 0 and z_min <= z_max");
+  for (std::size_t i = 0; i < positions.size; ++i)
+    if (!is_finite(positions[i]) || !is_finite(normals[i]))
+      throw std::invalid_argument("positions and normals must be finite (row " +
+                                  std::to_string(i) + ")");
+  const int K = directions();
+  const float height = std::max(frame.z_max - frame.z_min, 1e-12f);
+  const Vec3 mid = {frame.center.x, frame.center.y, 0.5f * (frame.z_min + frame.z_max)};
+  const float half_diag = std::max(0.5f * std::sqrt(4 * frame.radius * frame.radius +
+                                                    height * height), 1e-12f);
+  parallel_for_blocks(positions.size, 256, [&](std::size_t b, std::size_t e) {
+    std::vector<float> taus(K);
+    for (std::size_t i = b; i < e; ++i) {
+      const Vec3 p = positions[i];
+      const Vec3 nn = normalize(normals[i]);
+      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
+      float w_opp = 0, ao_opp = 0, w_sky = 0, sky = 0;
+      taus_at(p, taus.data());
+      for (int k = 0; k < K; ++k) {
+        const Vec3 d = dirs_[k];
+        const float t = taus[k];
+        const float tr = std::exp(-t);
+        if (d.z > 0) {
+          sky += d.z * tr;
+          w_sky += d.z;
+        }
+        const float w = dot(nn, d);
+        if (w > 0) {
+          w_sum += w;
+          const float sq = std::sqrt(tr);
+          ao_s[0] += w * sq;
+          ao_s[1] += w * tr;
+          ao_s[2] += w * tr * tr;
+          mean_tau += w * t;
+        } else if (w < 0) {
+          w_opp -= w;
+          ao_opp -= w * tr;
+        }
+      }
+      float* o = out + i * kCount;
+      if (w_sum > 0) {
+        for (int s = 0; s < 3; ++s) o[s] = ao_s[s] / w_sum;
+        o[4] = std::log1p(mean_tau / w_sum);
+      } else {  // zero normal: an open receiver
+        o[0] = o[1] = o[2] = 1.0f;
+        o[4] = 0.0f;
+      }
+      o[3] = w_sky > 0 ? sky / w_sky : 1.0f;
+      const Vec3 gf = lattice(fine_.origin, fine_.h, p);
+      const float sf = lerp3(fine_, fine_.sigma, gf) * fine_.h;
+      o[5] = std::log1p(inside_box(fine_.n, gf) ? sf : 0.0f);
+      const Vec3 r = {p.x - frame.center.x, p.y - frame.center.y, 0.0f};
+      const float rl = length(r);
+      o[6] = nn.z;
+      o[7] = rl > 0 ? dot(nn, r) / rl : 0.0f;
+      o[8] = std::clamp((p.z - frame.z_min) / height, -0.5f, 1.5f);
+      o[9] = std::min(rl / frame.radius, 2.0f);
+      const Vec3 q = p - mid;
+      const float ql = length(q);
+      o[10] = ql > 0 ? dot(nn, q) / ql : 0.0f;
+      o[11] = std::min(ql / half_diag, 2.0f);
+      o[12] = o[1] - (w_opp > 0 ? ao_opp / w_opp : 1.0f);
+    }
+  });
+}
+
+const char* OcclusionFeatures::feature_name(int f) {
+  static const char* names[kCount] = {
+      "grid_ao_half", "grid_ao", "grid_ao_double", "sky_view", "log_depth", "density",
+      "normal_up", "normal_radial", "height", "radial", "normal_out", "centre_distance",
+      "open_side"};
+  if (f < 0 || f >= kCount) throw std::invalid_argument("feature index out of range");
+  return names[f];
+}
+
+// --- The linear model --------------------------------------------------------------------------
+
+int expanded_size(int features) {
+  return 3 * features + (features == OcclusionFeatures::kCount ? kShapePairs : 0);
+}
+
+namespace {
+void check_model(int f, const float* scale) {
+  if (f < 1) throw std::invalid_argument("at least one feature is needed");
+  for (int j = 0; j < f; ++j)
+    if (!(scale[j] > 0) || !std::isfinite(scale[j]))
+      throw std::invalid_argument("scale must be finite and > 0 (feature " + std::to_string(j) +
+                                  ")");
+}
+
+inline void expand_row(const float* x, int f, const float* mean, const float* scale, float* z,
+                       float* phi) {
+  for (int j = 0; j < f; ++j) z[j] = (x[j] - mean[j]) / scale[j];
+  const int g = std::min(kGridAO, f - 1);
+  int p = 0;
+  phi[p++] = 1.0f;
+  for (int j = 0; j < f; ++j) phi[p++] = z[j];
+  for (int j = 0; j < f; ++j) phi[p++] = z[j] * z[j];
+  for (int j = 0; j < f; ++j)
+    if (j != g) phi[p++] = z[g] * z[j];
+  if (f == OcclusionFeatures::kCount)
+    for (int a = kShapeBegin; a < kShapeEnd; ++a)
+      for (int b = a + 1; b < kShapeEnd; ++b) phi[p++] = z[a] * z[b];
+}
+}  // namespace
+
+void expand_features(const float* features, std::size_t n, int f, const float* mean,
+                     const float* scale, float* out) {
+  check_model(f, scale);
+  const int P = expanded_size(f);
+  parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
+    std::vector<float> z(f);
+    for (std::size_t i = b; i < e; ++i)
+      expand_row(features + i * f, f, mean, scale, z.data(), out + i * P);
+  });
+}
+
+void predict_features(const float* features, std::size_t n, int f, const float* mean,
+                      const float* scale, const float* weights, float* out) {
+  check_model(f, scale);
+  const int P = expanded_size(f);
+  parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
+    std::vector<float> z(f), phi(P);
+    for (std::size_t i = b; i < e; ++i) {
+      expand_row(features + i * f, f, mean, scale, z.data(), phi.data());
+      double acc = 0;
+      for (int p = 0; p < P; ++p) acc += static_cast<double>(weights[p]) * phi[p];
+      out[i] = std::isfinite(acc) ? static_cast<float>(std::clamp(acc, 0.0, 1.0)) : 1.0f;
+    }
+  });
+}
+
+}  // namespace canopy_ao

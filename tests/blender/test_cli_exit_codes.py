@@ -1,0 +1,52 @@
+"""The command line as documented, run as a pipeline would: when the add-on is not installed
+the failure must reach the exit code (Blender exits 0 when a --python-expr fails unless it is
+given --python-exit-code). The commands are read from README.md, addon/README.md and
+scripts/run_example.sh, so the test checks what the documents say."""
+import os
+import re
+import shlex
+import subprocess
+
+import bpy
+import pytest
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+
+
+def documented_commands(path):
+    """Every `blender -b ... canopy_ao.cli ...` command in a file, continuation lines joined."""
+    with open(os.path.join(REPO, path), encoding="utf-8") as f:
+        text = f.read().replace("\\\n", " ")
+    return [m.group(0) for m in re.finditer(r"blender -b [^\n]*canopy_ao\.cli[^\n]*", text)]
+
+
+def as_argv(command, blend):
+    command = command.replace('"out/$scene.blend"', "scene.blend")
+    command = command.replace('"$method"', "sphere").replace("$scene", "x")
+    argv = shlex.split(command)
+    argv = [blend if a == "scene.blend" else a for a in argv]
+    argv[0] = bpy.app.binary_path
+    if "--factory-startup" not in argv:
+        argv.insert(2, "--factory-startup")  # never the user's own preferences
+    if "--" in argv:  # the bake's own options do not matter: it fails before them
+        argv = argv[:argv.index("--") + 1] + ["--all", "--method", "sphere"]
+    return argv
+
+
+SOURCES = ["README.md", "addon/README.md", "scripts/run_example.sh"]
+
+
+@pytest.mark.parametrize("source", SOURCES)
+def test_the_documented_command_fails_with_a_message_without_the_addon(source, tmp_path):
+    commands = documented_commands(source)
+    assert commands, f"no CLI command found in {source}"
+    blend = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True)
+    empty = tmp_path / "scripts"  # a user-scripts folder without the add-on
+    (empty / "addons").mkdir(parents=True)
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=str(empty))
+    for command in commands:
+        argv = as_argv(command, blend)
+        r = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
+        assert r.returncode != 0, f"{source}: exit 0 without the add-on: {command}"
+        assert "No module named 'canopy_ao'" in r.stdout + r.stderr, r.stderr[-1000:]

@@ -1,0 +1,125 @@
+"""The ray-free regression rung and the near/far hybrid (canopy_ao.core), no bpy.
+
+Against Embree on the small tree + ground scene of tree_scene.py: the regression of the traced
+sample must beat the density grid it starts from; both rungs are deterministic and scale-free
+(a scene 100x larger bakes the same AO), and the regression bakes a grass-only scene.
+"""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+HERE = os.path.dirname(__file__)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
+sys.path.insert(0, HERE)
+
+from canopy_ao import core  # noqa: E402
+from canopy_ao.core import regression  # noqa: E402
+from canopy_ao.core.native import _core  # noqa: E402
+import tree_scene as ts  # noqa: E402
+
+if not core.core_status()[0]:
+    pytest.skip(core.core_status()[1], allow_module_level=True)
+
+ROLE = ts.ROLE
+
+
+def items(names=("Trunk", "Leaves", "Ground"), scale=1.0):
+    out = []
+    for name, (p, t) in ts.scene(with_grass=True).items():
+        if name in names:
+            p = (p * np.float32(scale)).astype(np.float32)
+            out.append(core.SceneItem(name, ROLE[name], "T" if name in ("Trunk", "Leaves") else "",
+                                      p, ts.vertex_normals(p, t), t))
+    return out
+
+
+def reference(its, samples=512):
+    """Embree at every vertex, each skipping only its own triangles."""
+    V = np.concatenate([it.positions for it in its])
+    offs = np.cumsum([0] + [len(it.positions) for it in its])
+    T = np.concatenate([it.triangles + o for it, o in zip(its, offs)]).astype(np.int32)
+    N = np.concatenate([it.normals for it in its])
+    ids = np.arange(len(V), dtype=np.int32)
+    return np.asarray(_core.RayTracer(V, T).ao(V, N, samples=samples, seed=99, vertex_ids=ids))
+
+
+def bake(its, method, **kw):
+    res, rep = core.bake(its, core.BakeSettings(method=method, **kw))
+    return np.concatenate([r.ao for r in res]), rep
+
+
+@pytest.fixture(scope="module")
+def scene():
+    its = items()
+    return its, reference(its)
+
+
+def test_regression_beats_the_grid_it_starts_from(scene):
+    its, ref = scene
+    got, rep = bake(its, "regression")
+    grid, _ = bake(its, "grid")
+    mae, mae_grid = np.abs(got - ref).mean(), np.abs(grid - ref).mean()
+    assert mae < 0.7 * mae_grid, (mae, mae_grid)
+    assert mae < 0.06 and np.corrcoef(got, ref)[0, 1] > 0.9
+    assert rep["method"] == "regression"
+    cal = rep["calibration"]
+    assert cal["calibration_points"] <= regression.POINTS  # no rays beyond the sample
+    assert set(cal["groups"]) == {"T/TRUNK", "T/CANOPY", "-/GROUND"}
+
+
+@pytest.mark.parametrize("method", ["regression", "hybrid"])
+def test_deterministic_and_scale_free(method):
+    a, _ = bake(items(), method)
+    b, _ = bake(items(), method)
+    np.testing.assert_array_equal(a, b)
+    big, _ = bake(items(scale=100.0), method)
+    assert np.abs(big - a).max() < 0.02, np.abs(big - a).max()
+
+
+def test_regression_bakes_grass_without_a_tree_and_grass_shades_the_ground():
+    its = items(("Grass", "Ground"))
+    got, _ = bake(its, "regression")
+    ref = reference(its)
+    role = np.concatenate([np.full(len(it.positions), it.role) for it in its])
+    ground = role == "GROUND"
+    assert got[ground].min() < ref[ground].max() - 0.1  # blades shade the ground around them
+    assert np.abs(got[ground] - ref[ground]).mean() < 0.03
+    assert np.abs(got - ref).mean() < 0.08
+
+
+def test_regression_refuses_a_scene_with_nothing_to_occlude():
+    with pytest.raises(core.CanopyAOError, match="regression"):
+        bake(items(("Ground",)), "regression")
+
+
+def test_ridge_recovers_a_linear_law():
+    rng = np.random.default_rng(0)
+    X = np.c_[np.ones(400), rng.normal(size=(400, 3))]
+    w = np.array([0.5, 0.1, -0.05, 0.02])
+    y = X @ w + rng.normal(scale=1e-3, size=400)
+    got, lam, cv = regression.ridge(X, y)
+    np.testing.assert_allclose(got, w, atol=5e-3)
+    assert cv < 5e-3
+
+
+@pytest.mark.parametrize("method", ["hybrid", "regression"])
+def test_command_line_offers_and_documents_the_rung(method):
+    from canopy_ao import cli
+    p = cli.build_parser()
+    assert f"{method}:" in " ".join(p.format_help().split())  # its own line of --help
+    opts = cli.options_from_args(p.parse_args(["--method", method]), world_distance=3.0)
+    assert opts["method"] == method
+
+
+def test_ray_free_auto_never_picks_rays_and_weighs_the_regression():
+    from canopy_ao import cli
+    assert "--ray-free" in cli.build_parser().format_help()
+    its = items()
+    _, free = bake(its, "auto", ray_free=True, time_budget=0.0)
+    assert free["method"] not in ("raytrace", "hybrid")
+    assert "regression" in free["calibration"]["candidates"]
+    assert "raytrace" not in free["calibration"]["candidates"]
+    _, full = bake(its, "auto", time_budget=0.0)
+    assert "raytrace" in full["calibration"]["candidates"]
