@@ -16,7 +16,8 @@ bl_info = {
     "category": "Render",
 }
 
-_MODULES = ("blender.properties", "blender.operators", "blender.panels")
+_MODULES = ("blender.properties", "blender.operators", "blender.panels", "blender.live",
+            "blender.frames")
 
 
 def _modules():

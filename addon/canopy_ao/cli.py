@@ -63,6 +63,9 @@ def build_parser():
     for o in OPTIONS:
         if o.cli is not None:
             _add_option(p, o)
+    p.add_argument("--frames", nargs=2, type=int, metavar=("START", "END"),
+                   help="bake every frame of START..END into per-frame attributes read back "
+                        "by a geometry-nodes modifier (blender/frames.py)")
     p.add_argument("--report", metavar="FILE.json", help="write a JSON report here")
     p.add_argument("--save", action="store_true", help="save the .blend after baking")
     p.add_argument("--threads", type=int, default=0, metavar="N",
@@ -115,6 +118,10 @@ def main(argv=None):
         traceback.print_exc()
         _fail(f"{type(exc).__name__}: {exc}")
     sys.stdout.flush()
+    if args.live:
+        # Blender goes on with its own arguments before "--" (-a renders the animation, live
+        # AO re-evaluated at every frame by the handler this bake armed).
+        return
     sys.exit(code)
 
 
@@ -149,6 +156,8 @@ def run(args):
         # Headless: "the selection" means nothing here, so bake every visible mesh.
         for ob in context.view_layer.objects:
             ob.select_set(False)
+    if args.frames:
+        return _run_frames(args, context, opts)
     try:
         bake_job, rep = job.run_bake(context, args.objects or [], opts)
     except CanopyAOError as exc:
@@ -170,6 +179,30 @@ def run(args):
           f"{rep['seconds']:.2f} s", flush=True)
     for note in rep["notes"]:
         print(f"canopy_ao: note: {note}", flush=True)
+    _finish(args, rep)
+    return rep
+
+
+def _run_frames(args, context, opts):
+    from .blender import frames
+    from .core.native import CanopyAOError
+    if args.live:
+        raise BakeFailed("--frames and --live are two ways to animate AO: give one")
+    try:
+        rep = frames.FrameBake(context, args.objects or [], opts, *args.frames).run()
+    except CanopyAOError as exc:
+        raise BakeFailed(str(exc)) from None
+    print(f"canopy_ao: frames {rep['frames'][0]}-{rep['frames'][1]}, {rep['method']} tau "
+          f"{rep['tau']:.4g}, {len(rep['objects'])} object(s) into {rep['cache'][0]}.."
+          f"{rep['cache'][1]}, {rep['ms_per_frame']:.1f} ms per frame, {rep['seconds']:.2f} s",
+          flush=True)
+    _finish(args, rep)
+    return rep
+
+
+def _finish(args, rep):
+    """The report file and --save."""
+    import bpy
     if args.report:
         try:
             with open(bpy.path.abspath(args.report), "w") as f:
@@ -179,4 +212,3 @@ def run(args):
     if args.save:
         bpy.ops.wm.save_mainfile()
         print(f"canopy_ao: saved {bpy.data.filepath}", flush=True)
-    return rep

@@ -173,15 +173,9 @@ def test_evaluated_mesh_is_used(tree_scene_objects):
 def test_modal_bake_escape_and_undo(user_scripts):
     """In a real window (Xvfb): the modal bake finishes, Ctrl+Z removes attribute, mark and
     proxies together, Esc cancels with nothing written. Skipped without xvfb-run."""
-    import shutil
-    if shutil.which("xvfb-run") is None:
-        pytest.skip("xvfb-run not installed: the windowed check cannot run")
-    script = os.path.join(os.path.dirname(__file__), "ui_modal_undo.py")
-    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
-    r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1024x768x24", bpy.app.binary_path,
-                        "--factory-startup", "--enable-event-simulate", "--python", script],
-                       env=env, capture_output=True, text=True, timeout=180)
-    assert r.returncode == 0 and "UI-OK" in r.stdout, (r.stdout[-1500:], r.stderr[-1500:])
+    from ui_harness import run_in_window
+    run_in_window(os.path.join(os.path.dirname(__file__), "ui_modal_undo.py"), user_scripts,
+                  timeout=180)
 
 
 def test_undo_is_declared():

@@ -7,27 +7,13 @@ timer once the window is up; prints "UI-OK" and exits 0, or exits 1 with the fai
 """
 import os
 import sys
-import traceback
 
 import bpy
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import tree_scene  # noqa: E402
-
-
-def fail(msg):
-    print(f"UI-FAIL: {msg}", file=sys.stderr, flush=True)
-    os._exit(1)
-
-
-def check(cond, msg):
-    if not cond:
-        fail(msg)
-
-
-def window_ctx():
-    win = bpy.context.window_manager.windows[0]
-    return dict(window=win, screen=win.screen, area=win.screen.areas[0])
+from ui_harness import check, run_steps, window_ctx  # noqa: E402
 
 
 def ground():
@@ -144,17 +130,4 @@ def steps():
     os._exit(0)
 
 
-_it = steps()
-
-
-def tick():
-    try:
-        return next(_it)
-    except StopIteration:
-        return None
-    except BaseException:
-        traceback.print_exc()
-        fail("exception")
-
-
-bpy.app.timers.register(tick, first_interval=1.0)
+run_steps(steps)

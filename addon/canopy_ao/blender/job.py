@@ -7,7 +7,7 @@ import time
 import bpy
 import numpy as np
 
-from . import cycles_check, gather, instances, materials, mesh_io, tiles_io
+from . import cycles_check, gather, instances, live, materials, mesh_io, tiles_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget
 from .. import core
@@ -40,6 +40,8 @@ class BakeJob:
         ok, msg = core.core_status()
         if not ok:
             raise CanopyAOError(msg)
+        if opts["live"]:
+            live.check_request(opts)  # texels or a non-live rung: refused before any work
         if opts["wire_material"] or opts["add_aov"]:
             try:
                 materials.check_aov_name(opts["aov_name"])
@@ -149,6 +151,8 @@ class BakeJob:
         Transaction undoes what was written, and the error goes on). Returns the JSON-ready
         report, whose "stage_seconds" are this bake's times per stage."""
         o = self.opts
+        if o["live"]:
+            live.check_job(self)  # what auto chose, a frame cache: refused unwritten
         t0 = time.perf_counter()
         txn = Transaction()
         try:
@@ -190,6 +194,8 @@ class BakeJob:
         self.scene.canopy_ao.last_report = (
             f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)")
         self._lap("proxies", t0)
+        if o["live"]:
+            live.begin(self)  # every frame change from now on re-evaluates (live.py)
         rep["stage_seconds"] = dict(self.timings)
         self.report_dict = rep
         return rep

@@ -159,25 +159,34 @@ def check_attribute(obj, name, overwrite):
             "choose another name or tick Overwrite")
 
 
-def write_ao_attribute(obj, name, ao, overwrite=False):
-    """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
-
-    Replaces an attribute Canopy AO made (or any, with overwrite); refuses otherwise.
-    """
+def _point_attribute(obj, name, values, data_type, overwrite):
+    """(the POINT attribute ``name`` of type data_type to fill, values float32 (V,)): checked
+    against the ownership rules and the vertex count, an attribute of another type replaced."""
     why = check_attribute(obj, name, overwrite)
     if why:
         raise MeshIOError(why)
     mesh = obj.data
     n = len(mesh.vertices)
-    ao = np.asarray(ao, dtype=np.float32).reshape(-1)
-    if len(ao) != n:
-        raise MeshIOError(f"{obj.name}: {len(ao)} AO values for {n} vertices")
+    values = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
+    if len(values) != n:
+        raise MeshIOError(f"{obj.name}: {len(values)} AO values for {n} vertices")
     attr = mesh.attributes.get(name)
-    if attr is not None and (attr.data_type != 'FLOAT_COLOR' or attr.domain != 'POINT'):
+    if attr is not None and (attr.data_type != data_type or attr.domain != 'POINT'):
         mesh.attributes.remove(attr)
         attr = None
     if attr is None:
-        attr = mesh.color_attributes.new(name=name, type='FLOAT_COLOR', domain='POINT')
+        attr = (mesh.color_attributes.new(name=name, type=data_type, domain='POINT')
+                if data_type == 'FLOAT_COLOR' else mesh.attributes.new(name, data_type, 'POINT'))
+    return attr, values
+
+
+def write_ao_attribute(obj, name, ao, overwrite=False):
+    """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
+
+    Replaces an attribute Canopy AO made (or any, with overwrite); refuses otherwise.
+    """
+    attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite)
+    mesh, n = obj.data, len(ao)
     rgba = np.ones((n, 4), dtype=np.float32)  # column by column: the fastest fill measured
     rgba[:, 0] = ao
     rgba[:, 1] = ao
@@ -188,6 +197,30 @@ def write_ao_attribute(obj, name, ao, overwrite=False):
     mesh.update_tag()
     _mark_owned(obj, name)
     return attr
+
+
+def write_float_attribute(obj, name, values, overwrite=False):
+    """Write float (V,) as a POINT-domain FLOAT attribute (one frame of a frame-range bake's
+    cache), under write_ao_attribute's ownership rules."""
+    attr, values = _point_attribute(obj, name, values, 'FLOAT', overwrite)
+    mesh = obj.data
+    attr.data.foreach_set("value", values)
+    mesh.update_tag()
+    _mark_owned(obj, name)
+    return attr
+
+
+def remove_owned_attribute(obj, name):
+    """Remove an attribute Canopy AO made, and its ownership mark; True if one went."""
+    if name not in owned_attributes(obj):
+        return False
+    attr = obj.data.attributes.get(name)
+    if attr is not None:
+        obj.data.attributes.remove(attr)
+    for idblock in (obj, obj.data):
+        idblock[OWNED_PROP] = json.dumps([n for n in _owned(idblock) if n != name])
+    obj.data.update_tag()
+    return attr is not None
 
 
 def read_ao_attribute(obj, name):

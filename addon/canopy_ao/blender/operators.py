@@ -19,6 +19,16 @@ from ..core.native import CanopyAOError, core_status
 TICK = 0.05
 
 
+def start_modal(op, context, steps, status):
+    """A modal operator's start: progress bar, timer (op._timer), handler, status text."""
+    wm = context.window_manager
+    wm.progress_begin(0, steps)
+    op._timer = wm.event_timer_add(0.01, window=context.window)
+    wm.modal_handler_add(op)
+    context.workspace.status_text_set(status)
+    return {'RUNNING_MODAL'}
+
+
 # === The operator ============================================================================
 
 class CANOPY_AO_OT_bake(bpy.types.Operator):
@@ -121,12 +131,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
             self._job = BakeJob(context, self._names(), self._opts(context))
         except Exception as exc:
             return self._report_error(exc)
-        wm = context.window_manager
-        wm.progress_begin(0, self._job.steps)
-        self._timer = wm.event_timer_add(0.01, window=context.window)
-        wm.modal_handler_add(self)
-        context.workspace.status_text_set("Canopy AO: baking… (Esc to cancel)")
-        return {'RUNNING_MODAL'}
+        return start_modal(self, context, self._job.steps, "Canopy AO: baking… (Esc to cancel)")
 
     def _stop(self, context):
         wm = context.window_manager

@@ -88,6 +88,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         sub = row.row(align=True)
         sub.enabled = s.check_cycles
         sub.prop(s, "cycles_samples", text="Samples")
+        col.prop(s, "live")  # the Animation subpanel shows its state and the range bake
         col.separator()
         n_sel = sum(1 for o in context.selected_objects if o.type == 'MESH')
         label = f"Bake {n_sel} Selected" if n_sel else "Bake All Visible"
@@ -102,7 +103,36 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
         "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
-        "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples"}
+        "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples",
+        "live"}
+
+
+class CANOPY_AO_PT_animation(_Sidebar, bpy.types.Panel):
+    """Live AO and frame-range bakes (blender/live.py, blender/frames.py)."""
+
+    bl_idname = "CANOPY_AO_PT_animation"
+    bl_label = "Animation"
+    bl_parent_id = "CANOPY_AO_PT_main"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        from . import live
+        col = self.layout.column()
+        s, scene = context.scene.canopy_ao, context.scene
+        col.label(text="Live AO: on" if s.live else "Live AO: off (tick Live above)")
+        session = live.session_of(scene)
+        if s.live and session is not None:
+            ms = 1000.0 * session.timings.get("total", 0.0)
+            col.label(text=f"{session.plan.method}, τ {session.plan.tau:.3g}, {ms:.0f} ms/frame",
+                      icon='TIME')
+        if s.live:
+            col.operator("canopy_ao.live_stop", icon='PAUSE')
+            if scene.render.use_lock_interface is False:
+                col.label(text="Renders: tick Render > Lock Interface", icon='ERROR')
+        col.separator()
+        col.label(text=f"Frames {scene.frame_start}-{scene.frame_end}")
+        col.operator("canopy_ao.bake_frames", icon='RENDER_ANIMATION')
+        col.operator("canopy_ao.clear_frames", icon='TRASH')
 
 
 class CANOPY_AO_PT_advanced(_Sidebar, bpy.types.Panel):
@@ -141,6 +171,7 @@ class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
                 box.label(text=part)
 
 
-classes = (CANOPY_AO_PT_main, CANOPY_AO_PT_advanced, CANOPY_AO_PT_object)
+classes = (CANOPY_AO_PT_main, CANOPY_AO_PT_advanced, CANOPY_AO_PT_animation,
+           CANOPY_AO_PT_object)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

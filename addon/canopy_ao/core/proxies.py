@@ -11,10 +11,15 @@ from .native import _core
 from .scene import Plan, SceneItem
 
 
-def fit_tree(points: np.ndarray, settings):
-    """Fitted canopy proxies for one tree: (sphere, ellipsoid, [k shells]). The k-means shells
-    cost most (1.2 s for 1M points), so only the methods that use them get them; the others
-    get [ellipsoid]."""
+def fit_tree(points: np.ndarray, settings, labels=None):
+    """Fitted canopy proxies for one tree and its points' shells: ((sphere, ellipsoid,
+    [k shells]), labels int32 (N,) or None). The k-means shells cost most (1.2 s for 1M
+    points), so only the methods that use them get them; the others get [ellipsoid].
+
+    ``labels`` (an earlier fit's, for the same points moved: live AO) keeps that partition: each
+    shell is refitted to the same leaves, as fit_shells fits a cluster, instead of clustering
+    again, whose partition can flip between two frames (docs/DESIGN.md, 'Live and per-frame
+    AO')."""
     sphere = _core.fit_sphere(points, trim=settings.trim)
     if settings.method == "sphere":
         # The sphere model uses no ellipsoid: skip its fit (~40 ms per million points); the
@@ -25,13 +30,16 @@ def fit_tree(points: np.ndarray, settings):
     k = max(1, min(settings.shells, len(points) // 64))
     if settings.method not in ("auto", "shells", "medium"):
         k = 1
-    if k > 1:
-        shells, _labels = _core.fit_shells(points, k, kind="ellipsoid", trim=settings.trim,
-                                           seed=settings.seed)
+    if k > 1 and labels is not None and len(labels) == len(points):
+        shells = [_core.fit_ellipsoid(np.ascontiguousarray(points[labels == c]),
+                                      trim=settings.trim) for c in np.unique(labels)]
+    elif k > 1:
+        shells, labels = _core.fit_shells(points, k, kind="ellipsoid", trim=settings.trim,
+                                          seed=settings.seed)
         shells = list(shells)
     else:
-        shells = [ell]
-    return sphere, ell, shells
+        shells, labels = [ell], None
+    return (sphere, ell, shells), labels
 
 
 def own_shells(plan: Plan, tree: str, method: str) -> list:
@@ -69,7 +77,9 @@ def fit_scene(plan: Plan, items) -> None:
     for tree, pts in trees.items():
         pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
                                    dtype=np.float32)
-        plan.fits[tree] = fit_tree(pts, plan.settings)
+        plan.fits[tree], labels = fit_tree(pts, plan.settings, plan.shell_labels.get(tree))
+        if labels is not None:
+            plan.shell_labels[tree] = labels
     for it in items:
         if it.role == "TRUNK":
             b = bole(plan, it)

@@ -71,6 +71,8 @@ class Plan:
     notes: list = field(default_factory=list)
     forest: object = None  # forest.Forest: instanced trees occluding every receiver (attach_forest)
     tau_by_tree: dict = field(default_factory=dict)  # τ calibrated per tree (else plan.tau)
+    # tree -> int32 (N,): the k-means shell of each of its canopy points (kept by live AO)
+    shell_labels: dict = field(default_factory=dict)
 
     def taus(self):
         """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""

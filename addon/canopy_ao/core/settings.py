@@ -224,6 +224,10 @@ OPTIONS = (
            "Also bake Cycles AO and report the error per object (slow)", group="output"),
     Option("cycles_samples", "int", 64, "Cycles Samples", "Samples of the Cycles check",
            group="output", min=1, max=65536, soft_max=4096),
+    Option("live", "bool", False, "Live (Animation)",
+           "Re-evaluate the AO on every frame change (playback and renders) with the rung and "
+           "τ of the first bake, the proxies refitted to the deformed leaves; analytic rungs "
+           "and per-vertex output only (blender/live.py)", group="output"),
 )
 BY_NAME = {o.name: o for o in OPTIONS}
 

@@ -1,0 +1,323 @@
+"""Frame-range bakes: the AO of every frame of a range cached on the mesh, read back by a
+geometry-nodes modifier (docs/DESIGN.md, 'Live and per-frame AO').
+
+The cache: one POINT-domain FLOAT attribute per frame, ``<attribute>_<frame>`` (CanopyAO_1,
+CanopyAO_2, ...), each owned by Canopy AO under mesh_io's rules; 4 bytes per vertex per frame.
+The read-back: a modifier "Canopy AO Frames" at the end of the stack whose node group takes
+the scene frame, clamped to the baked range, spells the attribute's name with Replace String
+("<attribute>_#", # = the frame), reads it with Named Attribute and stores it as the FLOAT_COLOR
+attribute ``<attribute>`` that the material and the AOV read, so the file renders its per-frame
+AO in any Blender, with or without the add-on (Replace String, not Join Strings: a multi-input
+socket's order is not the order its links were made in).
+
+Each frame is a live update (live.Session: the first frame's rung and τ, the proxies refitted),
+so a range bake gives what live playback shows. Nothing is written until every frame is
+evaluated: Esc or an error leaves the file as it was (the current frame comes back too).
+"""
+
+import time
+
+import bpy
+
+from . import live, mesh_io
+from .commit import Transaction
+from ..core.native import CanopyAOError
+
+MODIFIER = "Canopy AO Frames"
+GROUP_TAG = "canopy_ao_frames"  # the node group's custom property: the attribute it reads
+
+
+def cache_name(attribute, frame):
+    return f"{attribute}_{int(frame)}"
+
+
+class FrameBake:
+    """Bake frames start..end of the named objects (empty: every visible mesh)."""
+
+    def __init__(self, context, object_names, opts, start, end):
+        start, end = int(start), int(end)
+        if end < start:
+            raise CanopyAOError(f"the frame range {start}-{end} is empty (end before start)")
+        live.check_request(opts)
+        self.context, self.scene = context, context.scene
+        self.names, self.opts = list(object_names), dict(opts, live=False)
+        self.frames = list(range(start, end + 1))
+        self.frame0 = self.scene.frame_current
+        self.session = None
+        self.results = {}  # frame -> {object name: AO float32 (V,)}
+        self.seconds = []  # our work per frame (read, fit, evaluate)
+        self.report = {}
+
+    @property
+    def steps(self):
+        return len(self.frames)
+
+    @property
+    def steps_done(self):
+        return len(self.results)
+
+    def step(self):
+        """Evaluate the next frame; False once every frame is done."""
+        if len(self.results) == len(self.frames):
+            return False
+        from .job import BakeJob
+        f = self.frames[len(self.results)]
+        live.suspend(True)
+        try:
+            self.scene.frame_set(f)
+        finally:
+            live.suspend(False)
+        dg = self.context.evaluated_depsgraph_get()
+        if self.session is None:  # the first frame: gather, fit, calibrate (as a bake does)
+            job = BakeJob(self.context, self.names, self.opts)
+            job.prepare()
+            self.session = live.Session(job)
+            self._check_names()
+        aos, tm = self.session.evaluate(self.scene, dg)
+        self.results[f] = aos
+        self.seconds.append(tm["total"])
+        return True
+
+    def _check_names(self):
+        o = self.opts
+        for name in self.session.targets:
+            obj = self.scene.objects[name]
+            for n in [o["attribute"]] + [cache_name(o["attribute"], f) for f in self.frames]:
+                why = mesh_io.check_attribute(obj, n, o["overwrite"])
+                if why:
+                    raise CanopyAOError(why + " (nothing was changed)")
+
+    def cancel(self):
+        """Stop: nothing was written; the frame the bake started on comes back."""
+        self.results.clear()
+        self._restore_frame()
+
+    def _restore_frame(self):
+        if self.scene.frame_current != self.frame0:
+            self.scene.frame_set(self.frame0)
+
+    def commit(self):
+        """Write every frame's attribute and the read-back modifier: all or, on failure, none.
+        Returns the JSON-ready report."""
+        o = self.opts
+        attribute = o["attribute"]
+        txn = Transaction()
+        try:
+            group = node_group(attribute, self.frames[0], self.frames[-1], txn)
+            for name in self.session.targets:
+                obj = self.scene.objects[name]
+                for f in self.frames:
+                    txn.attribute(obj, cache_name(attribute, f))
+                    mesh_io.write_float_attribute(obj, cache_name(attribute, f),
+                                                  self.results[f][name], o["overwrite"])
+                _attach(obj, group, txn)
+        except BaseException:
+            txn.rollback()
+            self._restore_frame()
+            raise
+        txn.done()
+        for ng in [g for g in bpy.data.node_groups if g.get(GROUP_TAG) and g.users == 0]:
+            bpy.data.node_groups.remove(ng)  # an earlier range's read-back, replaced
+        self._restore_frame()
+        plan = self.session.plan
+        ms = 1000.0 * sum(self.seconds) / max(len(self.seconds), 1)
+        self.report = {"frames": [self.frames[0], self.frames[-1]], "method": plan.method,
+                       "tau": plan.tau, "tau_by_tree": dict(plan.tau_by_tree),
+                       "objects": list(self.session.targets), "attribute": attribute,
+                       "cache": [cache_name(attribute, f) for f in (self.frames[0],
+                                                                      self.frames[-1])],
+                       "ms_per_frame": ms}
+        self.scene.canopy_ao.last_report = (
+            f"frames {self.frames[0]}-{self.frames[-1]}: {plan.method}, τ {plan.tau:.3g}, "
+            f"{ms:.0f} ms per frame")
+        return self.report
+
+    def run(self):
+        t0 = time.perf_counter()
+        try:
+            while self.step():
+                pass
+        except BaseException:
+            self.cancel()
+            raise
+        rep = self.commit()
+        rep["seconds"] = time.perf_counter() - t0
+        return rep
+
+
+def _sockets(sockets, name):
+    """The enabled sockets called ``name`` (3.x lists one per data type, 4.x one)."""
+    return [s for s in sockets if s.name == name and s.enabled]
+
+
+def node_group(attribute, start, end, txn):
+    """The node group reading ``<attribute>_<frame>`` for the scene frame clamped to
+    [start, end] into the FLOAT_COLOR attribute ``<attribute>``; new, removed on rollback."""
+    ng = bpy.data.node_groups.new(f"{MODIFIER} {attribute} {start}-{end}", 'GeometryNodeTree')
+    txn.add(lambda: bpy.data.node_groups.remove(ng))
+    ng[GROUP_TAG] = attribute
+    for io in ('INPUT', 'OUTPUT'):
+        if hasattr(ng, "interface"):  # 4.0+
+            ng.interface.new_socket(name="Geometry", in_out=io, socket_type='NodeSocketGeometry')
+        else:
+            (ng.inputs if io == 'INPUT' else ng.outputs).new('NodeSocketGeometry', "Geometry")
+    nodes, link = ng.nodes, ng.links.new
+    gin, gout = nodes.new('NodeGroupInput'), nodes.new('NodeGroupOutput')
+    time_node = nodes.new('GeometryNodeInputSceneTime')
+    clamp = nodes.new('ShaderNodeClamp')
+    clamp.inputs["Min"].default_value, clamp.inputs["Max"].default_value = start, end
+    text = nodes.new('FunctionNodeValueToString')  # 0 decimals: the frame rounded
+    spell = nodes.new('FunctionNodeReplaceString')
+    spell.inputs["String"].default_value = f"{attribute}_#"
+    spell.inputs["Find"].default_value = "#"
+    read = nodes.new('GeometryNodeInputNamedAttribute')
+    read.data_type = 'FLOAT'
+    store = nodes.new('GeometryNodeStoreNamedAttribute')
+    store.data_type, store.domain = 'FLOAT_COLOR', 'POINT'
+    store.inputs["Name"].default_value = attribute
+    link(time_node.outputs["Frame"], clamp.inputs["Value"])
+    link(clamp.outputs[0], text.inputs["Value"])
+    link(text.outputs[0], spell.inputs["Replace"])
+    link(spell.outputs[0], read.inputs["Name"])
+    link(_sockets(read.outputs, "Attribute")[0], _sockets(store.inputs, "Value")[0])
+    link(gin.outputs[0], store.inputs[0])
+    link(store.outputs[0], gout.inputs[0])
+    return ng
+
+
+def _attach(obj, group, txn):
+    """Point obj's "Canopy AO Frames" modifier (added last if missing) at ``group``."""
+    mod = obj.modifiers.get(MODIFIER)
+    if mod is None:
+        mod = obj.modifiers.new(MODIFIER, 'NODES')
+        txn.add(lambda: obj.modifiers.remove(obj.modifiers[MODIFIER]))
+    else:
+        old = mod.node_group
+        txn.add(lambda: setattr(obj.modifiers[MODIFIER], "node_group", old))
+    mod.node_group = group
+
+
+def clear(obj):
+    """Remove obj's frame cache: its modifier and every ``<attribute>_<frame>`` attribute
+    Canopy AO made for the attribute the modifier reads. Returns the attributes removed."""
+    mod = obj.modifiers.get(MODIFIER)
+    if mod is None:
+        return 0
+    group = mod.node_group
+    attribute = group.get(GROUP_TAG) if group is not None else None
+    obj.modifiers.remove(mod)
+    removed = 0
+    if isinstance(attribute, str):
+        prefix = attribute + "_"
+        for name in mesh_io.owned_attributes(obj):
+            if name.startswith(prefix) and name[len(prefix):].lstrip("-").isdigit():
+                removed += mesh_io.remove_owned_attribute(obj, name)
+    if group is not None and group.users == 0:
+        bpy.data.node_groups.remove(group)
+    return removed
+
+
+# === Operators ==============================================================================
+
+class CANOPY_AO_OT_bake_frames(bpy.types.Operator):
+    """Bake the AO of every frame of a range into per-frame attributes, read back at render
+    time by a geometry-nodes modifier (Esc cancels: nothing is written)"""
+
+    bl_idname = "canopy_ao.bake_frames"
+    bl_label = "Bake Frame Range"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    objects: bpy.props.StringProperty(name="Objects", default="",
+                                      description="Comma-separated object names; empty = the "
+                                                  "selection, or every visible mesh")
+    use_scene_range: bpy.props.BoolProperty(name="Scene Range", default=True,
+                                            description="Bake the scene's frame range")
+    frame_start: bpy.props.IntProperty(name="Start", default=1)
+    frame_end: bpy.props.IntProperty(name="End", default=250)
+
+    _bake = None
+    _timer = None
+
+    def _make(self, context):
+        from .properties import scene_options
+        s = context.scene
+        start, end = ((s.frame_start, s.frame_end) if self.use_scene_range
+                      else (self.frame_start, self.frame_end))
+        names = [n.strip() for n in self.objects.split(",") if n.strip()]
+        return FrameBake(context, names, scene_options(s), start, end)
+
+    def _done(self, rep):
+        self.report({'INFO'}, f"Canopy AO: frames {rep['frames'][0]}-{rep['frames'][1]} baked "
+                              f"({rep['method']}, τ {rep['tau']:.3g}, "
+                              f"{rep['ms_per_frame']:.0f} ms per frame)")
+        return {'FINISHED'}
+
+    def execute(self, context):
+        try:
+            return self._done(self._make(context).run())
+        except CanopyAOError as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        try:
+            self._bake = self._make(context)
+        except CanopyAOError as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        from .operators import start_modal
+        return start_modal(self, context, self._bake.steps,
+                           "Canopy AO: baking frames… (Esc to cancel)")
+
+    def _stop(self, context):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == 'ESC' and event.value == 'PRESS':
+            self._stop(context)
+            self._bake.cancel()
+            self.report({'WARNING'}, "Canopy AO frame bake cancelled; nothing was changed")
+            return {'CANCELLED'}
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        self._bake.context = context  # a context is valid for the call it is given to
+        try:
+            if not self._bake.step():
+                self._stop(context)
+                return self._done(self._bake.commit())
+            context.window_manager.progress_update(self._bake.steps_done)
+        except Exception as exc:  # noqa: BLE001 - the timer and status text must go
+            self._stop(context)
+            self._bake.cancel()
+            if not isinstance(exc, CanopyAOError):
+                raise
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        return {'RUNNING_MODAL'}
+
+
+class CANOPY_AO_OT_clear_frames(bpy.types.Operator):
+    """Remove the frame cache (per-frame attributes and the read-back modifier) from the
+    selected objects, or from every object that has one"""
+
+    bl_idname = "canopy_ao.clear_frames"
+    bl_label = "Clear Frame Cache"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        obs = [o for o in (context.selected_objects or context.scene.objects)
+               if o.type == 'MESH' and o.modifiers.get(MODIFIER) is not None]
+        removed = sum(clear(o) for o in obs)
+        self.report({'INFO'}, f"Canopy AO: removed {removed} cached frame(s) from "
+                              f"{len(obs)} object(s)")
+        return {'FINISHED'}
+
+
+classes = (CANOPY_AO_OT_bake_frames, CANOPY_AO_OT_clear_frames)
+
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -1,0 +1,75 @@
+"""AO that follows animated vegetation (no bpy): the proxies refitted to each frame's deformed
+leaves and evaluated with what the first bake decided (docs/DESIGN.md, 'Live and per-frame AO').
+
+Hegeman et al. evaluate their canopy shells per frame for trees moving in the wind, because a
+fit and an analytic evaluation cost little. Here a frame keeps from the first bake everything
+that does not move: the rung, τ (scene and per tree, from its calibration), every item's role
+and tree (and the tree labels of a mesh holding several), the triangles (the topology of a
+deformed mesh does not change; only grass blades need them) and the leaves' partition into
+k-means shells. It redoes what moves: the fits (sphere, ellipsoid, each shell to its own
+leaves, trunks, grass heights) and the evaluation. For the one-proxy rungs a frame's AO is
+therefore the AO of a full bake of that frame with the same rung and τ; for shells and the
+medium it is that bake with the first frame's partition (clustering every frame afresh flips
+leaves between shells: up to 0.6 AO from one frame to the next on the test tree).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import proxies
+from .native import CanopyAOError, refusals_are_user_errors
+from .scene import Plan, SceneItem, split_trees
+
+# The rungs that refit and evaluate fast enough per frame: the analytic proxy models (the
+# Reeves-Blau baseline is analytic too). The density grid and the rays rebuild a grid or a BVH
+# over every triangle each frame, which is a full bake, not a live update.
+LIVE_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau")
+
+
+def check_method(method: str, by_auto: bool = False) -> None:
+    """CanopyAOError unless ``method`` (a rung, or what auto chose: ``by_auto``) can run
+    live."""
+    if method not in LIVE_METHODS:
+        which = f"auto chose the {method} rung, which" if by_auto else f"the {method} rung"
+        raise CanopyAOError(
+            f"live and per-frame AO run the analytic rungs only ({', '.join(LIVE_METHODS)}); "
+            f"{which} rebuilds its grid or ray tracer from every triangle each frame: choose "
+            "one of those methods (or bake single frames)")
+
+
+def frame_items(template, positions, normals) -> list:
+    """This frame's SceneItems: each template item (the first bake's, role and tree resolved)
+    with the frame's positions and normals {name: float32 (V, 3)}. Raises CanopyAOError when a
+    mesh's vertex count changed (its topology is not the first bake's)."""
+    out = []
+    for it in template:
+        p, n = positions[it.name], normals[it.name]
+        if len(p) != len(it.positions):
+            raise CanopyAOError(f"{it.name}: {len(p)} vertices at this frame, "
+                                f"{len(it.positions)} at the first bake (the topology changed; "
+                                "bake again)")
+        out.append(SceneItem(it.name, it.role, it.tree, p, n, it.triangles,
+                             tree_source="set", tree_labels=it.tree_labels,
+                             tree_names=it.tree_names, tree_why=it.tree_why))
+    return out
+
+
+@refusals_are_user_errors
+def refit(base: Plan, items) -> Plan:
+    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted."""
+    check_method(base.method)
+    plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
+                tau_by_tree=dict(base.tau_by_tree), forest=base.forest,
+                shell_labels=dict(base.shell_labels))
+    proxies.fit_scene(plan, split_trees(items))
+    plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
+    return plan
+
+
+def template_items(items) -> list:
+    """The first bake's items as a frame's template: positions kept only for their count."""
+    return [SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
+                      it.triangles if it.role == "GRASS" else np.zeros((0, 3), np.int32),
+                      tree_source="set", tree_labels=it.tree_labels, tree_names=it.tree_names,
+                      tree_why=it.tree_why) for it in items]

@@ -1,0 +1,332 @@
+"""Animated vegetation: live AO (a frame_change_post handler) and frame-range bakes, each
+checked against full bakes made at the same frame with the same rung and τ."""
+
+import os
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+import tree_scene
+from conftest import _clear_scene, add_mesh
+from canopy_ao.blender import frames, live, mesh_io, properties
+from canopy_ao.blender.job import run_bake
+from canopy_ao.core.native import CanopyAOError
+
+NAMES = ("Trunk", "Leaves", "Ground", "Grass")
+ROLES = {"Trunk": 'TRUNK', "Leaves": 'CANOPY', "Ground": 'GROUND', "Grass": 'GRASS'}
+
+
+def _animated_tree():
+    """The tree scene with its leaves swaying: a shape key bending the crown sideways (0.15 h²
+    at height h above its base; a bend, not a shear, which an ellipsoid fit would follow
+    exactly), keyed 0 at frame 1 and 1 at frame 9."""
+    _clear_scene()
+    scene = bpy.context.scene
+    for name, (p, t) in tree_scene.scene(True).items():
+        ob = add_mesh(name, p, t)
+        ob.canopy_ao.role = ROLES[name]
+        ob.canopy_ao.tree = "Oak" if name in ("Trunk", "Leaves") else ""
+    leaves = scene.objects["Leaves"]
+    leaves.shape_key_add(name="Basis")
+    wind = leaves.shape_key_add(name="Wind")
+    co = np.empty(len(leaves.data.vertices) * 3, np.float32)
+    wind.data.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 0] += 0.15 * (co[:, 2] - 1.4) ** 2
+    wind.data.foreach_set("co", co.ravel())
+    for frame, value in ((1, 0.0), (9, 1.0)):
+        wind.value = value
+        wind.keyframe_insert("value", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 9
+    scene.frame_set(1)
+    for ob in scene.objects:
+        ob.select_set(False)
+    return scene
+
+
+@pytest.fixture
+def animated():
+    scene = _animated_tree()
+    yield scene
+    live.stop(bpy.context.scene)  # a test may have loaded a file: the scene it has now
+    _clear_scene()
+
+
+def opts(**kw):
+    base = dict(properties.scene_options(bpy.context.scene), method="ellipsoid", tau=1.7,
+                distance=0.0, show_proxies=False, live=False)
+    base.update(kw)
+    return base
+
+
+def _ao(name, attribute="CanopyAO"):
+    return mesh_io.read_ao_attribute(bpy.context.scene.objects[name], attribute)
+
+
+def _full(method, tau, attribute="Full"):
+    """A full bake of the current frame; {name: AO}."""
+    _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, tau=tau,
+                                                      attribute=attribute))
+    assert rep["method"] == method
+    return {n: _ao(n, attribute) for n in NAMES}
+
+
+def _assert_equal(got, want):
+    for n in NAMES:
+        np.testing.assert_allclose(got[n], want[n], atol=2e-6, err_msg=n)
+
+
+@pytest.mark.parametrize("method", ["sphere", "ellipsoid", "shells", "medium"])
+def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
+    _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, live=True))
+    first = {n: _ao(n) for n in NAMES}
+    assert animated.canopy_ao.live and live.session_of(animated) is not None
+    animated.frame_set(7)  # the handler re-evaluates
+    now = {n: _ao(n) for n in NAMES}
+    assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
+    assert np.abs(now["Ground"] - first["Ground"]).max() > 0.005  # and the shadow moved
+    if method in ("sphere", "ellipsoid"):
+        _assert_equal(now, _full(method, rep["tau"]))
+    else:
+        # The shells keep the first bake's partition of the leaves (core/live.py): a full bake
+        # clusters afresh, so the check is the first frame, reached again.
+        animated.frame_set(1)
+        _assert_equal({n: _ao(n) for n in NAMES}, first)
+        animated.frame_set(7)
+        _assert_equal({n: _ao(n) for n in NAMES}, now)
+
+
+def test_live_keeps_the_first_bakes_calibrated_tau(animated):
+    _j, rep = run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", tau=None, live=True))
+    assert rep["calibration"]  # τ was calibrated at frame 1 ...
+    animated.frame_set(5)
+    session = live.session_of(animated)
+    assert session.frames == 1 and session.plan.tau == rep["tau"]  # ... and kept at frame 5
+    taus = set(rep["tau_by_tree"].values()) | {rep["tau"]}
+    if len(taus) == 1:  # one τ for every tree: a full bake given it is the same bake
+        _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", rep["tau"]))
+
+
+@pytest.mark.parametrize("kw, words", [
+    (dict(method="raytrace"), "analytic rungs"), (dict(method="grid"), "analytic rungs"),
+    (dict(mode='TEXEL'), "per-vertex attributes only")])
+def test_live_refuses_what_cannot_run_live_and_changes_nothing(animated, kw, words):
+    with pytest.raises(CanopyAOError, match=words):
+        run_bake(bpy.context, list(NAMES), opts(live=True, **kw))
+    assert "CanopyAO" not in animated.objects["Leaves"].data.attributes
+    assert not animated.canopy_ao.live and live.session_of(animated) is None
+
+
+def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribute(
+        animated, tmp_path):
+    run_bake(bpy.context, list(NAMES), opts(live=True))
+    animated.frame_set(4)
+    at4 = _ao("Leaves")
+    assert bpy.ops.canopy_ao.live_stop() == {'FINISHED'}
+    animated.frame_set(8)
+    np.testing.assert_array_equal(_ao("Leaves"), at4)  # stopped: the last frame's AO stays
+    # Undo and redo replace every datablock: the session goes and is rebuilt from the record.
+    animated.canopy_ao.live = True
+    live._forget()
+    animated.frame_set(9)
+    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7))
+    # Saved and loaded: re-armed from the file's record by the persistent handler.
+    path = str(tmp_path / "live.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    assert scene.canopy_ao.live and live.session_of(scene) is None
+    scene.frame_set(3)
+    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7))
+    # The user's own attribute of that name is never overwritten: live AO stops instead.
+    leaves = scene.objects["Leaves"]
+    mesh_io.remove_owned_attribute(leaves, "CanopyAO")
+    theirs = leaves.data.attributes.new("CanopyAO", 'FLOAT', 'POINT')
+    theirs.data.foreach_set("value", np.full(len(theirs.data), 0.25, np.float32))
+    scene.frame_set(6)
+    assert not scene.canopy_ao.live and "did not make" in scene.canopy_ao.last_report
+    vals = np.empty(len(leaves.data.vertices), np.float32)
+    leaves.data.attributes["CanopyAO"].data.foreach_get("value", vals)
+    assert np.all(vals == 0.25)
+
+
+def test_unregister_removes_the_handlers():
+    assert live._on_frame_change in bpy.app.handlers.frame_change_post
+    live.unregister()
+    try:
+        assert live._on_frame_change not in bpy.app.handlers.frame_change_post
+        assert live._forget not in bpy.app.handlers.load_post
+        assert not hasattr(bpy.types, "CANOPY_AO_OT_live_stop")
+    finally:
+        live.register()
+    assert live._on_frame_change in bpy.app.handlers.frame_change_post
+
+
+def _evaluated_ao(obj):
+    mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    buf = np.empty(len(mesh.vertices) * 4, np.float32)
+    mesh.attributes["CanopyAO"].data.foreach_get("color", buf)
+    return buf.reshape(-1, 4)[:, 0].copy()
+
+
+def test_a_frame_range_bake_matches_per_frame_full_bakes_and_is_read_back(animated):
+    want = {}
+    for f in (2, 4, 6):
+        animated.frame_set(f)
+        want[f] = _full("ellipsoid", 1.7)
+    animated.frame_set(1)
+    rep = frames.FrameBake(bpy.context, list(NAMES), opts(method="ellipsoid"), 2, 6).run()
+    assert rep["frames"] == [2, 6] and rep["cache"] == ["CanopyAO_2", "CanopyAO_6"]
+    assert animated.frame_current == 1  # the frame the bake started on
+    for f, full in want.items():
+        for n in NAMES:
+            attr = animated.objects[n].data.attributes[f"CanopyAO_{f}"]
+            vals = np.empty(len(attr.data), np.float32)
+            attr.data.foreach_get("value", vals)
+            np.testing.assert_allclose(vals, full[n], atol=2e-6, err_msg=f"{n} at {f}")
+    # The geometry-nodes read-back: the frame's cache, clamped to the baked range.
+    leaves = animated.objects["Leaves"]
+    for frame, cached in ((4, 4), (6, 6), (1, 2), (40, 6)):
+        animated.frame_set(frame)
+        np.testing.assert_allclose(_evaluated_ao(leaves), want[cached]["Leaves"], atol=2e-6)
+    # Clearing removes the modifier, the cache and the node group.
+    assert bpy.ops.canopy_ao.clear_frames() == {'FINISHED'}
+    assert not any(a.name.startswith("CanopyAO_") for a in leaves.data.attributes)
+    assert leaves.modifiers.get(frames.MODIFIER) is None
+    assert not [g for g in bpy.data.node_groups if g.get(frames.GROUP_TAG)]
+
+
+def test_a_cancelled_frame_range_bake_leaves_nothing_behind(animated):
+    before = {n: sorted(a.name for a in animated.objects[n].data.attributes) for n in NAMES}
+    groups = len(bpy.data.node_groups)
+    bake = frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 9)
+    assert bake.step() and bake.step() and bake.steps_done == 2 and bake.steps == 9
+    assert animated.frame_current == 2
+    bake.cancel()
+    assert animated.frame_current == 1
+    assert {n: sorted(a.name for a in animated.objects[n].data.attributes)
+            for n in NAMES} == before
+    assert len(bpy.data.node_groups) == groups
+    assert all(not o.modifiers for o in animated.objects)
+    with pytest.raises(CanopyAOError, match="analytic rungs"):
+        frames.FrameBake(bpy.context, [], opts(method="raytrace"), 1, 3)
+    with pytest.raises(CanopyAOError, match="empty"):
+        frames.FrameBake(bpy.context, [], opts(), 5, 3)
+
+
+def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_path,
+                                                                 user_scripts):
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    animated.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = (0.0, -12.0, 3.0), (1.45, 0.0, 0.0)
+    animated.camera = cam
+    animated.render.engine = 'CYCLES'
+    animated.cycles.samples, animated.cycles.use_denoising = 1, False  # no OIDN in Debian
+    animated.render.resolution_x = animated.render.resolution_y = 8
+    animated.render.filepath = str(tmp_path / "frame_")
+    animated.frame_start, animated.frame_end = 3, 4
+    path = str(tmp_path / "cli.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    probe = ("import bpy, numpy as np; o = bpy.context.scene.objects['Leaves']; "
+             "a = o.data.attributes['CanopyAO']; v = np.empty(len(a.data) * 4, np.float32); "
+             "a.data.foreach_get('color', v); np.save(r'%s', v[::4]); "
+             "print('frame', bpy.context.scene.frame_current)") % (tmp_path / "ao.npy")
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
+    cmd = ["blender", "-b", "--factory-startup", path, "--python-expr",
+           "import canopy_ao.cli; canopy_ao.cli.main()", "-a", "--python-expr", probe, "--",
+           "--live", "--method", "ellipsoid", "--tau", "1.7", "--no-proxies"]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "canopy_ao: error" not in out.stderr, out.stderr
+    rendered = np.load(tmp_path / "ao.npy")  # the AO of the last frame the render evaluated
+    animated.frame_set(4)
+    np.testing.assert_allclose(rendered, _full("ellipsoid", 1.7)["Leaves"], atol=2e-6)
+    assert os.path.exists(str(tmp_path / "frame_0004.png"))
+    # --frames: the cache written and saved.
+    cmd = ["blender", "-b", "--factory-startup", path, "--python-expr",
+           "import canopy_ao.cli; canopy_ao.cli.main()", "--", "--frames", "3", "4",
+           "--method", "sphere", "--tau", "1.7", "--no-proxies", "--save"]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "canopy_ao: frames 3-4, sphere" in out.stdout
+    bpy.ops.wm.open_mainfile(filepath=path)
+    names = {a.name for a in bpy.context.scene.objects["Leaves"].data.attributes}
+    assert {"CanopyAO_3", "CanopyAO_4"} <= names
+    assert sys.modules["canopy_ao.blender.frames"].MODIFIER in \
+        bpy.context.scene.objects["Leaves"].modifiers
+
+
+def test_live_and_frame_bakes_in_a_window(user_scripts):
+    """In a real window (Xvfb): undo around live AO (an unrelated edit undone: the session is
+    rebuilt at the next frame; the live bake undone: live AO off, nothing written), and the
+    modal frame-range bake (Esc leaves nothing; run to the end, every frame cached). Skipped
+    without xvfb-run."""
+    from ui_harness import run_in_window
+    run_in_window(os.path.join(os.path.dirname(__file__), "ui_live.py"), user_scripts)
+
+
+def test_auto_choosing_a_rung_that_cannot_run_live_is_refused_unwritten(animated,
+                                                                        monkeypatch):
+    from canopy_ao.core import ladder
+    real = ladder.choose
+
+    def choose_rays(plan, items, grass_only_auto):
+        real(plan, items, grass_only_auto)
+        plan.method = "raytrace"  # as auto does on a small scene its rays bake within budget
+    monkeypatch.setattr(ladder, "choose", choose_rays)
+    with pytest.raises(CanopyAOError, match="auto chose the raytrace rung"):
+        run_bake(bpy.context, list(NAMES), opts(method="auto", tau=None, live=True))
+    assert "CanopyAO" not in animated.objects["Leaves"].data.attributes
+    assert not animated.canopy_ao.live
+    with pytest.raises(CanopyAOError, match="auto chose the raytrace rung"):
+        frames.FrameBake(bpy.context, list(NAMES), opts(method="auto", tau=None), 1, 3).run()
+    assert not any(a.name.startswith("CanopyAO") for a in
+                   animated.objects["Leaves"].data.attributes)
+    assert animated.frame_current == 1
+
+
+def test_the_animation_panel_shows_live_state_and_the_frame_bakes(animated):
+    from types import SimpleNamespace
+    from test_addon import FakeLayout
+    from canopy_ao.blender import panels
+
+    def drawn():
+        log = []
+        panels.CANOPY_AO_PT_animation.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+        return log
+    off = drawn()
+    assert {("operator", "canopy_ao.bake_frames"), ("operator", "canopy_ao.clear_frames")} \
+        <= set(off)
+    assert ("operator", "canopy_ao.live_stop") not in off
+    run_bake(bpy.context, list(NAMES), opts(live=True))
+    animated.frame_set(2)
+    on = drawn()
+    assert ("operator", "canopy_ao.live_stop") in on
+    assert any(kind == "label" and text.startswith("ellipsoid, τ 1.7") for kind, text in on)
+
+
+def test_live_refuses_targets_a_frame_cache_would_hide(animated):
+    frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 2).run()
+    frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 3).run()  # a range baked again
+    assert "CanopyAO_3" in animated.objects["Leaves"].data.attributes
+    assert len([g for g in bpy.data.node_groups if g.get(frames.GROUP_TAG)]) == 1
+    with pytest.raises(CanopyAOError, match="frame cache .* would hide live AO"):
+        run_bake(bpy.context, list(NAMES), opts(live=True))
+    assert not animated.canopy_ao.live
+
+
+def test_a_reloaded_file_keeps_the_shell_partition_of_the_session_that_saved_it(animated,
+                                                                                 tmp_path):
+    run_bake(bpy.context, list(NAMES), opts(method="shells", live=True))
+    animated.frame_set(5)
+    at5 = {n: _ao(n) for n in NAMES}
+    path = str(tmp_path / "shells.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)  # re-armed at frame 5, a frame the bake was not at
+    scene = bpy.context.scene
+    scene.frame_set(6)
+    scene.frame_set(5)
+    _assert_equal({n: _ao(n) for n in NAMES}, at5)
