@@ -34,6 +34,17 @@ def add_plane(size=2.0, subdivisions=0, location=(0, 0, 0), name=None):
     return obj
 
 
+def leaves_over_ground(ground, leaves, image_dir):
+    """Name leaves "Leaves" and give the roles CANOPY over ground GROUND, nothing
+    selected; the fixture dict of the bake pipeline tests."""
+    leaves.name = "Leaves"
+    ground.canopy_ao.role, leaves.canopy_ao.role = 'GROUND', 'CANOPY'
+    for ob in bpy.context.scene.objects:
+        ob.select_set(False)
+    bpy.context.view_layer.update()
+    return dict(ground=ground, leaves=leaves, image_dir=str(image_dir))
+
+
 def add_material(obj, name="UserMat", color=(0.8, 0.5, 0.2, 1.0)):
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True

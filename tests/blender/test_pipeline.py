@@ -18,13 +18,7 @@ def plane_under_disk(tmp_path):
     ground = H.add_plane(size=4.0, subdivisions=15, name="Ground")
     bpy.ops.mesh.primitive_circle_add(vertices=48, radius=1.2, fill_type="NGON",
                                       location=(0, 0, 1.0))
-    leaves = bpy.context.object
-    leaves.name = "Leaves"
-    ground.canopy_ao.role, leaves.canopy_ao.role = 'GROUND', 'CANOPY'
-    for ob in bpy.context.scene.objects:
-        ob.select_set(False)
-    bpy.context.view_layer.update()
-    return dict(ground=ground, leaves=leaves, image_dir=str(tmp_path))
+    return H.leaves_over_ground(ground, bpy.context.object, tmp_path)
 
 
 def _read(path):

@@ -13,7 +13,9 @@ from . import mesh_io
 _LAYOUT = {'FLOAT': ("value", 1, np.float32), 'INT': ("value", 1, np.int32),
            'INT8': ("value", 1, np.int32), 'BOOLEAN': ("value", 1, bool),
            'FLOAT2': ("vector", 2, np.float32), 'FLOAT_VECTOR': ("vector", 3, np.float32),
-           'FLOAT_COLOR': ("color", 4, np.float32), 'BYTE_COLOR': ("color", 4, np.float32)}
+           'FLOAT_COLOR': ("color", 4, np.float32),
+           # the stored bytes / 255, no colour conversion: restored bit for bit
+           'BYTE_COLOR': ("color_srgb", 4, np.float32)}
 
 
 class Transaction:

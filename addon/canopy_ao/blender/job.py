@@ -7,11 +7,11 @@ import time
 import bpy
 import numpy as np
 
-from . import cycles_check, gather, instances, live, materials, mesh_io
+from . import cycles_check, gather, instances, live, materials, mesh_io, tiles_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget
 from .. import core
-from ..core import metrics, settings
+from ..core import maps, metrics, settings
 from ..core.native import CanopyAOError
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
@@ -45,8 +45,14 @@ class BakeJob:
         if opts["wire_material"] or opts["add_aov"]:
             try:
                 materials.check_aov_name(opts["aov_name"])
+                if opts["thickness"] and opts["wire_material"]:
+                    materials.check_aov_name(opts["thickness_name"])
             except ValueError as exc:
                 raise CanopyAOError(str(exc)) from None
+        if opts["thickness"] and opts["thickness_name"] in ("", opts["attribute"],
+                                                            opts["aov_name"]):
+            raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
+                                "also the AO's attribute or AOV; give it a name of its own")
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -117,6 +123,11 @@ class BakeJob:
                 triangles=t.triangles[a:b] if t.triangles is not None else None)
         except CanopyAOError as exc:
             raise CanopyAOError(f"{t.item.name}: {exc}") from exc
+        if self.opts["thickness"]:
+            if t.thickness is None:
+                t.thickness = np.zeros(t.count, np.float32)
+            t.thickness[a:b] = maps.thickness(self.plan, t.item, t.positions[a:b],
+                                              slice(a, b) if t.kind == "vertex" else None)
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
@@ -145,8 +156,12 @@ class BakeJob:
         t0 = time.perf_counter()
         txn = Transaction()
         try:
-            for t in self.targets:
-                t.write(txn, o)
+            if o["atlas"] and o["mode"] == 'TEXEL':  # one image for every object
+                rep_atlas = tiles_io.write_atlas(self.targets, txn, o)
+            else:
+                rep_atlas = None
+                for t in self.targets:
+                    t.write(txn, o)
             self.prototypes.commit(txn, o)
             if o["add_aov"]:
                 if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
@@ -155,6 +170,9 @@ class BakeJob:
                 materials.ensure_view_layer_aov(self.scene, o["aov_name"])
             t0 = self._lap("write", t0)
             rep = self._report()
+            if rep_atlas is not None:
+                rep["atlas"] = {"name": o["atlas"], "paths": rep_atlas["paths"],
+                                "shared_texels": rep_atlas["shared_texels"]}
             if o["check_cycles"]:
                 self._check_cycles(context, rep)
         except BaseException:
@@ -187,6 +205,10 @@ class BakeJob:
         rep = core.report(self.plan, self.results)
         rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
         rep["mode"] = o["mode"].lower()
+        rep["channel"] = o["channel"]
+        if o["channel"] != "RGBA" and o["wire_material"]:
+            rep["notes"].append(f"the AO went into channel {o['channel']} only, so it was not "
+                                "multiplied into the materials (a packed map is for engines)")
         rep["instances"] = {
             "instances": self.prototypes.count if self.prototypes else 0,
             "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
@@ -197,6 +219,8 @@ class BakeJob:
             e = rep["objects"][t.item.name]
             e["role_source"] = self.how[t.item.name]
             e["vertices"] = len(t.item.positions)
+            if t.thickness is not None:
+                e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
             if t.kind == "texel":
                 e["texel"] = t.report()
                 rep["notes"].extend(t.stats.get("warnings", []))
@@ -221,7 +245,10 @@ class BakeJob:
                     rep["objects"][name]["cycles"] = {
                         k: float(v) for k, v in metrics.compare(t.ao, ref[name]).items()}
             for t in self.targets:
-                if t.kind == "texel":
+                if t.kind == "texel" and "image_tiles" in t.stats:  # UDIM or atlas
+                    rep["objects"][t.item.name]["cycles"] = tiles_io.check_tiles(
+                        context, t, d, samples)
+                elif t.kind == "texel":
                     m = cycles_check.check_texel(context, t.obj, t.stats["image"], t.rx.uv_map,
                                                  d, samples, ours_mask=t.stats["mask"] == 1)
                     rep["objects"][t.item.name]["cycles"] = {k: float(v) for k, v in m.items()}

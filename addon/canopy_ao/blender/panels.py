@@ -60,10 +60,21 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         col.prop(s, "mode")
         col.prop(s, "attribute")
         col.prop(s, "overwrite")
+        col.prop(s, "channel")
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
             col.prop(s, "image_dir")
+            col.prop(s, "udim")
+            col.prop(s, "atlas")
+            sub = col.row()
+            sub.enabled = s.channel != 'RGBA'
+            sub.prop(s, "pack_image")
+        row = col.row(align=True)
+        row.prop(s, "thickness")
+        sub = row.row(align=True)
+        sub.enabled = s.thickness
+        sub.prop(s, "thickness_name", text="")
         col.separator()
         col.prop(s, "show_proxies")
         col.prop(s, "wire_material")
@@ -91,8 +102,9 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "image_dir", "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles",
-        "cycles_samples", "live"}
+        "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
+        "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples",
+        "live"}
 
 
 class CANOPY_AO_PT_animation(_Sidebar, bpy.types.Panel):

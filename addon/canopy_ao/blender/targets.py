@@ -2,9 +2,11 @@
 rasteriser finds in its UV layout), the AO evaluated for them, and how that AO is written
 (docs/DESIGN.md, 'Data flow'). Reading happens when a target is made, writing only in write()."""
 
+import bpy
 import numpy as np
 
-from . import materials, mesh_io, texel_io
+from ..core.native import CanopyAOError
+from . import maps_io, materials, mesh_io, texel_io, tiles_io
 
 
 class Target:
@@ -15,6 +17,7 @@ class Target:
         self.positions, self.normals = positions, normals
         self.triangles = None  # texels: each one's triangle in the item's mesh (own rays)
         self.ao = np.ones(len(positions), np.float32)
+        self.thickness = None  # float32 like ao when the bake also makes the thickness
         self.seconds = 0.0
         self.stats = {}
 
@@ -40,17 +43,34 @@ class VertexTarget(Target):
 
     def __init__(self, item, obj, opts):
         super().__init__(item, obj, item.positions, item.normals)
-        why = mesh_io.check_attribute(obj, opts["attribute"], opts["overwrite"])
+        if opts["channel"] != "RGBA":  # one channel: any color attribute, when asked
+            why = maps_io.check_channel_attribute(obj, opts["attribute"])
+        else:
+            why = mesh_io.check_attribute(obj, opts["attribute"], opts["overwrite"])
+        if not why and opts["thickness"]:
+            why = mesh_io.check_attribute(obj, opts["thickness_name"], opts["overwrite"])
         if why:
             raise mesh_io.MeshIOError(why + " (nothing was changed)")
 
     def write(self, txn, opts):
         txn.attribute(self.obj, opts["attribute"])
-        mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
-                                   overwrite=opts["overwrite"])
+        if opts["channel"] != "RGBA":
+            maps_io.write_attribute_channel(self.obj, opts["attribute"], self.ao,
+                                            opts["channel"])
+        else:
+            mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
+                                       overwrite=opts["overwrite"])
+        if self.thickness is not None:
+            txn.attribute(self.obj, opts["thickness_name"])
+            mesh_io.write_ao_attribute(self.obj, opts["thickness_name"], self.thickness,
+                                       overwrite=opts["overwrite"])
         if opts["wire_material"]:
             wire_undo(txn, self.obj)
-            materials.wire_vertex_ao(self.obj, opts["attribute"], opts["aov_name"])
+            if opts["channel"] == "RGBA":  # a packed channel is for engines, not multiplied
+                materials.wire_vertex_ao(self.obj, opts["attribute"], opts["aov_name"])
+            if self.thickness is not None:
+                maps_io.wire_thickness(self.obj, "vertex", opts["thickness_name"],
+                                       opts["thickness_name"])
 
 
 class TexelTarget(Target):
@@ -59,22 +79,65 @@ class TexelTarget(Target):
     kind = "texel"
 
     def __init__(self, item, obj, opts, depsgraph):
+        if opts["channel"] != "RGBA" and (opts["udim"] or opts["atlas"]):
+            raise CanopyAOError("a channel is packed into one image of one object's 0–1 tile; "
+                                "turn off UDIM Tiles and Atlas to pack (nothing was changed)")
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
-                                     opts["resolution"])
+                                     opts["resolution"], udim=opts["udim"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
         # The raster's loop triangles are the item's own when the counts agree (the same
         # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
         tris = self.rx.triangles
         if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
             self.triangles = tris
+        if opts["channel"] != "RGBA":
+            self.pack = bpy.data.images.get(opts["pack_image"])
+            if self.pack is None:
+                raise CanopyAOError(f"Channel {opts['channel']} per texel packs into an image: "
+                                    f"no image named '{opts['pack_image']}'; set Pack Image "
+                                    "(nothing was changed)")
 
     def write(self, txn, opts):
-        image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
-                                                  opts["image_dir"] or None, txn)
+        if opts["channel"] != "RGBA":
+            img, mask = texel_io.splat(self.rx.pixels, self.ao, self.rx.resolution,
+                                       self.rx.resolution, self.rx.margin)
+            image = maps_io.pack_image_channel(self.pack, img, opts["channel"], txn)
+            self.stats = dict(self.rx.stats, image=img, mask=mask, path=image.filepath,
+                              packed_into=image.name, channel=opts["channel"])
+        elif opts["udim"]:
+            image, st = tiles_io.write_tiled(self.obj, [(self.rx, self.ao)],
+                                             opts["image_dir"] or None, txn, tiled=True)
+            self.stats = dict(self.rx.stats, path=st["paths"][0], paths=st["paths"],
+                              tiles=sorted(st["tiles"]), image_tiles=st["tiles"],
+                              notes=self.rx.stats["notes"] + st["notes"])
+        else:
+            image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
+                                                      opts["image_dir"] or None, txn)
+        timage = None
+        if self.thickness is not None and opts["udim"]:
+            timage, tstats = tiles_io.write_tiled(self.obj, [(self.rx, self.thickness)],
+                                                  opts["image_dir"] or None, txn,
+                                                  suffix=opts["thickness_name"], tiled=True,
+                                                  background=0.0)
+            self.stats["thickness_path"] = tstats["paths"][0]
+        elif self.thickness is not None:
+            timage, tstats = texel_io.write_texels(self.obj, self.rx, self.thickness,
+                                                   opts["image_dir"] or None, txn,
+                                                   suffix=opts["thickness_name"],
+                                                   background=0.0)
+            self.stats["thickness_path"] = tstats["path"]
+        self.wire(txn, opts, image, timage)
+
+    def wire(self, txn, opts, image, timage):
+        """Wire the AO image (and the thickness's, timage) into obj's materials when asked."""
         if opts["wire_material"]:
             wire_undo(txn, self.obj)
-            self.stats["nodes_added"] = materials.wire_texel_ao(self.obj, image, self.rx.uv_map,
-                                                                opts["aov_name"])
+            if opts["channel"] == "RGBA":
+                self.stats["nodes_added"] = materials.wire_texel_ao(
+                    self.obj, image, self.rx.uv_map, opts["aov_name"])
+            if self.thickness is not None:
+                maps_io.wire_thickness(self.obj, "texel", timage, opts["thickness_name"],
+                                       self.rx.uv_map)
 
     def report(self):
         """The texel stats as plain data for the JSON report."""

@@ -20,12 +20,13 @@ from . import materials, mesh_io
 from ..core.native import CanopyAOError, _core
 
 TAG = "canopy_ao"
-OBJ_KEY = "canopy_ao_object"   # on our images: the object they belong to
+OBJ_KEY = "canopy_ao_object"   # on our images: the object they belong to ...
+MAP_KEY = "canopy_ao_map"      # ... and the map they hold (absent: "CanopyAO", the AO)
 MAX_RESOLUTION = 16384
 
 
-def image_name(obj):
-    return f"{obj.name}_CanopyAO"
+def image_name(obj, suffix="CanopyAO"):
+    return f"{obj.name}_{suffix}"
 
 
 # === Mesh → texel receivers
@@ -117,11 +118,13 @@ class TexelReceivers:
     normals: np.ndarray
     stats: dict = field(default_factory=dict)  # raster counts, "warnings", "notes"
     triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
+    tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
 
 
-def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
-    """The texels of obj's UV layout at resolution² as receivers. Raises CanopyAOError before
-    reading anything when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
+def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False):
+    """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
+    UVs use, tile by tile, tiles_io.split_tiles). Raises CanopyAOError before reading anything
+    when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
     if obj.type != "MESH":
         raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
                             "texel")
@@ -133,8 +136,31 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
     if margin < 0:
         raise CanopyAOError(f"Margin must be >= 0 texels, not {margin}")
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
-    pixels, tpos, tnrm, stats, ttri = rasterize(uvs, pos, nrm, res, res)
+    from .tiles_io import split_tiles
+    parts, outside = split_tiles(uvs) if udim else ([(1001, slice(None), (0, 0))], 0)
+    if not parts:
+        raise CanopyAOError(f"Object '{obj.name}': no triangle of UV map '{uv_map}' lies in a "
+                            "UDIM tile (1001–1999: u in [0, 10), v >= 0); move its UVs there "
+                            "or bake without UDIM Tiles")
+    got, tiles, stats = [], [], {}
+    for number, rows, (du, dv) in parts:
+        tile_uvs = uvs[rows] - np.float32([du, dv]) if du or dv else uvs[rows]
+        px, tp, tn, st, tt = rasterize(np.ascontiguousarray(tile_uvs),
+                                       np.ascontiguousarray(pos[rows]),
+                                       np.ascontiguousarray(nrm[rows]), res, res)
+        if not isinstance(rows, slice):  # the tile's triangle k is the mesh's rows[3k] // 3
+            tt = (rows[0::3] // 3).astype(np.int32)[tt]
+        got.append((px, tp, tn, tt))
+        start = tiles[-1][2] if tiles else 0
+        tiles.append((number, start, start + len(px)))
+        for k, v in st.items():
+            stats[k] = stats.get(k, 0) + v
+    pixels, tpos, tnrm, ttri = (np.concatenate([g[i] for g in got]) for i in range(4))
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
+    if outside:
+        stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
+                                 f"'{uv_map}' lie outside the UDIM tiles 1001–1999 (u in "
+                                 "[0, 10), v >= 0); they are not baked")
     if stats.get("overlapping_texels", 0) > 0:
         stats["warnings"].append(
             f"Object '{obj.name}': UV map '{uv_map}' overlaps ({stats['overlapping_texels']} "
@@ -144,7 +170,7 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4):
         stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
                                  f"map '{uv_map}' at {res}×{res}; raise the resolution or "
                                  "check the UVs lie in the 0–1 square")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):
@@ -159,9 +185,9 @@ def splat(pixels, values, width, height, margin, background=1.0):
 
 # === Image file and Blender image
 
-def image_path(obj, image_dir, notes):
+def image_path(obj, image_dir, notes, suffix="CanopyAO"):
     """Where obj's EXR goes (the folder is made); a note says when it is a temporary one."""
-    fname = bpy.path.clean_name(image_name(obj)) + ".exr"
+    fname = bpy.path.clean_name(image_name(obj, suffix)) + ".exr"
     if image_dir:
         if image_dir.startswith("//") and not bpy.data.filepath:
             d = os.path.join(tempfile.gettempdir(), "canopy_ao")
@@ -192,34 +218,51 @@ def write_exr(path, ao):
         raise CanopyAOError(f"Could not write '{path}': {exc}") from exc
 
 
-def _find_our_image(obj):
+def find_image(key, value, suffix="CanopyAO"):
+    """Our image whose property key is value (OBJ_KEY: the object's name) holding map suffix."""
     for img in bpy.data.images:
-        if img.get(TAG) and img.get(OBJ_KEY) == obj.name:
+        if img.get(TAG) and img.get(key) == value and img.get(MAP_KEY, "CanopyAO") == suffix:
             return img
     return None
 
 
-def load_image(obj, path):
-    """(image, undo): obj's image of ours, (re)loaded from path; undo() puts back what was."""
-    img = _find_our_image(obj)
+def _retile(img, path, source, numbers=None):
+    """Point img at path with source 'FILE' or 'TILED' (which finds name.<tile>.exr beside it
+    and sets the <UDIM> token), keeping only the tiles in numbers: a tile no longer baked must
+    not stay."""
+    img.source = 'FILE'
+    img.filepath = path
+    img.source = source
+    img.reload()
+    if source == 'TILED' and numbers is not None:
+        for tile in [t for t in img.tiles if t.number not in numbers]:
+            img.tiles.remove(tile)
+
+
+def load_image(obj, path, suffix="CanopyAO", key=OBJ_KEY, name=None, numbers=None,
+               tiled=False):
+    """(image, undo): our image of obj (or, key=tiles_io.ATLAS_KEY, of the atlas named obj),
+    (re)loaded from path, tiled when asked (path: the first tile's file); undo() puts back
+    what was."""
+    value = obj if isinstance(obj, str) else obj.name
+    img = find_image(key, value, suffix)
     if img is not None:
-        old = img.filepath
+        old = (img.filepath, img.source, [t.number for t in img.tiles])
 
         def undo():
-            img.filepath = old
-            img.reload()
-        img.filepath = path
-        img.reload()
+            _retile(img, *old)
     else:
         # Never touches a user image of the same name: load() makes a new datablock and Blender
         # gives it a free name.
         img = bpy.data.images.load(path, check_existing=False)
-        img.name = image_name(obj)
+        img.name = name or f"{value}_{suffix}"
         img[TAG] = True
-        img[OBJ_KEY] = obj.name
+        img[key] = value
+        img[MAP_KEY] = suffix
 
         def undo():
             bpy.data.images.remove(img)
+    _retile(img, path, 'TILED' if tiled else 'FILE', numbers)
     img.colorspace_settings.name = "Non-Color"  # AO is data, not a colour to convert
     return img, undo
 
@@ -254,18 +297,18 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
     return image, stats
 
 
-def write_texels(obj, rx, ao, image_dir, txn):
-    """Splat AO per texel into the image, write its EXR and (re)load it as obj's image, each
-    write recorded in txn (commit.Transaction; a replaced file is kept until txn.done()).
-    Returns (image, stats)."""
+def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0):
+    """Splat AO (or another map: suffix names it) per texel into the image, write its EXR and
+    (re)load it as obj's image, each write recorded in txn (commit.Transaction; a replaced file
+    is kept until txn.done()). Returns (image, stats)."""
     res = rx.resolution
-    img_arr, mask = splat(rx.pixels, ao, res, res, rx.margin)
+    img_arr, mask = splat(rx.pixels, ao, res, res, rx.margin, background)
     stats = dict(rx.stats, margin_texels=int(np.count_nonzero(mask == 2)),
                  notes=list(rx.stats["notes"]))
-    path = image_path(obj, image_dir, stats["notes"])
+    path = image_path(obj, image_dir, stats["notes"], suffix)
     txn.add(keep_file(path))
     write_exr(path, img_arr)
-    image, undo_image = load_image(obj, path)
+    image, undo_image = load_image(obj, path, suffix)
     txn.add(undo_image)
     stats.update(path=path, writer="native", image=img_arr, mask=mask)
     return image, stats

@@ -137,7 +137,7 @@ def _nearest_crown(plan: Plan, names, p) -> np.ndarray:
             continue
         e = plan.fits[tree][1]
         q = (np.asarray(p, np.float64) - np.asarray(e.center, np.float64)) @ \
-            np.asarray(e.axes, np.float64).T / np.asarray(e.radii, np.float64)
+            np.asarray(e.axes, np.float64) / np.asarray(e.radii, np.float64)  # columns = axes
         d = np.einsum("ij,ij->i", q, q)
         better = d < dist
         best[better], dist[better] = k, d[better]

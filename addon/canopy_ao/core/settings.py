@@ -176,10 +176,39 @@ OPTIONS = (
            "Color attribute (POINT, FLOAT_COLOR) to write", group="output"),
     Option("overwrite", "bool", False, "Overwrite",
            "Replace an attribute of this name that Canopy AO did not make", group="output"),
+    Option("channel", "enum", "RGBA", "Channel",
+           "Write the AO as grey (R, G, B, alpha 1) into an attribute or image of its own, or "
+           "into one channel of an existing color attribute (Attribute) or image (Pack Image), "
+           "leaving its other channels exactly as they were (choosing a channel is the ask to "
+           "write into an attribute Canopy AO did not make)", group="output",
+           items=(("RGBA", "Grey", "AO in R, G and B, alpha 1"),
+                  ("R", "R", "AO in the red channel only"),
+                  ("G", "G", "AO in the green channel only"),
+                  ("B", "B", "AO in the blue channel only"),
+                  ("A", "A", "AO in the alpha channel only"))),
+    Option("pack_image", "str", "", "Pack Image",
+           "Texel mode with a channel: the Blender image (square, Resolution texels) whose "
+           "channel gets the AO; saved to its file if it has one", group="output"),
+    Option("thickness", "bool", False, "Canopy Thickness",
+           "Also bake how deep each point lies in its tree's canopy (0 on the fitted crown "
+           "ellipsoid's surface, 1 at its centre, scale-free; τ times it is the optical depth "
+           "out along its radius) into a grey attribute or image, and, with Wire "
+           "Material, a render pass", group="output"),
+    Option("thickness_name", "str", "CanopyThickness", "Thickness Name",
+           "The thickness's attribute (per vertex), image name suffix (per texel) and AOV",
+           group="output"),
     Option("uv_map", "str", "", "UV Map", "Texel mode: UV map (empty = the active one)",
            group="output", cli="--uv"),
     Option("resolution", "int", 1024, "Resolution", "Texel mode: image size in texels",
            group="output", min=1, max=16384),
+    Option("udim", "bool", False, "UDIM Tiles",
+           "Texel mode: bake every UDIM tile the UVs use (tile 1001 + u + 10 v), one EXR per "
+           "tile with its own margin, loaded as one tiled image (<UDIM> in its file name)",
+           group="output"),
+    Option("atlas", "str", "", "Atlas",
+           "Texel mode: bake every object into one image of this name, for objects sharing "
+           "one UV atlas; texels two objects claim are reported (empty = an image per object)",
+           group="output"),
     Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder",
            group="output", subtype='DIR_PATH'),
     Option("show_proxies", "bool", True, "Show Proxies", "Show the fitted shells as empties "

@@ -1,0 +1,143 @@
+"""Maps beyond a grey AO attribute (docs/DESIGN.md, 'Maps'): a value into one channel of an
+existing color attribute or image, leaving the other channels bit-identical, and the canopy
+thickness wired into materials as a render pass.
+
+Ownership is mesh_io's: an attribute Canopy AO did not make is written only when the user asks,
+and then only into the chosen channel; naming the channel is that ask.
+"""
+
+import numpy as np
+
+from . import materials, mesh_io
+from .mesh_io import MeshIOError
+
+CHANNELS = "RGBA"
+# Color attributes whose channels can be written without touching the others: FLOAT_COLOR
+# through "color" (raw floats), BYTE_COLOR through "color_srgb" (the stored bytes / 255, no
+# colour conversion, so an unchanged byte reads and writes back as itself).
+_KEY = {'FLOAT_COLOR': "color", 'BYTE_COLOR': "color_srgb"}
+
+
+def channel_index(channel):
+    """0..3 for 'R', 'G', 'B', 'A'; None for 'RGBA' (grey AO in R, G, B and alpha 1)."""
+    return None if channel in ("", "RGBA") else CHANNELS.index(channel)
+
+
+def check_channel_attribute(obj, name):
+    """None if ``name`` on obj can take one channel (or does not exist yet, and will be made),
+    else the reason it cannot."""
+    if not name:
+        return "the attribute name is empty"
+    attr = obj.data.attributes.get(name)
+    if attr is None:
+        return None
+    if attr.data_type not in _KEY or attr.domain not in ('POINT', 'CORNER'):
+        return (f"{obj.name}: attribute '{name}' is {attr.data_type} on {attr.domain}; a "
+                "channel can be written into a color attribute (Color or Byte Color) on "
+                "vertices or face corners only")
+    return None
+
+
+def write_attribute_channel(obj, name, values, channel):
+    """Write values (float (V,), one per vertex) into channel 'R', 'G', 'B' or 'A' of obj's
+    color attribute ``name``; every other channel keeps its bits. A CORNER attribute gets each
+    corner its vertex's value. A missing attribute is made (FLOAT_COLOR on vertices, other
+    channels 1) and marked as Canopy AO's."""
+    why = check_channel_attribute(obj, name)
+    if why:
+        raise MeshIOError(why)
+    mesh = obj.data
+    n = len(mesh.vertices)
+    values = np.asarray(values, np.float32).reshape(-1)
+    if len(values) != n:
+        raise MeshIOError(f"{obj.name}: {len(values)} values for {n} vertices")
+    attr = mesh.attributes.get(name)
+    made = attr is None
+    if made:
+        attr = mesh.color_attributes.new(name=name, type='FLOAT_COLOR', domain='POINT')
+        attr.data.foreach_set("color", np.ones(n * 4, np.float32))
+    key = _KEY[attr.data_type]
+    buf = np.empty(len(attr.data) * 4, np.float32)
+    attr.data.foreach_get(key, buf)
+    if attr.domain == 'CORNER':
+        loop_vert = np.empty(len(mesh.loops), np.int32)
+        mesh.loops.foreach_get("vertex_index", loop_vert)
+        values = values[loop_vert]
+    buf[channel_index(channel)::4] = np.clip(values, 0.0, 1.0) if key == "color_srgb" else values
+    attr.data.foreach_set(key, buf)
+    mesh.update_tag()
+    if made:
+        mesh_io._mark_owned(obj, name)
+    return attr
+
+
+def pack_image_channel(image, img, channel, txn):
+    """Write img (float32 (H, W), row 0 = bottom) into channel 'R', 'G', 'B' or 'A' of a
+    Blender image of the same size; the other channels keep their values (a byte image's
+    unchanged bytes write back as themselves). Recorded in txn: undo puts the old pixels back
+    (and the image's file, when it is saved to one)."""
+    from .texel_io import keep_file
+    w, h = image.size
+    c = channel_index(channel)
+    if (h, w) != img.shape:
+        raise MeshIOError(f"image '{image.name}' is {w}×{h}; set Resolution to {w} (a square "
+                          "image of that size) to pack into it")
+    if c >= image.channels:
+        raise MeshIOError(f"image '{image.name}' has {image.channels} channels, no "
+                          f"{channel}")
+    buf = np.empty(w * h * image.channels, np.float32)
+    image.pixels.foreach_get(buf)
+    old = buf.copy()
+
+    def undo():
+        image.pixels.foreach_set(old)
+        image.update()
+    txn.add(undo)
+    buf[c::image.channels] = (np.clip(img, 0.0, 1.0) if not image.is_float else img).ravel()
+    image.pixels.foreach_set(buf)
+    image.update()
+    if image.source == 'FILE' and image.filepath and image.packed_file is None:
+        import bpy
+        txn.add(keep_file(bpy.path.abspath(image.filepath)))
+        image.save()
+    return image
+
+
+def wire_thickness(obj, kind, source, aov_name, uv_map=None):
+    """Read the thickness (attribute name for kind 'vertex', image for 'texel') in each of
+    obj's materials into a shader AOV named aov_name. Idempotent; materials.unwire removes the
+    nodes (they carry materials.TAG). Returns the nodes added."""
+    materials.check_aov_name(aov_name)
+    added = 0
+    for mat in materials._object_materials(obj):
+        nt = mat.node_tree
+        src = next(iter(materials._ours(nt, "thickness_source")), None)
+        if src is not None and src.get("kind") != kind:
+            nt.nodes.remove(src)
+            src = None
+        if src is None:
+            src = materials._new(nt, "ShaderNodeVertexColor" if kind == "vertex" else
+                                 "ShaderNodeTexImage", "thickness_source", "Canopy Thickness",
+                                 (-900, -700))
+            src["kind"] = kind
+            added += 1
+        if kind == "vertex":
+            src.layer_name = source
+        else:
+            src.image = source
+            src.extension = "EXTEND"
+            uv = next(iter(materials._ours(nt, "uv")), None)
+            if uv is None:
+                uv = materials._new(nt, "ShaderNodeUVMap", "uv", "Canopy AO UV", (-1100, -700))
+                added += 1
+            uv.uv_map = uv_map or ""
+            materials._link_once(nt, uv.outputs["UV"], src.inputs["Vector"])
+        aov = next(iter(materials._ours(nt, "thickness_aov")), None)
+        if aov is None:
+            aov = materials._new(nt, "ShaderNodeOutputAOV", "thickness_aov",
+                                 "Canopy thickness pass", (0, -700))
+            added += 1
+        materials._set_aov_target(aov, aov_name)
+        materials._link_once(nt, src.outputs["Color"], aov.inputs["Color"])
+        materials._link_once(nt, src.outputs["Color"], aov.inputs["Value"])
+    return added
