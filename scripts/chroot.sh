@@ -48,6 +48,9 @@ archive_url() {
 enter() {
   [[ -x $dir/bin/sh ]] || die "$dir is not a chroot: run '$0 $suite setup' first"
   cp -L /etc/resolv.conf "$dir/etc/resolv.conf" 2>/dev/null || true
+  # The chroot shares this machine's network and host name: it resolves names as the host does
+  # (slurmd binds to the host name).
+  cp -L /etc/hosts "$dir/etc/hosts" 2>/dev/null || true
   mkdir -p "$dir/canopy-ao"
   # What crosses into the chroot's clean environment: CI and this project's own settings.
   local pass=(CI="${CI:-}")

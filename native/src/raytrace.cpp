@@ -328,12 +328,13 @@ struct RayTracer::Impl {
     ScenePtr scene;
   };
 
-  // Declaration order is destruction order reversed: the scene goes before the device, both
-  // before the buffers Embree shares and the error record its callback writes to.
+  // Declaration order is destruction order reversed: the scene goes first (it holds the
+  // instances), then the prototypes' scenes, then the device, all before the buffers Embree
+  // shares and the error record its callback writes to. (A prototype scene released after its
+  // device corrupted the heap on Embree 4.4.)
   std::unique_ptr<ErrorRecord> errors = std::make_unique<ErrorRecord>();
   std::vector<float> vertices;       // 3V floats + 1 of padding (Embree reads 16 bytes)
   std::vector<std::uint32_t> indices;  // 3M (6M when the device culls back faces)
-  std::vector<std::unique_ptr<Prototype>> prototypes;  // instanced meshes (occluders only)
   std::size_t instance_count = 0;
   // The triangles using each vertex (CSR): vertex v's are tris_of[first_tri[v] .. first_tri[v+1]).
   std::vector<std::uint32_t> first_tri, tris_of;
@@ -342,6 +343,7 @@ struct RayTracer::Impl {
   float auto_offset = 0;
   float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
   DevicePtr device;
+  std::vector<std::unique_ptr<Prototype>> prototypes;  // instanced meshes (occluders only)
   ScenePtr scene;
 
   Vec3 vertex(std::uint32_t i) const {
