@@ -96,6 +96,21 @@ def test_auto_does_not_read_the_clock(monkeypatch):
     assert "formula" in rep["calibration"]["cost_model"]
 
 
+def test_auto_falls_back_to_the_ray_free_rung_where_rays_are_over_budget():
+    """Where the counted cost of rays is over the time budget, auto weighs the ray-free
+    regression rung (it beats every proxy on real trees); within it, it does not build it."""
+    scene = cs.weeping_tree(leaves=4000)
+    rep, _data = _bake_bytes(scene, time_budget=1.0)
+    assert "regression" not in rep["calibration"]["candidates"]
+    rays = rep["calibration"]["candidates"]["raytrace"]["predicted_seconds"]
+    rep2, _data2 = _bake_bytes(scene, time_budget=rays / 4)
+    cands = rep2["calibration"]["candidates"]
+    assert "regression" in cands and rep2["method"] != "raytrace"
+    assert cands["regression"]["predicted_seconds"] < rays / 4
+    proxies = min(cands[m]["rmse"] for m in ("sphere", "ellipsoid", "shells", "medium"))
+    assert rep2["method"] == "regression" and cands["regression"]["rmse"] < 0.81 * proxies
+
+
 def test_auto_gives_the_same_bytes_under_load():
     """Bake, start processes that burn every core, bake again: same choice, same bytes."""
     import os

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import cost, ladder, lighting, native, proxies, regression, trees
 from .native import CanopyAOError, refusals_are_user_errors
-from .scene import ItemResult, Plan, SceneItem, split_trees
+from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, split_trees
 from .ladder import DEFAULT_TAU
 from .settings import BakeSettings, validate
 
@@ -53,8 +53,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
             plan.notes.append(f"calibration skipped: {exc}")
         plan.timings["tracer"] = time.perf_counter() - t0
 
-    if settings.method == "regression" or (settings.method == "auto" and settings.ray_free
-                                           and plan.fits and plan.tracer is not None):
+    if _wants_regression(plan, items, settings):
         t0 = time.perf_counter()
         try:
             plan.regression = regression.RegressionRung(
@@ -83,6 +82,21 @@ def prepare(items, settings: BakeSettings) -> Plan:
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     plan.timings["prepare"] = time.perf_counter() - t_start
     return plan
+
+
+def _wants_regression(plan: Plan, items, settings) -> bool:
+    """Whether prepare builds the ray-free rung: asked for, --ray-free, or auto where rays are
+    over the time budget (a big tree: on real trees the ray-free rung is the best one short of
+    rays, docs/DESIGN.md 'Auto mode'). Decided from counted work, never a clock."""
+    if settings.method == "regression":
+        return True
+    if settings.method != "auto" or not plan.fits or plan.tracer is None:
+        return False
+    if settings.ray_free:
+        return True
+    receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
+    return (settings.time_budget > 0
+            and cost.predict(plan, "raytrace", receivers)["seconds"] > settings.time_budget)
 
 
 @refusals_are_user_errors
