@@ -106,7 +106,8 @@ def _log_tail(path, lines=6):
             text = f.read().splitlines()
     except OSError:
         return ""
-    errors = [t for t in text if "rror" in t]
+    # "Error: ..." up to Blender 4.x, "... | ERROR ..." from 5.x.
+    errors = [t for t in text if "error" in t.lower() and not t.startswith("$ ")]
     return " | ".join((errors or text)[-lines:])
 
 
