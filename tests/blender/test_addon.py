@@ -419,6 +419,60 @@ def test_attribute_names_blender_owns_or_shortens_are_refused(tree_scene_objects
     assert sorted(a.name for a in mesh.attributes) == layers
 
 
+def _refused(cli, capsys, args, message):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(args)
+    err = capsys.readouterr().err
+    assert exc.value.code == 1 and message in err and "Traceback" not in err, err
+
+
+def test_a_mesh_in_edit_mode_is_refused_and_left_alone(tree_scene_objects, capsys):
+    from canopy_ao import cli
+    ground = bpy.data.objects["Ground"]
+    bpy.context.view_layer.objects.active = ground
+    bpy.ops.object.mode_set(mode='EDIT')
+    try:
+        _refused(cli, capsys, ["--objects", "Ground", "--method", "sphere"], "in Edit Mode")
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+    assert ATTR not in ground.data.attributes
+
+
+def test_objects_sharing_one_mesh_are_refused_by_name(tree_scene_objects, capsys):
+    from canopy_ao import cli
+    ground = bpy.data.objects["Ground"]
+    twin = ground.copy()  # a linked duplicate (Alt+D): the same mesh datablock
+    twin.name = "GroundTwin"
+    bpy.context.scene.collection.objects.link(twin)
+    try:
+        _refused(cli, capsys, ["--objects", "Ground", "GroundTwin", "--method", "sphere"],
+                 "share one mesh")
+        assert ATTR not in ground.data.attributes
+    finally:
+        bpy.data.objects.remove(twin)
+
+
+def test_linked_library_meshes_are_refused(tree_scene_objects, capsys, tmp_path):
+    from canopy_ao import cli
+    lib = str(tmp_path / "lib.blend")
+    local = bpy.data.objects["Ground"].copy()
+    local.data = local.data.copy()
+    local.name = local.data.name = "LibGround"
+    bpy.data.libraries.write(lib, {local})
+    bpy.data.objects.remove(local)
+    with bpy.data.libraries.load(lib, link=True) as (_src, dst):
+        dst.objects = ["LibGround"]
+    linked = dst.objects[0]
+    bpy.context.scene.collection.objects.link(linked)
+    try:
+        assert linked.library is not None
+        _refused(cli, capsys, ["--objects", linked.name, "--method", "sphere"],
+                 "linked from another .blend")
+        assert ATTR not in linked.data.attributes
+    finally:
+        bpy.data.objects.remove(linked)
+
+
 def test_every_option_reachable_from_panel_operator_and_cli():
     """One declaration per option (core/settings.py) gives a scene property the panel draws,
     an operator property and a command-line argument."""

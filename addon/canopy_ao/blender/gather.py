@@ -104,7 +104,33 @@ def bake_targets(context, object_names):
                        if is_candidate(o) and o.visible_get(view_layer=context.view_layer)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
+    check_writable(targets)
     return targets
+
+
+def check_writable(targets):
+    """Refuse, before anything is read or written, what a bake could not write back whole: a
+    mesh in Edit Mode (its data is the edit copy until Blender leaves it), linked library data
+    (a write would be lost on save), and one mesh shared by several targets (each would
+    overwrite the other's result)."""
+    editing = [o.name for o in targets if o.mode == 'EDIT']
+    if editing:
+        raise CanopyAOError(f"{', '.join(editing)}: in Edit Mode; leave it (Tab) and bake "
+                            "again (nothing was changed)")
+    linked = [o.name for o in targets if o.library is not None or o.data.library is not None]
+    if linked:
+        raise CanopyAOError(f"{', '.join(linked)}: linked from another .blend file, so a bake "
+                            "could not be saved; make it local (Object > Relations > Make "
+                            "Local) first (nothing was changed)")
+    by_mesh = {}
+    for o in targets:
+        by_mesh.setdefault(o.data.name_full, []).append(o.name)
+    shared = [names for names in by_mesh.values() if len(names) > 1]
+    if shared:
+        raise CanopyAOError("these objects share one mesh, so only one result could stay on "
+                            f"it: {'; '.join(', '.join(n) for n in shared)}; bake one of them, "
+                            "or give each its own mesh (Object > Relations > Make Single User)"
+                            " (nothing was changed)")
 
 
 def scene_items(context, depsgraph, targets, opts, timings):
