@@ -249,13 +249,8 @@ def _diag(p):
 def _trace(tracer, P, N, samples, distance, seed, ids):
     """Traced AO; points with an own vertex id (>= 0) skip only their own triangles."""
     P, N = np.ascontiguousarray(P, np.float32), np.ascontiguousarray(N, np.float32)
-    if (ids >= 0).all():
-        try:
-            return np.asarray(tracer.ao(P, N, samples=int(samples), distance=distance,
-                                        seed=int(seed), vertex_ids=ids))
-        except TypeError:  # a tracer without own-triangle skipping: the offset path
-            pass
-    return np.asarray(tracer.ao(P, N, samples=int(samples), distance=distance, seed=int(seed)))
+    return np.asarray(tracer.ao(P, N, samples=int(samples), distance=distance, seed=int(seed),
+                                vertex_ids=np.ascontiguousarray(ids, np.int32)))
 
 
 def _near_ao(tracer, P, N, diag, ids):
