@@ -346,6 +346,32 @@ def test_cli_bad_arguments_in_process(tree_scene_objects, capsys):
     assert capsys.readouterr().out.startswith("Ground: role GROUND, method sphere")
 
 
+@pytest.mark.parametrize("args, method", [
+    (["--method", "regression"], "regression"),
+    (["--method", "hybrid", "--samples", "8"], "hybrid"),
+    (["--method", "auto", "--ray-free"], None),
+])
+def test_cli_bakes_the_ray_free_and_hybrid_rungs(tree_scene_objects, capsys, tmp_path, args,
+                                                  method):
+    """The new rungs through the documented entry: a bake writes AO in [0, 1] on every
+    target, and --ray-free keeps auto off rays."""
+    from canopy_ao import cli
+    report = tmp_path / "r.json"
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Leaves", "Ground", "--no-proxies", "--report", str(report)]
+                 + args)
+    assert exc.value.code == 0, capsys.readouterr().err
+    rep = json.loads(report.read_text())
+    assert rep["method"] == method if method else rep["method"] not in ("raytrace", "hybrid")
+    for name in ("Leaves", "Ground"):
+        attr = bpy.data.objects[name].data.attributes[ATTR]
+        ao = np.empty(len(attr.data) * 4, np.float32)
+        attr.data.foreach_get("color", ao)
+        assert np.all((ao >= 0) & (ao <= 1))
+        if name == "Leaves":  # shaded by the model, not a constant
+            assert ao[0::4].std() > 0.01
+
+
 def test_cli_threads_caps_the_native_core_and_leaves_the_result_alone(tree_scene_objects,
                                                                         capsys):
     """--threads N (what the batch passes per bake) caps the core's worker threads; the AO
