@@ -2,10 +2,10 @@
 
     /usr/bin/python3 bench/bench_sampling.py [--scenes NAME ...] [--points 6000] [--seeds 3]
 
-Scenes: the Sapling Tree Gen exports named in /work/wt/signals/sapling_scenes when that file
-exists (`<scene>_quick.npz`: every object's positions, normals, triangles, role; AO distance
-= the scene's bbox diagonal), else the repository's example scenes (examples/canopy_scenes.py,
-quick sizes). Every vertex is its own receiver (vertex_ids), as the add-on bakes.
+Scenes: the Sapling Tree Gen exports in bench/out/real (`<scene>_quick.npz`, written by
+examples/sapling_scenes.py and read through bench/real_scenes.py: every object's positions,
+normals, triangles, role; AO distance = the scene's bbox diagonal) when there are any, else the
+repository's example scenes (examples/canopy_scenes.py, quick sizes). Every vertex is its own receiver (vertex_ids), as the add-on bakes.
 
 1. Sample sets: MAE over --points random vertices against a 4096-ray reference (four
    1024-ray lattice runs with other seeds, mean) at 16, 64 and 256 rays per vertex, for the
@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import glob
 import os
-import re
 import sys
 import time
 
@@ -33,25 +32,21 @@ sys.path.insert(0, os.path.join(HERE, "..", "addon"))
 sys.path.insert(0, os.path.join(HERE, "..", "examples"))
 
 from canopy_ao import _core  # noqa: E402
+import real_scenes  # noqa: E402
 
-SIGNAL = "/work/wt/signals/sapling_scenes"
 SAMPLERS = ("lattice", "sobol", "independent")
 
 
 def sapling_dir():
-    """The folder of the exported Sapling scenes, or None."""
-    if not os.path.exists(SIGNAL):
-        return None
-    m = re.search(r"cache:\s*(\S+)/<scene>", open(SIGNAL).read())
-    return m.group(1) if m and os.path.isdir(m.group(1)) else None
+    """The folder of the exported Sapling scenes (real_scenes.REAL), or None without any."""
+    folder = real_scenes.REAL
+    return folder if glob.glob(os.path.join(folder, "*_quick.npz")) else None
 
 
 def load_npz(path):
     """[(name, role, positions, normals, triangles)], AO distance."""
-    z = np.load(path)
-    objs = [(str(nm), str(z[f"{nm}/role"]), z[f"{nm}/positions"], z[f"{nm}/normals"],
-             z[f"{nm}/triangles"]) for nm in z["names"]]
-    return objs, float(z["distance"])
+    sc = real_scenes.RealScene(path)
+    return [(n, r, p, nrm, t) for n, r, _tree, p, nrm, t in sc.items()], sc.distance
 
 
 def load_example(name):

@@ -110,6 +110,8 @@ def main(argv):
         sun.data.energy = 3.0
         sun.rotation_euler = (math.radians(40), 0, math.radians(30))
         scene.collection.objects.link(sun)
+    # No machine paths in the picture: Blender stamps the .blend's path into the PNG's text.
+    scene.render.use_stamp_filename = False
     bpy.ops.render.render(write_still=True)
     print(f"render_preview: wrote {a.out} ({a.look}, {len(baked)} baked objects)")
     return 0

@@ -144,3 +144,93 @@ def test_forest_cost_is_bounded_by_the_cut_off():
     n = np.tile(np.float32([0, 0, 1]), (2000, 1))
     a, b = cut.ao(p, n), full.ao(p, n)
     assert np.all(a >= b - 1e-6) and (a - b).max() < 0.05
+
+
+# --- Instanced trees under the exact rung and auto (docs/DESIGN.md, 'How each role is lit')
+FOREST = [affine(rot_z(0.3), (-4.0, -3.0, 0.0)), affine(rot_z(1.9) * 1.1, (3.5, -2.5, 0.0)),
+          affine(rot_z(-0.8) * 0.9, (0.5, 4.0, 0.0))]
+
+
+def small_forest(settings):
+    """Three instances of the test tree (its own plan, baked once at the origin) and the
+    ground under them: (prototypes, ground item, the same trees realised as real triangles)."""
+    tree = items(ground=False)
+    proto = core.prepare(tree, settings)
+    protos = [forest.prototype_from_plan(proto, "T", np.stack(FOREST), items=tree)]
+    (ground,) = items(tree=False)
+    v, t = forest.prototype_mesh(tree)
+    real_v, real_t = [ground.positions], [ground.triangles]
+    base = len(ground.positions)
+    for m in FOREST:
+        real_v.append((v.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+        real_t.append(t + base)
+        base += len(v)
+    realised = (np.ascontiguousarray(np.concatenate(real_v)),
+                np.ascontiguousarray(np.concatenate(real_t), np.int32))
+    return protos, ground, realised
+
+
+def test_raytrace_ground_sees_instances_as_their_triangles():
+    """The exact rung's ground AO under instanced trees is the AO of a tracer over the same
+    triangles realised (un-instanced), to noise: rays hit the instances, no shell law."""
+    settings = core.BakeSettings(method="raytrace", samples=64, seed=3)
+    protos, ground, (rv, rt) = small_forest(settings)
+    plan = core.prepare([ground], settings, prototypes=protos)
+    assert plan.tracer.instance_count == len(FOREST)
+    got = core.evaluate_item(plan, ground).ao
+    ids = np.arange(len(ground.positions), dtype=np.int32)
+    want = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=1024,
+                                                 seed=11, vertex_ids=ids))
+    shaded = want < 0.95
+    assert shaded.sum() > 50  # the trees do shade the ground
+    # 64 rays against 1024: per-vertex noise ≤ sqrt(a(1−a)/64) ≤ 0.063, so the mean of |Δ|
+    # over the shaded vertices stays well below 0.03 and its bias below 0.01.
+    assert np.abs(got - want)[shaded].mean() < 0.03
+    assert abs(float(np.mean(got[shaded] - want[shaded]))) < 0.01
+    # The same rays (same seed) through the realised mesh: equal but for float rounding of
+    # the instance transforms.
+    same = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=64,
+                                                 seed=3, vertex_ids=ids))
+    assert np.abs(got - same).max() <= 2.0 / 64
+
+
+def test_attach_forest_after_prepare_traces_instances():
+    """attach_forest on an exact-rung plan rebuilds its tracer with the instances."""
+    settings = core.BakeSettings(method="raytrace", samples=32, seed=3)
+    protos, ground, (rv, rt) = small_forest(settings)
+    plan = core.prepare([ground], settings)
+    before = core.evaluate_item(plan, ground).ao
+    core.attach_forest(plan, protos)
+    assert plan.tracer.instance_count == len(FOREST)
+    got = core.evaluate_item(plan, ground).ao
+    ids = np.arange(len(ground.positions), dtype=np.int32)
+    same = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=32,
+                                                 seed=3, vertex_ids=ids))
+    assert np.abs(got - same).max() <= 2.0 / 32
+    assert before.min() > 0.99 and got.min() < 0.8
+
+
+def test_auto_on_a_forest_is_checked_against_traced_instances():
+    """Auto's calibration on a ground under instanced trees traces the instances: its
+    reference rays see them (the exact rung's sample error is its own noise only), and the
+    proxy candidate's error is the instances' shell law against those rays."""
+    settings = core.BakeSettings(method="auto", samples=64, seed=3, calibration_points=200)
+    protos, ground, (rv, rt) = small_forest(settings)
+    plan = core.prepare([ground], settings, prototypes=protos)
+    cal = plan.calibration
+    assert cal and cal["instances_traced"]
+    cands = cal["candidates"]
+    assert set(cands) == {"ellipsoid", "raytrace"}
+    # Reference (128 rays) and candidate (64 rays, another seed) both see the trees: noise only.
+    assert cands["raytrace"]["rmse"] < 0.06
+    # The shells' law is not the traced trees: a real error, measured against traced rays.
+    assert cands["ellipsoid"]["rmse"] > cands["raytrace"]["rmse"]
+    got = core.evaluate_item(plan, ground).ao
+    ids = np.arange(len(ground.positions), dtype=np.int32)
+    want = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=256,
+                                                 seed=11, vertex_ids=ids))
+    # Whatever auto chose, it was scored against these rays: its ground error stays near the
+    # sample RMSE it reported.
+    rmse = float(np.sqrt(np.mean((got - want) ** 2)))
+    assert rmse < 1.5 * cands[plan.method]["rmse"] + 0.02
+    assert not any("do not see the instanced trees" in n for n in plan.notes)

@@ -9,7 +9,8 @@ it stands in the scene (the prototype's space) onto the instance. Prototype obje
 into trees as the bake groups real objects (gather.tree_of: usually the collection that is
 instanced), each tree is fitted and baked once with the engine (its self-AO, written to the
 prototype's mesh, which the instances share), and its shells and trunks, moved by every M, are
-occluders for everything the main bake evaluates.
+occluders for everything the main bake evaluates; the exact rung and auto's calibration trace
+its triangles at every M (Embree instances).
 
 Limits: geometry instanced without an object (a geometry-nodes primitive realised inside the
 node tree) has no prototype object and is skipped; a prototype's self-AO does not include the
@@ -99,14 +100,15 @@ class Prototypes:
         return None
 
     def bake(self, settings, skip=()):
-        """Fit and bake each tree once; returns forest.Prototype list for core.attach_forest.
+        """Fit and bake each tree once; returns forest.Prototype list (shells and mesh) for
+        core.prepare, whose ray tracer and calibration then see every instance.
         Items named in ``skip`` (also baked by the main bake) are fitted but not evaluated."""
         protos = []
         for tree, items in self.items.items():
             plan = core.prepare(items, settings)
             self.plans[tree] = plan
             mats = forest.unique_matrices(np.concatenate(self.matrices[tree]))
-            protos.append(forest.prototype_from_plan(plan, tree, mats))
+            protos.append(forest.prototype_from_plan(plan, tree, mats, items=items))
             for it in items:
                 if it.name in self.writable and it.name not in skip:
                     self.results.append(core.evaluate_item(plan, it))

@@ -99,14 +99,16 @@ class BakeJob:
     def prepare(self):
         t0 = time.perf_counter()
         # CanopyAOError (bad input, with its reason) passes to the caller as it is; anything
-        # else is a bug and keeps its traceback.
-        self.plan = core.prepare(self.items, self.settings)
-        t0 = self._lap("prepare (fit, calibrate)", t0)
+        # else is a bug and keeps its traceback. The instanced trees first: the main plan's
+        # ray tracer and calibration trace them (core.prepare's prototypes).
+        protos = None
         if self.prototypes:
             skip = {t.item.name for t in self.targets}
-            core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
+            protos = self.prototypes.bake(self.settings, skip=skip)
             self.lines.extend(self.prototypes.lines())
-            self._lap("instances", t0)
+            t0 = self._lap("instances", t0)
+        self.plan = core.prepare(self.items, self.settings, prototypes=protos)
+        self._lap("prepare (fit, calibrate)", t0)
 
     def step(self):
         """Evaluate the next chunk of receivers. Returns the line to report when it completes

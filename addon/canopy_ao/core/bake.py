@@ -22,8 +22,13 @@ from .settings import BakeSettings, validate
 
 
 @refusals_are_user_errors
-def prepare(items, settings: BakeSettings) -> Plan:
-    """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError."""
+def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
+    """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
+
+    prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every
+    receiver. Given here rather than attached afterwards, the ray tracer traces their meshes
+    at every instance, so the exact rung and auto's calibration (the reference rays and every
+    candidate, whose occluders then include the instances' shells) see them."""
     native.require()
     validate(settings)
     items = list(items)
@@ -39,14 +44,24 @@ def prepare(items, settings: BakeSettings) -> Plan:
     plan.timings["fit"] = time.perf_counter() - t0
 
     # Grass has no proxies to calibrate, but auto still weighs its law against rays.
-    grass_only_auto = (settings.method == "auto" and not plan.fits
-                       and any(it.role == "GRASS" for it in items))
-    needs_tracer = settings.method in ("raytrace", "hybrid") or grass_only_auto or (
+    if prototypes:
+        _attach(plan, prototypes, None)
+    # Grass has no proxies to calibrate, nor has a ground under instanced trees alone, but
+    # auto still weighs their laws against rays.
+    proxyless_auto = (settings.method == "auto" and not plan.fits
+                      and (any(it.role == "GRASS" for it in items)
+                           or bool(forest_meshes(prototypes))))
+    needs_tracer = settings.method in ("raytrace", "hybrid") or proxyless_auto or (
         settings.method == "auto" or settings.tau is None) and bool(plan.fits)
     if needs_tracer:
         t0 = time.perf_counter()
         try:
-            plan.tracer = lighting.build_tracer(whole, plan.tracer_bases)
+            # The hybrid's far field is the density grid of the scene's own triangles, so
+            # instanced trees stay its analytic occluders (near rays must not see them twice).
+            plan.tracer = lighting.build_tracer(
+                whole, plan.tracer_bases,
+                prototypes if settings.method != "hybrid" else None)
+            plan.tracer_items = whole
         except CanopyAOError as exc:
             if settings.method in ("raytrace", "hybrid"):
                 raise
@@ -78,7 +93,7 @@ def prepare(items, settings: BakeSettings) -> Plan:
             plan.notes.append(f"density grid not considered: {exc}")
         plan.timings["grid"] = time.perf_counter() - t0
 
-    ladder.choose(plan, items, grass_only_auto)
+    ladder.choose(plan, items, proxyless_auto)
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     plan.timings["prepare"] = time.perf_counter() - t_start
     return plan
@@ -166,13 +181,38 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
                       time.perf_counter() - t0, item.tree_source, item.tree_why)
 
 
+def forest_meshes(prototypes) -> list:
+    """The prototypes that carry triangles for the ray tracer (forest.Prototype.mesh)."""
+    return [p for p in prototypes or () if p.mesh is not None and len(p.mesh[1])]
+
+
 @refusals_are_user_errors
 def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     """Make instanced trees occlude every item evaluate_item() bakes with this plan.
 
-    prototypes: forest.Prototype list (shells in the prototype's space, instance matrices).
-    Attached after prepare(), so calibration (which traces only the real triangles) does not
-    see occluders its reference has not got."""
+    prototypes: forest.Prototype list (shells in the prototype's space, instance matrices,
+    and the prototype's mesh for the ray tracer). Attached after prepare(): the proxies see
+    the instances' shells, and an exact-rung plan's tracer is rebuilt with the instances, but
+    a calibration already done did not see them; prepare(items, settings, prototypes) does
+    (the add-on's bake job passes them there)."""
+    _attach(plan, prototypes, epsilon)
+    if (plan.forest is not None and plan.method == "raytrace" and plan.tracer is not None
+            and not lighting.traces_instances(plan) and forest_meshes(prototypes)):
+        t0 = time.perf_counter()
+        bases = {}
+        plan.tracer = lighting.build_tracer(plan.tracer_items, bases, prototypes)
+        plan.tracer_bases = bases
+        plan.timings["tracer"] = plan.timings.get("tracer", 0.0) + time.perf_counter() - t0
+    if plan.forest is not None and plan.calibration and not plan.calibration.get(
+            "instances_traced"):
+        # Calibration traced the scene's own triangles only: say so rather than imply the
+        # choice was checked under the forest.
+        plan.notes.append("the method and τ were chosen against rays that do not see the "
+                          "instanced trees (attached after prepare: pass them to prepare)")
+
+
+def _attach(plan: Plan, prototypes, epsilon) -> None:
+    """plan.forest: the instances' shells and trunks as occluders, and the note saying so."""
     from . import forest as _forest
     t0 = time.perf_counter()
     eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
@@ -187,11 +227,6 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
             f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
             f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
             "per receiver)")
-        if plan.calibration:
-            # Calibration traced the scene's own triangles only: say so rather than imply the
-            # choice was checked under the forest.
-            plan.notes.append("the method and τ were chosen against rays that do not see the "
-                              "instanced trees (the ray tracer has no instances yet)")
 
 
 def report(plan: Plan, results) -> dict:

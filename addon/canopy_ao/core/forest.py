@@ -108,6 +108,10 @@ class Prototype:
     tau: float
     matrices: np.ndarray
     solids: list = field(default_factory=list)
+    # The prototype's triangles in its own space, (vertices float32 (V, 3), triangles int32
+    # (M, 3)), or None: what the exact rung's ray tracer instances (lighting.build_tracer), so
+    # rays and calibration see the trees the shells stand for.
+    mesh: tuple | None = None
 
     @property
     def count(self) -> int:
@@ -165,11 +169,53 @@ class Forest:
         return out
 
 
-def prototype_from_plan(plan, tree, matrices, name=None):
+def prototype_mesh(items):
+    """(vertices float32 (V, 3), triangles int32 (M, 3)): every non-ignored item's triangles
+    in one mesh, or None when there are none."""
+    verts, tris, base = [], [], 0
+    for it in items:
+        if it.role == "IGNORE" or not len(it.triangles):
+            continue
+        verts.append(np.asarray(it.positions, np.float32).reshape(-1, 3))
+        tris.append(np.asarray(it.triangles, np.int64).reshape(-1, 3) + base)
+        base += len(verts[-1])
+    if not verts:
+        return None
+    return (np.ascontiguousarray(np.concatenate(verts), np.float32),
+            np.ascontiguousarray(np.concatenate(tris), np.int32))
+
+
+def prototype_from_plan(plan, tree, matrices, name=None, items=None):
     """The Prototype of ``tree`` as an engine Plan fitted it (its chosen shells, τ and solid
     trunks, in the space the prototype was baked in), placed by ``matrices`` (N, 4, 4) that
-    map that space to each instance's."""
+    map that space to each instance's. ``items``: the prototype's SceneItems (in that space),
+    whose triangles the exact rung traces at every instance (None: shells only)."""
     return Prototype(name or tree, list(plan.proxies.get(tree, [])),
                      tau_of(plan.taus(), tree),
                      np.asarray(matrices, np.float64).reshape(-1, 4, 4),
-                     list(plan.trunks.get(tree, [])))
+                     list(plan.trunks.get(tree, [])),
+                     prototype_mesh(items) if items is not None else None)
+
+
+def tracer_instances(prototypes):
+    """The RayTracer's instance arguments for prototypes that carry a mesh: {"prototypes":
+    [(vertices, triangles)], "instance_prototypes": int32 (K,), "instance_matrices": float32
+    (K, 4, 4)}, or {} when none does. Singular matrices (a zero-scaled instance) are dropped:
+    they occlude nothing."""
+    meshes, which, mats = [], [], []
+    for p in prototypes or ():
+        if p.mesh is None or not len(p.mesh[1]):
+            continue
+        m = np.asarray(p.matrices, np.float64).reshape(-1, 4, 4)
+        m = m[np.abs(np.linalg.det(m[:, :3, :3])) > 1e-12]
+        if not len(m):
+            continue
+        which.append(np.full(len(m), len(meshes), np.int32))
+        mats.append(m)
+        meshes.append(p.mesh)
+    if not meshes:
+        return {}
+    m = np.concatenate(mats)
+    m[:, 3, :] = (0.0, 0.0, 0.0, 1.0)  # affine, as Embree's instance transform
+    return {"prototypes": meshes, "instance_prototypes": np.concatenate(which),
+            "instance_matrices": np.ascontiguousarray(m, np.float32)}

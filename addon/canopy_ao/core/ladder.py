@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from . import cost, native
-from .lighting import evaluate_points, own_ids, trace
+from .lighting import evaluate_points, own_ids, trace, traces_instances
 from .scene import RECEIVER_ROLES, Plan
 
 # (name, label, help) of each rung; settings.OPTIONS offers them in this order.
@@ -213,6 +213,8 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         "buried_test": (f"every one of {BURIED_RAYS} rays stops within {BURIED_SCALE:g} of "
                         "the object's bounding-box diagonal"),
         "reference_samples": s.calibration_samples,
+        # The rays (reference and exact rung) hit the instanced trees too (lighting.build_tracer).
+        "instances_traced": traces_instances(plan),
         "trace_seconds": t_trace,
         "seconds": time.perf_counter() - t0,
         "candidates": {m: {"tau": _scene_tau(t), "tau_by_tree": _tree_taus(t),
@@ -237,9 +239,11 @@ def _tree_taus(tau):
         else {}
 
 
-def choose(plan: Plan, items, grass_only_auto: bool) -> None:
+def choose(plan: Plan, items, proxyless_auto: bool) -> None:
     """Set plan.method and plan.tau for the requested method: calibrated when "auto" or τ is
-    not given and a tracer exists, else the requested rung (or "ellipsoid" for "auto")."""
+    not given and a tracer exists, else the requested rung (or "ellipsoid" for "auto").
+    proxyless_auto: "auto" on a scene with no tree of its own but grass or instanced trees
+    (bake.prepare): their laws are weighed against rays on the same sample."""
     settings = plan.settings
     analytic = settings.method in TAU_METHODS + ("auto",)
     plan.method = settings.method
@@ -265,8 +269,10 @@ def choose(plan: Plan, items, grass_only_auto: bool) -> None:
                 plan.notes.append(f"tau not calibrated; using the default {DEFAULT_TAU}")
     elif analytic:
         plan.method = "ellipsoid" if settings.method == "auto" else settings.method
-        plan.notes.append("no CANOPY object: no proxies fitted")
-        if grass_only_auto and plan.tracer is not None and not settings.ray_free:
-            # The grass law (Hegeman Eq. 9) against the exact rung, on the same sample.
+        if plan.forest is None:  # all its trees may be instances: then it is no news
+            plan.notes.append("no CANOPY object: no proxies fitted")
+        if proxyless_auto and plan.tracer is not None and not settings.ray_free:
+            # The grass law (Hegeman Eq. 9) and the instances' shells against the exact rung
+            # (whose tracer holds the instances), on the same sample.
             plan.method, plan.tau, plan.calibration = calibrate(
                 plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)

@@ -78,7 +78,9 @@ def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
     own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
     in its item (-1 = none), so the exact rung's rays skip only what they start on."""
     ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
-    if plan.forest is not None and len(p):
+    # The exact rung's rays already hit the instanced trees when its tracer holds them.
+    if plan.forest is not None and len(p) and not (method == "raytrace"
+                                                   and traces_instances(plan)):
         ao = np.clip(ao * plan.forest.ao(p, n), 0.0, 1.0).astype(np.float32, copy=False)
     return ao
 
@@ -229,10 +231,27 @@ def _scene_triangles(items, bases=None):
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
 
 
-def build_tracer(items, bases=None):
+def build_tracer(items, bases=None, prototypes=None):
     """The Embree ray tracer over every non-ignored item's triangles; bases as
-    _scene_triangles."""
-    return _core.RayTracer(*_scene_triangles(items, bases))
+    _scene_triangles. prototypes: forest.Prototype list whose meshes are traced at every
+    instance matrix (Embree instances: each prototype's BVH built once), so the exact rung and
+    calibration see instanced trees as the real triangles they are (docs/DESIGN.md, 'How each
+    role is lit'). A scene of instances alone (a ground is a receiver with triangles, so this
+    is rare) still gets a tracer."""
+    from .forest import tracer_instances
+    inst = tracer_instances(prototypes)
+    try:
+        mesh = _scene_triangles(items, bases)
+    except CanopyAOError:
+        if not inst:
+            raise
+        mesh = (np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
+    return _core.RayTracer(*mesh, **inst)
+
+
+def traces_instances(plan: Plan) -> bool:
+    """Whether the plan's ray tracer holds the forest's instanced trees (build_tracer)."""
+    return plan.tracer is not None and int(plan.tracer.instance_count) > 0
 
 
 def build_grid(items):

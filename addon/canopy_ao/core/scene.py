@@ -61,6 +61,7 @@ class Plan:
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
     grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     tracer: object = None
+    tracer_items: list = field(default_factory=list)  # the items the tracer's mesh holds
     # item name -> (its first vertex, its first triangle) in the tracer's mesh, or None when two
     # items share the name (lighting.own_ids: a ray skips only its receiver's own triangles)
     tracer_bases: dict = field(default_factory=dict)
