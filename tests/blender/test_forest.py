@@ -138,3 +138,44 @@ def test_geometry_nodes_instances(proto):
     bpy.context.view_layer.update()
     _job, rep = bake_all()
     check(rep, [((-6.0 + 6 * i, -3.0 + 3 * i, 0.0), 0.0, 1.0) for i in range(3)])
+
+
+def test_raytrace_traces_the_instances(proto):
+    """The exact rung through the add-on's job: the ground under collection instances gets the
+    AO of rays against the same trees realised (un-instanced), to noise, and the report says
+    the calibration rays saw them too (auto)."""
+    from canopy_ao.core.native import _core
+    for i, (loc, angle, scale) in enumerate(PLACES):
+        e = bpy.data.objects.new(f"TreeInstance{i}", None)
+        e.instance_type = 'COLLECTION'
+        e.instance_collection = proto
+        e.location, e.rotation_euler[2], e.scale = loc, angle, (scale,) * 3
+        bpy.context.scene.collection.objects.link(e)
+    bpy.context.view_layer.update()
+    opts = properties.scene_options(bpy.context.scene)
+    opts.update(method="raytrace", samples=64, distance=0.0, show_proxies=False)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    got = mesh_io.read_ao_attribute(bpy.data.objects["Ground"], ATTR)
+    # The same triangles realised: each tree part under each empty's world matrix.
+    gp, gt = tree_scene.plane(size=24.0, cuts=48)
+    verts, tris, base = [gp], [gt], len(gp)
+    parts = tree_scene.scene(False)
+    for i in range(len(PLACES)):
+        m = np.array(bpy.data.objects[f"TreeInstance{i}"].matrix_world, np.float64)
+        for name in ("Trunk", "Leaves"):
+            p, t = parts[name]
+            verts.append((p @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+            tris.append(t + base)
+            base += len(p)
+    rt = _core.RayTracer(np.ascontiguousarray(np.concatenate(verts), np.float32),
+                         np.ascontiguousarray(np.concatenate(tris), np.int32))
+    up = np.tile(np.float32([0, 0, 1]), (len(gp), 1))
+    want = np.asarray(rt.ao(gp, up, samples=512, seed=5,
+                            vertex_ids=np.arange(len(gp), dtype=np.int32)))
+    shaded = want < 0.95
+    assert shaded.sum() > 50
+    assert np.abs(got - want)[shaded].mean() < 0.03
+    assert abs(float(np.mean(got[shaded] - want[shaded]))) < 0.01
+    opts.update(method="auto")
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert rep["calibration"]["instances_traced"] is True
