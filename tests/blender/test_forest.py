@@ -66,7 +66,8 @@ def check(rep, places):
     assert any("forest: " in n for n in rep["notes"])
 
 
-def test_collection_instances(proto):
+def place_instances(proto):
+    """A collection-instance empty of ``proto`` at each of PLACES (TreeInstance0, ...)."""
     for i, (loc, angle, scale) in enumerate(PLACES):
         e = bpy.data.objects.new(f"TreeInstance{i}", None)
         e.instance_type = 'COLLECTION'
@@ -74,6 +75,10 @@ def test_collection_instances(proto):
         e.location, e.rotation_euler[2], e.scale = loc, angle, (scale,) * 3
         bpy.context.scene.collection.objects.link(e)
     bpy.context.view_layer.update()
+
+
+def test_collection_instances(proto):
+    place_instances(proto)
     _job, rep = bake_all()
     check(rep, PLACES)
     # A re-bake replaces the prototype's attribute, it does not add one.
@@ -145,13 +150,7 @@ def test_raytrace_traces_the_instances(proto):
     AO of rays against the same trees realised (un-instanced), to noise, and the report says
     the calibration rays saw them too (auto)."""
     from canopy_ao.core.native import _core
-    for i, (loc, angle, scale) in enumerate(PLACES):
-        e = bpy.data.objects.new(f"TreeInstance{i}", None)
-        e.instance_type = 'COLLECTION'
-        e.instance_collection = proto
-        e.location, e.rotation_euler[2], e.scale = loc, angle, (scale,) * 3
-        bpy.context.scene.collection.objects.link(e)
-    bpy.context.view_layer.update()
+    place_instances(proto)
     opts = properties.scene_options(bpy.context.scene)
     opts.update(method="raytrace", samples=64, distance=0.0, show_proxies=False)
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
