@@ -117,7 +117,9 @@ def main():
     names = [os.path.basename(p)[:-len("_quick.npz")] for p in paths]
     picked = [s for s in (args.scenes or names) if s in names]
     if not picked:
-        sys.exit(f"real_rays: no scenes in {rs.REAL} (examples/sapling_scenes.py writes them)")
+        sys.exit(f"real_rays: {' '.join(args.scenes) if args.scenes else 'no scenes'} not in "
+                 f"{rs.REAL} (examples/sapling_scenes.py writes them; there: "
+                 f"{' '.join(names) or 'none'})")
     summary = []
     for name in picked:
         sc = rs.load(name)

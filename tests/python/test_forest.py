@@ -234,3 +234,17 @@ def test_auto_on_a_forest_is_checked_against_traced_instances():
     rmse = float(np.sqrt(np.mean((got - want) ** 2)))
     assert rmse < 1.5 * cands[plan.method]["rmse"] + 0.02
     assert not any("do not see the instanced trees" in n for n in plan.notes)
+
+
+def test_auto_with_own_tree_and_instances_scores_against_traced_instances():
+    """A real tree beside instanced ones: every candidate of auto's ladder (the proxies with
+    the instances' shells as occluders, the exact rung with their triangles) is scored against
+    reference rays that hit the instances."""
+    settings = core.BakeSettings(method="auto", samples=64, seed=3, calibration_points=300)
+    protos, _ground, _realised = small_forest(settings)
+    plan = core.prepare(items(), settings, prototypes=protos)
+    cal = plan.calibration
+    assert cal["instances_traced"] and plan.forest is not None
+    assert {"sphere", "ellipsoid", "raytrace"} <= set(cal["candidates"])
+    assert cal["candidates"]["raytrace"]["rmse"] < 0.06  # both see the same triangles
+    assert plan.tracer.instance_count == len(FOREST)
