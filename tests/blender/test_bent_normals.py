@@ -68,6 +68,23 @@ def test_world_and_tangent_attributes_lean_away_from_the_crown(tree):
     assert np.abs(turned[:, :2] - np.stack([-world[:, 1], world[:, 0]], 1)).max() < 0.05
 
 
+def test_tangent_space_on_a_curved_uv_map_keeps_what_no_frame_changes(tree):
+    """On the UV sphere (tangents turning with the surface, poles included), through bpy.ops:
+    the tangent-space z is the world bent normal's cosine with the normal, and its length is
+    the same, whatever the tangent frame."""
+    leaves = tree["leaves"]
+    run_bake(bpy.context, ["Leaves"], opts(bent_normals="WORLD", bent_normals_name="BentW"))
+    r = bpy.ops.canopy_ao.bake(objects="Leaves", method="ellipsoid", tau=2.0,
+                               use_world_distance=False, distance=0.0, samples=256,
+                               show_proxies=False, bent_normals='TANGENT')
+    assert r == {'FINISHED'}
+    world, tangent = _decoded(leaves, "BentW"), _decoded(leaves, "CanopyBentNormal")
+    n = np.array([v.normal for v in leaves.data.vertices])
+    assert np.abs(tangent[:, 2] - np.einsum("ij,ij->i", world, n)).max() < 2e-3
+    assert np.allclose(np.linalg.norm(tangent, axis=1), 1.0, atol=2e-3)
+    assert np.abs(tangent[:, :2]).max() > 0.3  # the frames do turn: not all along z
+
+
 def test_texel_image_holds_the_encoded_bent_normals(tree):
     _job, rep = run_bake(bpy.context, ["Ground"], opts(
         mode='TEXEL', resolution=32, bent_normals="TANGENT", image_dir=tree["image_dir"]))
