@@ -6,21 +6,11 @@ import bpy
 import numpy as np
 import pytest
 
-import helpers_materials as H
 from canopy_ao import _core
 from canopy_ao.blender import properties
 from canopy_ao.blender.job import run_bake
 from canopy_ao.core.native import CanopyAOError
-
-
-@pytest.fixture
-def tree(tmp_path):
-    """A UV-mapped ground plane (Ground, u along x, v along y) under a sphere of leaves."""
-    H.empty_scene()
-    ground = H.add_plane(size=6.0, subdivisions=11, name="Ground")
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12, radius=1.2,
-                                         location=(0, 0, 1.6))
-    return H.leaves_over_ground(ground, bpy.context.object, tmp_path)
+from test_maps import tree  # noqa: F401 (the fixture: a UV-mapped ground under a leaf sphere)
 
 
 def opts(**kw):

@@ -25,7 +25,7 @@ import numpy as np
 
 from . import lighting
 from .native import CanopyAOError
-from .scene import Plan, SceneItem
+from .scene import Plan, SceneItem, own_primitives
 
 
 def shell_depth(shells, points) -> np.ndarray:
@@ -92,12 +92,7 @@ def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
         raise CanopyAOError("bent normals need the ray tracer (maps.ensure_tracer)")
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
-    if vertices is not None:
-        own = {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
-    elif triangles is not None:
-        own = {"triangle_ids": np.asarray(triangles, np.int32)}
-    else:
-        own = None
+    own = own_primitives(item, vertices, triangles)
     d = plan.settings.distance
     _ao, bent = plan.tracer.ao(p, n, samples=int(plan.settings.samples),
                                distance=float(d) if d > 0 else math.inf,
