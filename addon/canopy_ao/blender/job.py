@@ -105,13 +105,14 @@ class BakeJob:
         # else is a bug and keeps its traceback.
         self.plan = core.prepare(self.items, self.settings)
         t0 = self._lap("prepare (fit, calibrate)", t0)
-        if self.opts["bent_normals"] != "OFF":
-            maps.ensure_tracer(self.plan, self.items)  # rays, whichever rung lit the AO
         if self.prototypes:
             skip = {t.item.name for t in self.targets}
             core.attach_forest(self.plan, self.prototypes.bake(self.settings, skip=skip))
             self.lines.extend(self.prototypes.lines())
-            self._lap("instances", t0)
+            t0 = self._lap("instances", t0)
+        if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
+            maps.ensure_tracer(self.plan, self.items)
+            self._lap("tracer (bent normals)", t0)
 
     def step(self):
         """Evaluate the next chunk of receivers. Returns the line to report when it completes

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from . import lighting
-from .native import CanopyAOError
+from .native import CanopyAOError, _core
 from .scene import Plan, SceneItem, own_primitives
 
 
@@ -71,7 +71,11 @@ def thickness(plan: Plan, item: SceneItem, positions, vertices=None) -> np.ndarr
 def ensure_tracer(plan: Plan, items) -> None:
     """Build the plan's ray tracer over items (the bake's whole items, as prepare() does) when
     the chosen rung did not need one: bent normals are ray-traced whichever rung lit the AO.
-    Raises CanopyAOError when the scene has no triangles."""
+    Raises CanopyAOError when the scene has no triangles or the native module predates bent
+    normals."""
+    if "bent_normals" not in (_core.RayTracer.ao.__doc__ or ""):
+        raise CanopyAOError("the native module was built before bent normals; rebuild it "
+                            "(scripts/build.sh)")
     if plan.tracer is None:
         plan.tracer = lighting.build_tracer(items, plan.tracer_bases)
         plan.notes.append("bent normals: built the ray tracer (the AO's method traces none)")
