@@ -111,3 +111,26 @@ def test_refusals_before_anything_is_written(tree):
     # World space needs no UVs.
     run_bake(bpy.context, ["Ground"], opts(bent_normals="WORLD"))
     assert "CanopyBentNormal" in ground.data.attributes
+
+
+def test_command_line_bakes_and_refuses_bent_normals(tree, capsys, tmp_path):
+    """--bent-normals through the CLI: tangent space written with its report entry; without a
+    UV map, exit code 1 with the reason, nothing written."""
+    import json
+    from canopy_ao import cli
+    report = tmp_path / "r.json"
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "sphere", "--tau", "2", "--no-proxies",
+                  "--bent-normals", "tangent", "--samples", "32", "--report", str(report)])
+    assert exc.value.code == 0, capsys.readouterr().err
+    rep = json.loads(report.read_text())
+    assert rep["objects"]["Ground"]["bent_normals"]["space"] == "tangent"
+    assert "CanopyBentNormal" in tree["ground"].data.attributes
+    leaves = tree["leaves"]
+    leaves.data.uv_layers.remove(leaves.data.uv_layers[0])
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Leaves", "--method", "sphere", "--tau", "2", "--no-proxies",
+                  "--bent-normals", "tangent"])
+    assert exc.value.code == 1 and "no UV map" in capsys.readouterr().err
+    assert "CanopyBentNormal" not in leaves.data.attributes
+    assert "CanopyAO" not in leaves.data.attributes
