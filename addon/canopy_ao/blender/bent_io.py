@@ -77,7 +77,7 @@ def texel_frames(obj, depsgraph, rx):
     a texel the conservative raster added outside it takes the nearest edge's blend)."""
     tan, sign, _v, corners = _corner_tangents(obj, depsgraph, rx.uv_map)
     uvs, _p, _n = texel_io.gather_corner_triangles(obj, depsgraph, rx.uv_map)
-    tri = np.asarray(rx.triangles, np.int64)
+    tri = np.asarray(rx.triangles if rx.triangles is not None else [], np.int64)
     if rx.triangles is None or len(corners) != len(uvs) or (len(tri) and
                                                              tri.max() * 3 >= len(corners)):
         raise CanopyAOError(f"Object '{obj.name}': its texels' triangles are unknown; bake "
