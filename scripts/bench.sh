@@ -52,13 +52,16 @@ if grep -q ",cycles," bench/out/results.csv; then
 fi
 echo "== stability"
 $py bench/stability.py
+echo "== bent normals (rays at 16/64, the grid, the normal against 256 rays)"
+$py bench/bent_normals.py "${quick[@]}" | tee bench/out/bent_normals.md
 if ((scaling)); then
   echo "== scaling"
   if ((full)); then $py bench/scaling.py --max 1e7; else $py bench/scaling.py --quick; fi
 fi
 
 mkdir -p bench/results
-cp bench/out/chart.png bench/out/summary.md bench/out/stability.md bench/results/
+cp bench/out/chart.png bench/out/summary.md bench/out/stability.md bench/out/bent_normals.md \
+   bench/results/
 for f in bench/out/chart_cycles.png bench/out/summary_cycles.md bench/out/scaling.png \
          bench/out/scaling.csv bench/out/results.csv bench/out/strip_*.png; do
   [[ -e $f ]] && cp "$f" bench/results/

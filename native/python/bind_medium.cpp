@@ -203,25 +203,41 @@ void bind_medium(py::module_& m) {
           [](const DensityGrid& self, const py::array& points, const py::array& normals,
              const py::object& directions, double distance, const py::object& seed,
              double sigma_scale,
-             double self_skip, double start) {
+             double self_skip, double start, bool bent_normals) -> py::object {
             const DensityAOOptions o =
                 grid_options(directions, distance, seed, sigma_scale, self_skip, start);
-            return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
-              self.ao(p, n, o, out);
-            }, "points");
+            if (!bent_normals) {
+              return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
+                self.ao(p, n, o, out);
+              }, "points");
+            }
+            const Receivers r = receivers_arg(points, normals, "points");
+            py::array_t<float> ao = new_floats(r.positions.size);
+            py::array_t<float> bent({static_cast<py::ssize_t>(r.positions.size),
+                                     static_cast<py::ssize_t>(3)});
+            float* dst = ao.mutable_data();
+            float* bent_dst = bent.mutable_data();
+            {
+              py::gil_scoped_release release;
+              self.ao(r.positions, r.normals, o, dst, bent_dst);
+            }
+            return py::make_tuple(ao, bent);
           },
           py::arg("points"), py::arg("normals"), py::arg("directions") = 32,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("sigma_scale") = 1.0,
-          py::arg("self_skip") = 1.0, py::arg("start") = 0.0,
+          py::arg("self_skip") = 1.0, py::arg("start") = 0.0, py::arg("bent_normals") = false,
           "ao(points, normals, directions=32, distance=inf, seed=0, sigma_scale=1.0, "
-          "self_skip=1.0, start=0.0) -> float32 (N,)\n\n"
+          "self_skip=1.0, start=0.0, bent_normals=False) -> float32 (N,), or (ao, bent) with "
+          "bent_normals\n\n"
           "Mean over `directions` cosine-weighted directions of exp(-sigma_scale * integral of "
           "sigma) along each ray, cut at `distance` (Cycles' AO distance). The direction set "
           "is rotated per point from (row index, seed): deterministic, thread-count "
           "independent. self_skip: voxels at the start of each ray read from a coarser level, "
           "so a receiver on a leaf is not shaded by its own leaf (0 = off). start: integrate "
           "only beyond this distance (scene units; see ao_near_far). A zero normal gives 1. "
-          "Releases the GIL.")
+          "bent_normals=True also returns float32 (N, 3): the transmittance-weighted mean "
+          "direction, normalised (the grid's estimate of the ray tracer's bent normal; all "
+          "blocked: the unit normal; zero normal: (0, 0, 0)). Releases the GIL.")
       .def(
           "optical_depth",
           [](const DensityGrid& self, const py::object& origin, const py::object& direction,

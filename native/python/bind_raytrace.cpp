@@ -108,10 +108,10 @@ const std::int32_t* ids_arg(const py::object& ids, const char* name, std::size_t
   return static_cast<const std::int32_t*>(a.data());
 }
 
-py::array_t<float> trace(const RayTracer& tracer, const py::array& points,
-                         const py::array& normals, const RayTraceOptions& o,
-                         const py::object& vertex_ids = py::none(),
-                         const py::object& triangle_ids = py::none()) {
+/// The AO (N,), or (AO, bent normals float32 (N, 3)) when `bent` (raytrace.h, "Bent normals").
+py::object trace(const RayTracer& tracer, const py::array& points, const py::array& normals,
+                 const RayTraceOptions& o, const py::object& vertex_ids = py::none(),
+                 const py::object& triangle_ids = py::none(), bool bent = false) {
   const Receivers r = receivers_arg(points, normals, "points");
   const PointsView p = r.positions, n = r.normals;
   OwnPrimitives own;
@@ -119,11 +119,18 @@ py::array_t<float> trace(const RayTracer& tracer, const py::array& points,
   own.triangle_ids = ids_arg(triangle_ids, "triangle_ids", p.size);
   py::array_t<float> out = new_floats(p.size);
   float* dst = out.mutable_data();
+  py::array_t<float> dirs;
+  float* bent_dst = nullptr;
+  if (bent) {
+    dirs = py::array_t<float>({static_cast<py::ssize_t>(p.size), static_cast<py::ssize_t>(3)});
+    bent_dst = dirs.mutable_data();
+  }
   {
     py::gil_scoped_release release;
-    tracer.ao(p, n, own, o, dst);
+    tracer.ao(p, n, own, o, dst, bent_dst);
   }
-  return out;
+  if (bent) return py::make_tuple(out, dirs);
+  return std::move(out);
 }
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -160,17 +167,18 @@ void bind_raytrace(py::module_& m) {
           [](const RayTracer& self, const py::array& points, const py::array& normals,
              const py::object& samples, double distance, const py::object& seed,
              double offset, const py::object& vertex_ids, const py::object& triangle_ids,
-             const std::string& sampling) {
+             const std::string& sampling, bool bent_normals) {
             RayTraceOptions o = options_arg(samples, distance, seed, offset);
             o.sampling = sampling_arg(sampling);
-            return trace(self, points, normals, o, vertex_ids, triangle_ids);
+            return trace(self, points, normals, o, vertex_ids, triangle_ids, bent_normals);
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("offset") = -1.0,
           py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
-          py::arg("sampling") = "lattice",
+          py::arg("sampling") = "lattice", py::arg("bent_normals") = false,
           "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
-          "triangle_ids=None, sampling='lattice') -> float32 (N,)\n\n"
+          "triangle_ids=None, sampling='lattice', bent_normals=False) -> float32 (N,), or "
+          "(ao, bent) with bent_normals\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
           "hemisphere of its normal (float32 (N, 3), normalised here; a zero normal gives 1) "
@@ -187,7 +195,11 @@ void bind_raytrace(py::module_& m) {
           "no normal offset unless offset >= 0 is given), so a surface it touches (the ground "
           "under a blade root) still occludes. Ids outside their range: ValueError.\n\n"
           "sampling: 'lattice' (a Fibonacci lattice rotated per point), 'sobol' (Owen-scrambled "
-          "Sobol' per point) or 'independent' (i.i.d. rays, the baseline). Releases the GIL.")
+          "Sobol' per point) or 'independent' (i.i.d. rays, the baseline).\n\n"
+          "bent_normals=True also returns each point's bent normal, float32 (N, 3), world "
+          "space: the normalised sum of its unblocked rays' directions (the cosine-weighted "
+          "mean unoccluded direction), from the same rays as the AO. Every ray blocked: the "
+          "unit normal; a zero normal: (0, 0, 0). Releases the GIL.")
       .def_property_readonly("vertex_count", &RayTracer::vertex_count)
       .def_property_readonly("triangle_count", &RayTracer::triangle_count)
       .def_property_readonly("instance_count", &RayTracer::instance_count)

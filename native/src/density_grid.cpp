@@ -322,6 +322,11 @@ float DensityGrid::optical_depth(Vec3 origin, Vec3 dir, float t_max, float self_
 
 void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOptions& opt,
                      float* out) const {
+  ao(positions, normals, opt, out, nullptr);
+}
+
+void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOptions& opt,
+                     float* out, float* bent) const {
   if (opt.directions < 1 || opt.directions > 4096) {
     throw std::invalid_argument("directions must be in [1, 4096], got " +
                                 std::to_string(opt.directions));
@@ -345,6 +350,12 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
   require_finite_points(normals, "normals");
   if (empty() || opt.sigma_scale == 0) {
     std::fill(out, out + positions.size, 1.0f);
+    for (std::size_t i = 0; bent && i < positions.size; ++i) {  // nothing blocks: the normal
+      const Vec3 n = normalize(normals[i]);
+      bent[3 * i] = n.x;
+      bent[3 * i + 1] = n.y;
+      bent[3 * i + 2] = n.z;
+    }
     return;
   }
   const int k = opt.directions;
@@ -359,6 +370,7 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
       const Vec3 n = normalize(normals[i]);
       if (dot(n, n) == 0) {  // no hemisphere: open, like the ray-traced reference
         out[i] = 1.0f;
+        if (bent) bent[3 * i] = bent[3 * i + 1] = bent[3 * i + 2] = 0.0f;
         continue;
       }
       Vec3 t1, t2;
@@ -366,13 +378,23 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
       const float psi = kTwoPi * static_cast<float>(mix(seed ^ i) >> 40) * (1.0f / (1 << 24));
       const float cs = std::cos(psi), sn = std::sin(psi);
       float sum = 0;
+      Vec3 dir_sum{0.0f, 0.0f, 0.0f};  // Σ transmittance · ω (bent normal)
       for (const Vec3& l : dirs) {
         const float lx = cs * l.x - sn * l.y, ly = sn * l.x + cs * l.y;
         const Vec3 d = t1 * lx + t2 * ly + n * l.z;
-        sum += std::exp(-opt.sigma_scale *
-                        march(x, d, opt.start, opt.distance, skip_len, cone_tan, limit));
+        const float tr = std::exp(-opt.sigma_scale *
+                                  march(x, d, opt.start, opt.distance, skip_len, cone_tan, limit));
+        sum += tr;
+        dir_sum = dir_sum + d * tr;
       }
       out[i] = std::clamp(sum / k, 0.0f, 1.0f);
+      if (bent) {
+        const float len = length(dir_sum);
+        const Vec3 b = len > 0.0f ? dir_sum / len : n;
+        bent[3 * i] = b.x;
+        bent[3 * i + 1] = b.y;
+        bent[3 * i + 2] = b.z;
+      }
     }
   });
 }

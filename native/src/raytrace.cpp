@@ -317,6 +317,45 @@ void check_mesh(PointsView vertices, const std::int32_t* triangles, std::size_t 
   }
 }
 
+// === Bent normals (raytrace.h, "Bent normals")
+/// Adds each unblocked ray's direction to its point's running sum (3 floats per point, indexed
+/// by owner). Rays are summed in their sample order, so the sum is the same however the points
+/// are split into blocks and streams.
+void accumulate_open(const RTCRay* rays, const std::uint32_t* owner, std::size_t count,
+                     float* sums) {
+  for (std::size_t r = 0; r < count; ++r) {
+    if (!(rays[r].tfar >= 0.0f)) continue;  // occluded: Embree set tfar to -inf
+    float* s = sums + 3 * static_cast<std::size_t>(owner[r]);
+    s[0] += rays[r].dir_x;
+    s[1] += rays[r].dir_y;
+    s[2] += rays[r].dir_z;
+  }
+}
+
+/// bent[3i..3i+3) for points [begin, end): the normalised sum (sums indexed from begin; null =
+/// no ray was blocked or traced, the normal stands), the unit normal where every ray was
+/// blocked, (0, 0, 0) for a zero normal.
+void finish_bent(PointsView normals, std::size_t begin, std::size_t end, const float* sums,
+                 float* bent) {
+  for (std::size_t i = begin; i < end; ++i) {
+    const Vec3 raw = normals[i];
+    const float big = std::max(std::fabs(raw.x), std::max(std::fabs(raw.y), std::fabs(raw.z)));
+    Vec3 b{0.0f, 0.0f, 0.0f};
+    if (big > 0.0f) {
+      b = normalize(raw / big);
+      if (sums) {
+        const float* s = sums + 3 * (i - begin);
+        const Vec3 v{s[0], s[1], s[2]};
+        const float len = length(v);
+        if (len > 0.0f) b = v / len;
+      }
+    }
+    bent[3 * i] = b.x;
+    bent[3 * i + 1] = b.y;
+    bent[3 * i + 2] = b.z;
+  }
+}
+
 }  // namespace
 
 // === Impl
@@ -553,6 +592,11 @@ void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions&
 
 void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& own,
                    const RayTraceOptions& options, float* out) const {
+  ao(points, normals, own, options, out, nullptr);
+}
+
+void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& own,
+                   const RayTraceOptions& options, float* out, float* bent) const {
   const Impl& m = *impl_;
   if (points.size != normals.size) {
     std::ostringstream s;
@@ -583,6 +627,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   const std::size_t n = points.size;
   if (m.triangle_count == 0 && m.instance_count == 0) {
     std::fill(out, out + n, 1.0f);
+    if (bent) finish_bent(normals, 0, n, nullptr, bent);  // nothing blocks: the normal
     return;
   }
 
@@ -601,6 +646,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     alignas(64) RTCRay rays[kStream];
     std::uint32_t owner[kStream];
     std::vector<int> open(end - begin, 0);
+    std::vector<float> open_sum(bent ? 3 * (end - begin) : 0, 0.0f);  // Σ unblocked ω
     std::vector<float> xs(samples), ys(samples), zs(samples);
     std::size_t filled = 0;
     TraceContext context;
@@ -615,6 +661,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         // Embree sets tfar to -inf on an occluded ray.
         open[owner[r]] += rays[r].tfar >= 0.0f ? 1 : 0;
       }
+      if (bent) accumulate_open(rays, owner, filled, open_sum.data());
       filled = 0;
     };
 
@@ -670,6 +717,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     for (std::size_t i = begin; i < end; ++i) {
       out[i] = std::min(1.0f, static_cast<float>(open[i - begin]) * inv_samples);
     }
+    if (bent) finish_bent(normals, begin, end, open_sum.data(), bent);
   });
   m.check("rtcOccluded");
 }

@@ -149,7 +149,8 @@ def scene_items(context, depsgraph, targets, opts, timings):
         declared = declared_role(obj)
         if declared is not None and declared[0] == "IGNORE":
             continue
-        tris_needed = declared is None or ladder.triangles_needed(
+        bent = opts.get("bent_normals", "OFF") != "OFF"  # ray-traced: every triangle counts
+        tris_needed = declared is None or bent or ladder.triangles_needed(
             opts["method"], opts["tau"], declared[0])
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
@@ -158,7 +159,8 @@ def scene_items(context, depsgraph, targets, opts, timings):
             triangles=tris_needed, timings=timings)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
-        if declared is None and not ladder.triangles_needed(opts["method"], opts["tau"], role):
+        if declared is None and not bent and not ladder.triangles_needed(opts["method"],
+                                                                         opts["tau"], role):
             tris = tris[:0]  # not part of this bake (kept only for the guess)
         timings["roles"] = timings.get("roles", 0.0) + time.perf_counter() - t0
         if role == "IGNORE":

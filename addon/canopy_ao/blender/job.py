@@ -7,7 +7,7 @@ import time
 import bpy
 import numpy as np
 
-from . import cycles_check, gather, instances, live, materials, mesh_io, tiles_io
+from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io, tiles_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget
 from .. import core
@@ -53,6 +53,8 @@ class BakeJob:
                                                             opts["aov_name"]):
             raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
                                 "also the AO's attribute or AOV; give it a name of its own")
+        if opts["bent_normals"] != "OFF":
+            _check_bent_request(opts)
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -60,7 +62,8 @@ class BakeJob:
                                                                 opts, self.timings)
         # Every target's receivers, read now: vertices, or texels rasterised from its UVs.
         t0 = time.perf_counter()
-        self.targets = [VertexTarget(it, self.objects[it.name], opts) if opts["mode"] == 'VERTEX'
+        self.targets = [VertexTarget(it, self.objects[it.name], opts, depsgraph)
+                        if opts["mode"] == 'VERTEX'
                         else TexelTarget(it, self.objects[it.name], opts, depsgraph)
                         for it in self.items if it.name in target_names]
         if not self.targets:
@@ -108,7 +111,10 @@ class BakeJob:
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
         self.plan = core.prepare(self.items, self.settings, prototypes=protos)
-        self._lap("prepare (fit, calibrate)", t0)
+        t0 = self._lap("prepare (fit, calibrate)", t0)
+        if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
+            maps.ensure_tracer(self.plan, self.items)
+            self._lap("tracer (bent normals)", t0)
 
     def step(self):
         """Evaluate the next chunk of receivers. Returns the line to report when it completes
@@ -130,6 +136,8 @@ class BakeJob:
                 t.thickness = np.zeros(t.count, np.float32)
             t.thickness[a:b] = maps.thickness(self.plan, t.item, t.positions[a:b],
                                               slice(a, b) if t.kind == "vertex" else None)
+        if self.opts["bent_normals"] != "OFF":
+            self._bent_step(t, a, b)
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
@@ -140,6 +148,18 @@ class BakeJob:
         return (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method "
                 f"{r.method}, {t.count} {t.kind}{'s' if t.count != 1 else ''}, "
                 f"{r.seconds:.3f} s")
+
+    def _bent_step(self, t, a, b):
+        """Bent normals of receivers a..b of target t, in the space asked for."""
+        if t.bent is None:
+            t.bent = np.zeros((t.count, 3), np.float32)
+        world = maps.bent_normals(self.plan, t.item, t.positions[a:b], t.normals[a:b],
+                                  vertices=slice(a, b) if t.kind == "vertex" else None,
+                                  triangles=t.triangles[a:b] if t.triangles is not None
+                                  else None)
+        frames = (t.frames[0][a:b], t.frames[1][a:b]) if t.frames is not None else None
+        t.bent[a:b] = bent_io.in_space(world, t.normals[a:b], self.opts["bent_normals"],
+                                       frames)
 
     def run(self):
         """prepare() and every step(), blocking."""
@@ -223,6 +243,8 @@ class BakeJob:
             e["vertices"] = len(t.item.positions)
             if t.thickness is not None:
                 e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
+            if t.bent is not None:
+                e["bent_normals"] = _bent_summary(t, o["bent_normals"])
             if t.kind == "texel":
                 e["texel"] = t.report()
                 rep["notes"].extend(t.stats.get("warnings", []))
@@ -258,6 +280,29 @@ class BakeJob:
             raise
         except ValueError as exc:  # the check's refusals (an empty material slot, ...)
             raise CanopyAOError(f"Cycles check: {exc}") from exc
+
+
+def _check_bent_request(opts):
+    """Refuse, before any work, bent normals the bake cannot give as asked."""
+    name = opts["bent_normals_name"]
+    if name in ("", opts["attribute"], opts["aov_name"]) or (
+            opts["thickness"] and name == opts["thickness_name"]):
+        raise CanopyAOError(f"the bent normals' name '{name}' is empty or also the AO's or the "
+                            "thickness's attribute or AOV; give it a name of its own")
+    if opts["live"]:
+        raise CanopyAOError("bent normals are baked once, not re-evaluated live; turn off "
+                            "Live or Bent Normals")
+
+
+def _bent_summary(t, space):
+    """The report's bent-normal figures of target t: space and the mean angle between the
+    bent normal and the receiver's normal (degrees), over receivers with a normal."""
+    b = t.bent.astype(np.float64)
+    cos = b[:, 2] if space == "TANGENT" else np.einsum("ij,ij->i", b, t.normals)
+    ok = np.einsum("ij,ij->i", b, b) > 0.5
+    tilt = np.degrees(np.arccos(np.clip(cos[ok], -1.0, 1.0)))
+    return {"space": space.lower(), "mean_tilt_degrees": float(tilt.mean()) if ok.any()
+            else None}
 
 
 def run_bake(context, object_names, opts):

@@ -75,6 +75,11 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         sub = row.row(align=True)
         sub.enabled = s.thickness
         sub.prop(s, "thickness_name", text="")
+        row = col.row(align=True)
+        row.prop(s, "bent_normals")
+        sub = row.row(align=True)
+        sub.enabled = s.bent_normals != 'OFF'
+        sub.prop(s, "bent_normals_name", text="")
         col.separator()
         col.prop(s, "show_proxies")
         col.prop(s, "wire_material")
@@ -103,6 +108,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
         "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
+        "bent_normals", "bent_normals_name",
         "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples",
         "live"}
 

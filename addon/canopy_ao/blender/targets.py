@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 
 from ..core.native import CanopyAOError
-from . import maps_io, materials, mesh_io, texel_io, tiles_io
+from . import bent_io, maps_io, materials, mesh_io, texel_io, tiles_io
 
 
 class Target:
@@ -18,6 +18,8 @@ class Target:
         self.triangles = None  # texels: each one's triangle in the item's mesh (own rays)
         self.ao = np.ones(len(positions), np.float32)
         self.thickness = None  # float32 like ao when the bake also makes the thickness
+        self.bent = None  # float32 (N, 3) when the bake also makes bent normals
+        self.frames = None  # (tangents, signs) per receiver for tangent-space bent normals
         self.seconds = 0.0
         self.stats = {}
 
@@ -41,7 +43,7 @@ class VertexTarget(Target):
 
     kind = "vertex"
 
-    def __init__(self, item, obj, opts):
+    def __init__(self, item, obj, opts, depsgraph=None):
         super().__init__(item, obj, item.positions, item.normals)
         if opts["channel"] != "RGBA":  # one channel: any color attribute, when asked
             why = maps_io.check_channel_attribute(obj, opts["attribute"])
@@ -49,8 +51,13 @@ class VertexTarget(Target):
             why = mesh_io.check_attribute(obj, opts["attribute"], opts["overwrite"])
         if not why and opts["thickness"]:
             why = mesh_io.check_attribute(obj, opts["thickness_name"], opts["overwrite"])
+        if not why and opts["bent_normals"] != "OFF":
+            why = mesh_io.check_attribute(obj, opts["bent_normals_name"], opts["overwrite"])
         if why:
             raise mesh_io.MeshIOError(why + " (nothing was changed)")
+        if opts["bent_normals"] == "TANGENT":
+            self.frames = bent_io.vertex_frames(obj, depsgraph, opts["uv_map"] or None,
+                                                self.count)
 
     def write(self, txn, opts):
         txn.attribute(self.obj, opts["attribute"])
@@ -64,6 +71,10 @@ class VertexTarget(Target):
             txn.attribute(self.obj, opts["thickness_name"])
             mesh_io.write_ao_attribute(self.obj, opts["thickness_name"], self.thickness,
                                        overwrite=opts["overwrite"])
+        if self.bent is not None:
+            txn.attribute(self.obj, opts["bent_normals_name"])
+            bent_io.write_attribute(self.obj, opts["bent_normals_name"], self.bent,
+                                    overwrite=opts["overwrite"])
         if opts["wire_material"]:
             wire_undo(txn, self.obj)
             if opts["channel"] == "RGBA":  # a packed channel is for engines, not multiplied
@@ -82,6 +93,10 @@ class TexelTarget(Target):
         if opts["channel"] != "RGBA" and (opts["udim"] or opts["atlas"]):
             raise CanopyAOError("a channel is packed into one image of one object's 0–1 tile; "
                                 "turn off UDIM Tiles and Atlas to pack (nothing was changed)")
+        if opts["bent_normals"] != "OFF" and (opts["udim"] or opts["atlas"]):
+            raise CanopyAOError("bent normals per texel go into one image of one object's 0–1 "
+                                "tile; turn off UDIM Tiles and Atlas, or bake them per vertex "
+                                "(nothing was changed)")
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
                                      opts["resolution"], udim=opts["udim"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
@@ -90,6 +105,8 @@ class TexelTarget(Target):
         tris = self.rx.triangles
         if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
             self.triangles = tris
+        if opts["bent_normals"] == "TANGENT":
+            self.frames = bent_io.texel_frames(obj, depsgraph, self.rx)
         if opts["channel"] != "RGBA":
             self.pack = bpy.data.images.get(opts["pack_image"])
             if self.pack is None:
@@ -126,6 +143,14 @@ class TexelTarget(Target):
                                                    suffix=opts["thickness_name"],
                                                    background=0.0)
             self.stats["thickness_path"] = tstats["path"]
+        if self.bent is not None:
+            _img, path, notes = bent_io.write_image(self.obj, self.rx, self.bent,
+                                                    opts["bent_normals"],
+                                                    opts["image_dir"] or None, txn,
+                                                    opts["bent_normals_name"])
+            self.stats["bent_normals_path"] = path
+            said = self.stats.setdefault("notes", [])
+            said += [n for n in notes if n not in said]  # the AO's image may have said it
         self.wire(txn, opts, image, timage)
 
     def wire(self, txn, opts, image, timage):

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import cost, ladder, lighting, native, proxies, regression, trees
 from .native import CanopyAOError, refusals_are_user_errors
-from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, split_trees
+from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, own_primitives, split_trees
 from .ladder import DEFAULT_TAU
 from .settings import BakeSettings, validate
 
@@ -43,7 +43,6 @@ def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
 
-    # Grass has no proxies to calibrate, but auto still weighs its law against rays.
     if prototypes:
         _attach(plan, prototypes, None)
     # Grass has no proxies to calibrate, nor has a ground under instanced trees alone, but
@@ -131,12 +130,7 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
         return np.ones(len(p), np.float32)
-    if vertices is not None:
-        own = {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
-    elif triangles is not None:
-        own = {"triangle_ids": np.asarray(triangles, np.int32)}
-    else:
-        own = None
+    own = own_primitives(item, vertices, triangles)
     if item.tree_labels is None or len(item.tree_names) <= 1:
         ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
                                       plan.taus(), own)

@@ -1,5 +1,5 @@
-"""Maps beyond AO computed from the fitted proxies (no bpy): the canopy thickness
-(docs/DESIGN.md, 'Maps').
+"""Maps beyond AO (no bpy): the canopy thickness from the fitted proxies, and bent normals
+from the ray tracer (docs/DESIGN.md, 'Maps' and 'Bent normals').
 
 Thickness of a point x in its tree's canopy, from the tree's fitted crown ellipsoid (the
 minimum-volume enclosing ellipsoid of its canopy points, the ellipsoid rung's shell; the same
@@ -19,9 +19,13 @@ point, and the crown's centre, where shells meet, would read as shallow.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .scene import Plan, SceneItem
+from . import lighting
+from .native import CanopyAOError, _core
+from .scene import Plan, SceneItem, own_primitives
 
 
 def shell_depth(shells, points) -> np.ndarray:
@@ -60,3 +64,73 @@ def thickness(plan: Plan, item: SceneItem, positions, vertices=None) -> np.ndarr
         if len(sel):
             out[sel] = shell_depth(crowns.get(tree) or every, p[sel])
     return out
+
+
+# === Bent normals (docs/DESIGN.md, 'Bent normals')
+
+def ensure_tracer(plan: Plan, items) -> None:
+    """Build the plan's ray tracer over items (the bake's whole items, as prepare() does) when
+    the chosen rung did not need one: bent normals are ray-traced whichever rung lit the AO.
+    Raises CanopyAOError when the scene has no triangles or the native module predates bent
+    normals."""
+    if "bent_normals" not in (_core.RayTracer.ao.__doc__ or ""):
+        raise CanopyAOError("the native module was built before bent normals; rebuild it "
+                            "(scripts/build.sh)")
+    protos = plan.forest.prototypes if plan.forest is not None else None
+    if plan.tracer is None:
+        plan.tracer = lighting.build_tracer(items, plan.tracer_bases, protos)
+        plan.notes.append("bent normals: built the ray tracer (the AO's method traces none)")
+    if protos and not lighting.traces_instances(plan) and not any(
+            n.startswith("bent normals: rays do not") for n in plan.notes):
+        plan.notes.append("bent normals: rays do not see the instanced trees (the ray tracer "
+                          "has only the scene's own triangles)")
+
+
+def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
+                 triangles=None) -> np.ndarray:
+    """World-space bent normals float32 (N, 3) of receivers on item (as
+    bake.evaluate_receivers: its vertices, a chunk of them, or texels with their triangles):
+    the cosine-weighted mean unoccluded direction of settings.samples rays per receiver,
+    normalised, against the plan's tracer (ensure_tracer). Every ray blocked: the unit normal;
+    a zero normal: (0, 0, 0) (raytrace.h, "Bent normals")."""
+    if plan.tracer is None:
+        raise CanopyAOError("bent normals need the ray tracer (maps.ensure_tracer)")
+    p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
+    n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
+    own = own_primitives(item, vertices, triangles)
+    d = plan.settings.distance
+    _ao, bent = plan.tracer.ao(p, n, samples=int(plan.settings.samples),
+                               distance=float(d) if d > 0 else math.inf,
+                               seed=int(plan.settings.seed), bent_normals=True,
+                               **(lighting.own_ids(plan, item.name, own) or {}))
+    return np.asarray(bent, np.float32)
+
+
+def to_tangent(bent, normals, tangents, signs) -> np.ndarray:
+    """Bent normals float (N, 3) in the tangent frame (T, B, N) of each receiver: N its unit
+    normal, T its tangent made orthogonal to N (Gram–Schmidt), B = sign · N × T (Blender's
+    and MikkTSpace's bitangent), so a bent normal equal to the normal is (0, 0, 1). A tangent
+    parallel to N or zero (no UV gradient there) is replaced by any unit vector orthogonal to
+    N. Returns float32 (N, 3); (0, 0, 0) stays (0, 0, 0)."""
+    b = np.asarray(bent, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    t = np.asarray(tangents, np.float64).reshape(-1, 3)
+    t = t - n * np.einsum("ij,ij->i", t, n)[:, None]
+    tl = np.linalg.norm(t, axis=1)
+    bad = ~(tl > 1e-6)
+    if bad.any():  # any vector orthogonal to n: n × (the axis least aligned with it)
+        axis = np.eye(3)[np.argmin(np.abs(n[bad]), axis=1)]
+        t[bad] = np.cross(n[bad], axis)
+        tl[bad] = np.linalg.norm(t[bad], axis=1)
+    t /= tl[:, None]
+    s = np.where(np.asarray(signs, np.float64).reshape(-1) < 0, -1.0, 1.0)
+    bt = s[:, None] * np.cross(n, t)
+    return np.stack([np.einsum("ij,ij->i", b, t), np.einsum("ij,ij->i", b, bt),
+                     np.einsum("ij,ij->i", b, n)], axis=1).astype(np.float32)
+
+
+def encode(bent) -> np.ndarray:
+    """Unit vectors float (N, 3) as colours 0.5 + 0.5 · v in [0, 1] (a normal map's
+    encoding: (0, 0, 1) is (0.5, 0.5, 1)), float32 (N, 3)."""
+    return np.clip(0.5 + 0.5 * np.asarray(bent, np.float32), 0.0, 1.0)

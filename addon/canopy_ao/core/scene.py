@@ -121,3 +121,15 @@ def parts(item: SceneItem):
 def split_trees(items):
     """Every item, those holding several trees replaced by one part per tree."""
     return [part for it in items for part, _idx in parts(it)]
+
+
+def own_primitives(item: SceneItem, vertices=None, triangles=None):
+    """What receivers on item lie on, for the ray tracer (lighting.own_ids shifts it into the
+    tracer's mesh): {"vertex_ids": ...} for its vertices ``vertices`` (an index array or
+    slice), else {"triangle_ids": ...} for texels on ``triangles`` (int32 (N,), -1 =
+    unknown), else None."""
+    if vertices is not None:
+        return {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
+    if triangles is not None:
+        return {"triangle_ids": np.asarray(triangles, np.int32)}
+    return None

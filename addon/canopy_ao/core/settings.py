@@ -197,6 +197,18 @@ OPTIONS = (
     Option("thickness_name", "str", "CanopyThickness", "Thickness Name",
            "The thickness's attribute (per vertex), image name suffix (per texel) and AOV",
            group="output"),
+    Option("bent_normals", "enum", "OFF", "Bent Normals",
+           "Also bake each point's bent normal, the cosine-weighted mean unoccluded direction "
+           "(ray-traced at Samples rays, whichever method lit the AO), encoded as colour "
+           "0.5 + 0.5·n into an attribute or RGB image: in world space, or in the tangent space "
+           "of the UV map (tangent, bitangent, normal as Blender's normal maps; needs UVs)",
+           group="output",
+           items=(("OFF", "Off", "No bent normals"),
+                  ("WORLD", "World", "World-space bent normals"),
+                  ("TANGENT", "Tangent", "Tangent-space bent normals (UV map's tangents)"))),
+    Option("bent_normals_name", "str", "CanopyBentNormal", "Bent Normals Name",
+           "The bent normals' attribute (per vertex) and image name suffix (per texel)",
+           group="output"),
     Option("uv_map", "str", "", "UV Map", "Texel mode: UV map (empty = the active one)",
            group="output", cli="--uv"),
     Option("resolution", "int", 1024, "Resolution", "Texel mode: image size in texels",

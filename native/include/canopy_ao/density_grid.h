@@ -82,6 +82,14 @@ class DensityGrid {
   /// non-finite input or bad options.
   void ao(PointsView positions, PointsView normals, const DensityAOOptions& options,
           float* out) const;
+  /// Same, and when `bent` is not null (3N floats) each receiver's bent-normal estimate
+  /// (docs/DESIGN.md, 'Bent normals'): the transmittance-weighted mean of its directions,
+  ///     B = normalize(Σ_k exp(−τ_k) ω_k),
+  /// the grid's stand-in for the ray tracer's mean unoccluded direction (raytrace.h, "Bent
+  /// normals"), with the same fallbacks: all transmittances 0 → the unit normal; zero normal →
+  /// (0, 0, 0).
+  void ao(PointsView positions, PointsView normals, const DensityAOOptions& options,
+          float* out, float* bent) const;
 
   /// ∫ σ dt along origin + t·dir (dir any non-zero length, normalised safely) for
   /// t ∈ [0, t_max], with the schedule above. Every loop is bounded by the grid's size, whatever

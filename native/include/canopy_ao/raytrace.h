@@ -58,6 +58,16 @@
 //  - samples < 1, distance ≤ 0 or NaN, offset NaN: std::invalid_argument;
 //  - a failure reported by Embree (out of memory, ...): canopy_ao::Error with Embree's message.
 //
+// Bent normals (docs/DESIGN.md, 'Bent normals'): on request, each point's cosine-weighted mean
+// unoccluded direction, normalised, in world space:
+//
+//     B(x, n) = normalize( ∫_hemisphere(n) V_D(x, ω) ω (ω·n) dω )
+//
+// estimated from the same cosine-weighted rays as the AO (the sum of the unblocked rays'
+// directions; the cosine weighting is in their distribution), so AO and bent normal are one
+// trace. Fallbacks: every ray blocked (no open direction) → the unit surface normal; zero-length
+// normal (no hemisphere) → (0, 0, 0); an empty scene → the unit normal (nothing blocks).
+//
 // Thread safety: a built RayTracer is immutable; ao() may be called from several threads at
 // once. Work inside one call runs on all cores (canopy_ao::parallel_for_blocks, capped by
 // set_max_threads); the BVH build honours the same cap.
@@ -177,6 +187,10 @@ class RayTracer {
   /// Same, skipping each receiver's own primitives (OwnPrimitives: N entries per given array).
   void ao(PointsView points, PointsView normals, const OwnPrimitives& own,
           const RayTraceOptions& options, float* out) const;
+  /// Same, also writing each point's bent normal (above, "Bent normals") to bent[3i..3i+3)
+  /// when `bent` is not null (then it must hold 3N floats). The AO is the same as without it.
+  void ao(PointsView points, PointsView normals, const OwnPrimitives& own,
+          const RayTraceOptions& options, float* out, float* bent) const;
   /// Same, returning a new vector of N values in [0, 1].
   std::vector<float> ao(PointsView points, PointsView normals,
                         const RayTraceOptions& options = {}) const;
