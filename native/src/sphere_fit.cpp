@@ -332,6 +332,67 @@ SphereFitCheck sphere_fit_check(PointsView points, const MinSphere& s) {
   return chk;
 }
 
+namespace {
+
+// One parallel pass over points[idx] (all points if idx is null): the largest squared distance
+// from `fc` (the rounded centre: the containment certificate) and, for the exact ball (c, r2),
+// the points outside it by more than round-off: at most kAddCap of them per block (the farthest
+// of each block always among them), so a pass adds a bounded number of points to the core set.
+struct OutsidePass {
+  double max_d2_rounded = 0;
+  std::vector<std::size_t> outside;  // indices into points
+};
+
+OutsidePass outside_pass(PointsView points, const std::vector<std::size_t>* idx, const P3& c,
+                         double r2, const P3& fc) {
+  // Relative slack on r²: Miniball's own round-off is ~1e-12 (sphere_fit_check); a point outside
+  // by less than ~1e-9·r changes the exact radius by less than that, far below the result's
+  // documented 1e-6 inflation.
+  const double limit = r2 * (1 + 2e-9);
+  constexpr std::size_t grain = 1 << 15, kAddCap = 64;
+  const std::size_t m = idx ? idx->size() : points.size;
+  const std::size_t blocks = (m + grain - 1) / grain;
+  std::vector<double> block_max(blocks, 0.0);
+  std::vector<std::vector<std::size_t>> block_out(blocks);
+  parallel_for_blocks(m, grain, [&](std::size_t b, std::size_t e) {
+    double mx = 0, far = limit;
+    std::size_t far_i = 0;
+    bool any = false;
+    std::vector<std::size_t>& out = block_out[b / grain];
+    std::size_t seen = 0;
+    for (std::size_t i = b; i < e; ++i) {
+      const std::size_t j = idx ? (*idx)[i] : i;
+      const P3 q = to_p3(points[j]);
+      mx = std::max(mx, dist2(q, fc));
+      const double d2 = dist2(q, c);
+      if (d2 > limit) {
+        // Reservoir-free and deterministic: the first kAddCap outside points of the block,
+        // then every later one that is farther than all seen (so the farthest is kept).
+        if (seen++ < kAddCap) out.push_back(j);
+        if (d2 > far) {
+          far = d2;
+          far_i = j;
+          any = true;
+        }
+      }
+    }
+    if (any && std::find(out.begin(), out.end(), far_i) == out.end()) out.push_back(far_i);
+    block_max[b / grain] = mx;
+  });
+  OutsidePass r;
+  for (std::size_t k = 0; k < blocks; ++k) {
+    r.max_d2_rounded = std::max(r.max_d2_rounded, block_max[k]);
+    r.outside.insert(r.outside.end(), block_out[k].begin(), block_out[k].end());
+  }
+  return r;
+}
+
+// Points the exact fit starts from: a fixed-size deterministic sample (evenly strided through
+// the input order, which for a mesh spreads it over the whole object).
+constexpr std::size_t kCoreSample = 4096;
+
+}  // namespace
+
 Sphere fit_min_sphere(PointsView points, double trim) {
   check_fit_points(points);
   check_trim(trim);
@@ -341,22 +402,47 @@ Sphere fit_min_sphere(PointsView points, double trim) {
     keep = trimmed_indices(points, trim);
     idx = &keep;
   }
-  const MinSphere ms = min_sphere_exact(points, idx);
-  Sphere s;
-  s.center = round_to_vec3(ms.center);
-
-  // The certificate of containment: the largest distance from the rounded centre, in double.
-  const P3 c = to_p3(s.center);
   const std::size_t m = idx ? idx->size() : points.size;
-  constexpr std::size_t grain = 1 << 16;
-  std::vector<double> block_max((m + grain - 1) / grain, 0.0);
-  parallel_for_blocks(m, grain, [&](std::size_t b, std::size_t e) {
-    double mx = 0;
-    for (std::size_t i = b; i < e; ++i) mx = std::max(mx, dist2(to_p3(points[idx ? (*idx)[i] : i]), c));
-    block_max[b / grain] = mx;
-  });
+  // The exact minimum ball of a subset S that already holds every point is the exact minimum
+  // ball of them all (it cannot be smaller than MEB(S), and it is feasible). So: Miniball on a
+  // small core set S, one parallel pass for the points left outside, add them, repeat — the
+  // core-set scheme of Bădoiu & Clarkson ("Smaller core-sets for balls", SODA 2003) with an
+  // exact solver on the core set. Each round's ball is strictly larger than the last, and in
+  // practice two or three rounds suffice; visiting every point only in those streaming passes
+  // (no shuffle of all points, no move-to-front over them) makes the fit ~20× faster at 10^6
+  // points, with the same ball (docs/DESIGN.md, 'Fitting the proxies').
+  std::vector<std::size_t> core;
+  const std::size_t first = std::min(m, kCoreSample);
+  core.reserve(first);
+  for (std::size_t k = 0; k < first; ++k) {
+    const std::size_t i = k * m / first;  // k < 2^12, m < 2^31: no overflow
+    core.push_back(idx ? (*idx)[i] : i);
+  }
+  MinSphere ms;
+  Sphere s;
   double r2 = 0;
-  for (double x : block_max) r2 = std::max(r2, x);
+  constexpr int kMaxRounds = 32;
+  for (int round = 0;; ++round) {
+    ms = min_sphere_exact(points, &core);
+    s.center = round_to_vec3(ms.center);
+    const P3 c{ms.center[0], ms.center[1], ms.center[2]};
+    OutsidePass pass = outside_pass(points, idx, c, ms.radius * ms.radius, to_p3(s.center));
+    r2 = pass.max_d2_rounded;
+    if (pass.outside.empty()) break;
+    if (round == kMaxRounds) {  // never seen; the one-shot exact fit is the answer then
+      ms = min_sphere_exact(points, idx);
+      s.center = round_to_vec3(ms.center);
+      r2 = outside_pass(points, idx, c, INFINITY, to_p3(s.center)).max_d2_rounded;
+      break;
+    }
+    // The core set grows by the points outside (so each round's ball is larger than the last).
+    core.insert(core.end(), pass.outside.begin(), pass.outside.end());
+    std::sort(core.begin(), core.end());
+    core.erase(std::unique(core.begin(), core.end()), core.end());
+  }
+
+  // The certificate of containment: the largest distance from the rounded centre, in double
+  // (measured over every point in the last pass).
   double r = std::max(std::sqrt(r2), ms.radius) * (1 + kSphereInflation);
   r = std::max(r, min_proxy_radius(s.center));
   float rf = static_cast<float>(r);

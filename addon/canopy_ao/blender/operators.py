@@ -195,7 +195,7 @@ class CANOPY_AO_OT_guess_roles(bpy.types.Operator):
                 continue
             try:
                 pos, _nor, tris = mesh_io.evaluated_arrays(obj, depsgraph)
-            except mesh_io.MeshIOError as exc:
+            except CanopyAOError as exc:  # a mesh it cannot read, or no native module
                 self.report({'WARNING'}, str(exc))
                 continue
             role, why = roles.guess_role(pos, tris)

@@ -116,7 +116,9 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
         return np.ones(len(p), np.float32)
-    if vertices is not None:
+    if isinstance(vertices, slice):  # a chunk of the item's vertices: their ids, made alone
+        own = {"vertex_ids": np.arange(*vertices.indices(len(item.positions)), dtype=np.int32)}
+    elif vertices is not None:
         own = {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
     elif triangles is not None:
         own = {"triangle_ids": np.asarray(triangles, np.int32)}
