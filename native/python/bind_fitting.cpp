@@ -17,6 +17,7 @@
 #include "arrays.h"
 #include "canopy_ao/ellipsoid_fit.h"
 #include "canopy_ao/geometry.h"
+#include "canopy_ao/parallel.h"
 #include "canopy_ao/shells.h"
 #include "canopy_ao/sphere_fit.h"
 
@@ -112,7 +113,10 @@ py::array_t<bool> contains_points(const py::array& points, double tol,
   bool* o = out.mutable_data();
   {
     py::gil_scoped_release release;
-    for (std::size_t i = 0; i < p.size; ++i) o[i] = inside(shape, p.data + 3 * i, tol);
+    // Points are independent: parallel blocks, the same answer on any thread count.
+    parallel_for_blocks(p.size, 1 << 15, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) o[i] = inside(shape, p.data + 3 * i, tol);
+    });
   }
   return out;
 }

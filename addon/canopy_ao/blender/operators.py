@@ -107,7 +107,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
     def execute(self, context):
         wm = context.window_manager
         try:
-            job = BakeJob(context, self._names(), self._opts(context))
+            job = BakeJob(context, self._names(), self._opts(context), blocking=True)
             wm.progress_begin(0, job.steps)
             try:
                 job.prepare()
