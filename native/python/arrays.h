@@ -18,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -136,6 +137,15 @@ inline PointsView rows3_arg(const py::array& a, const char* name, bool allow_emp
 /// Floats checked per branch-free block by the array checks below.
 constexpr std::size_t kCheckBlock = 3 * 1024;
 
+/// |x| as the bits of a non-negative float: ordered as the values are (+0 < denormals < normals
+/// < inf < NaN), so range and finiteness checks are integer compares, which vectorise.
+inline std::uint32_t abs_bits(float x) {
+  std::uint32_t u;
+  std::memcpy(&u, &x, sizeof u);
+  return u & 0x7fffffffu;
+}
+constexpr std::uint32_t kInfBits = 0x7f800000u;
+
 inline void throw_bad_value(const char* name, float x, std::size_t row, double limit) {
   std::ostringstream s;
   if (!std::isfinite(x)) {
@@ -157,9 +167,10 @@ inline PointsView points_arg(const py::array& a, const char* name, bool allow_em
   // looked for only in a block that has one. Every call checks every point, so this matters.
   for (std::size_t b = 0; b < m; b += kCheckBlock) {
     const std::size_t e = std::min(m, b + kCheckBlock);
-    bool ok = true;
-    for (std::size_t i = b; i < e; ++i) ok &= std::fabs(v.data[i]) <= limit;
-    if (ok) continue;
+    const std::uint32_t top = abs_bits(limit);
+    std::uint32_t bad = 0;
+    for (std::size_t i = b; i < e; ++i) bad |= abs_bits(v.data[i]) > top;  // NaN too
+    if (!bad) continue;
     for (std::size_t i = b; i < e; ++i)
       if (!(std::fabs(v.data[i]) <= limit)) throw_bad_value(name, v.data[i], i / 3, kMaxCoordinate);
   }
@@ -178,19 +189,20 @@ struct NormalsArg {
 inline NormalsArg normals_arg(const py::array& a, const char* name) {
   NormalsArg r{rows3_arg(a, name, /*allow_empty=*/true), py::array()};
   const float* d = r.view.data;
-  bool rescale = false;
-  constexpr float kFinite = std::numeric_limits<float>::max();
+  std::uint32_t rescale = 0;
+  const std::uint32_t lo = abs_bits(0x1p-10f), hi = abs_bits(0x1p10f);
   const std::size_t rows = r.view.size, block = kCheckBlock / 3;
   for (std::size_t b = 0; b < rows; b += block) {  // branch-free per block, as points_arg
     const std::size_t e = std::min(rows, b + block);
-    bool finite = true;
+    std::uint32_t bad = 0;
     for (std::size_t i = b; i < e; ++i) {
-      const float x = std::fabs(d[3 * i]), y = std::fabs(d[3 * i + 1]), z = std::fabs(d[3 * i + 2]);
-      finite &= (x <= kFinite) & (y <= kFinite) & (z <= kFinite);  // NaN and inf fail
-      const float m = std::max(x, std::max(y, z));
-      rescale |= (m != 0) & ((m < 0x1p-10f) | (m > 0x1p10f));
+      const std::uint32_t x = abs_bits(d[3 * i]), y = abs_bits(d[3 * i + 1]),
+                          z = abs_bits(d[3 * i + 2]);
+      const std::uint32_t m = std::max(x, std::max(y, z));
+      bad |= m >= kInfBits;  // inf or NaN in the row
+      rescale |= (m != 0) & ((m < lo) | (m > hi));
     }
-    if (finite) continue;
+    if (!bad) continue;
     for (std::size_t i = b; i < e; ++i)
       for (int k = 0; k < 3; ++k)
         if (!std::isfinite(d[3 * i + k])) throw_bad_value(name, d[3 * i + k], i, 0);

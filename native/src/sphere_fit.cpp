@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -203,13 +204,16 @@ void check_fit_points(PointsView points, const char* name) {
   if (points.data == nullptr) throw std::invalid_argument(std::string(name) + " is null");
   // Branch-free per block (it vectorises: NaN and inf fail the comparison); the first bad value
   // is looked for only in a block that has one.
-  constexpr float kFinite = std::numeric_limits<float>::max();
   const std::size_t m = 3 * points.size, block = 3 * 1024;
   for (std::size_t b = 0; b < m; b += block) {
     const std::size_t e = std::min(m, b + block);
-    bool finite = true;
-    for (std::size_t i = b; i < e; ++i) finite &= std::fabs(points.data[i]) <= kFinite;
-    if (finite) continue;
+    std::uint32_t bad = 0;  // the exponent bits all set: inf or NaN
+    for (std::size_t i = b; i < e; ++i) {
+      std::uint32_t u;
+      std::memcpy(&u, points.data + i, sizeof u);
+      bad |= (u & 0x7f800000u) == 0x7f800000u;
+    }
+    if (!bad) continue;
     for (std::size_t i = b; i < e; ++i) {
       if (!std::isfinite(points.data[i])) {
         std::ostringstream s;
@@ -346,19 +350,26 @@ namespace {
 
 // One parallel pass over points[idx] (all points if idx is null): the largest squared distance
 // from `fc` (the rounded centre: the containment certificate) and, for the exact ball (c, r2),
-// the points outside it by more than round-off: at most kAddCap of them per block (the farthest
-// of each block always among them), so a pass adds a bounded number of points to the core set.
+// the points outside it by more than round-off: the first kAddCap of them per block and the
+// block's farthest, so a pass adds a bounded number of points to the core set.
 struct OutsidePass {
   double max_d2_rounded = 0;
   std::vector<std::size_t> outside;  // indices into points
 };
 
 OutsidePass outside_pass(PointsView points, const std::vector<std::size_t>* idx, const P3& c,
-                         double r2, const P3& fc) {
+                         double r2, Vec3 fc) {
   // Relative slack on r²: Miniball's own round-off is ~1e-12 (sphere_fit_check); a point outside
   // by less than ~1e-9·r changes the exact radius by less than that, far below the result's
   // documented 1e-6 inflation.
   const double limit = r2 * (1 + 2e-9);
+  // A float pre-test skips the points well inside: a point at distance d from fc is within
+  // d + |c − fc| of c, and the ball's support points are at ≥ r − |c − fc| from fc, so a point
+  // nearer fc than lo is neither outside nor the farthest from fc. lo carries 1e-5 of margin
+  // against float32's ~3e-7 relative error in d² (one rounding per operation).
+  const P3 pc = to_p3(fc);
+  const double lo = (std::sqrt(r2) - std::sqrt(dist2(c, pc))) * (1 - 1e-5);
+  const float lo2 = lo > 0 ? static_cast<float>(lo * lo * (1 - 1e-5)) : -1.0f;
   constexpr std::size_t grain = 1 << 15, kAddCap = 64;
   const std::size_t m = idx ? idx->size() : points.size;
   const std::size_t blocks = (m + grain - 1) / grain;
@@ -370,14 +381,20 @@ OutsidePass outside_pass(PointsView points, const std::vector<std::size_t>* idx,
     bool any = false;
     std::vector<std::size_t>& out = block_out[b / grain];
     std::size_t seen = 0;
+    // Locals, not captures: the pushes below could otherwise alias them, and the loop would
+    // reload each one per point.
+    const float* data = points.data;
+    const std::size_t* ids = idx ? idx->data() : nullptr;
+    const float cx = fc.x, cy = fc.y, cz = fc.z, lo2_ = lo2;
     for (std::size_t i = b; i < e; ++i) {
-      const std::size_t j = idx ? (*idx)[i] : i;
+      const std::size_t j = ids ? ids[i] : i;
+      const float* x = data + 3 * j;
+      const float dx = x[0] - cx, dy = x[1] - cy, dz = x[2] - cz;
+      if (!(dx * dx + dy * dy + dz * dz > lo2_)) continue;
       const P3 q = to_p3(points[j]);
-      mx = std::max(mx, dist2(q, fc));
+      mx = std::max(mx, dist2(q, pc));
       const double d2 = dist2(q, c);
       if (d2 > limit) {
-        // Reservoir-free and deterministic: the first kAddCap outside points of the block,
-        // then every later one that is farther than all seen (so the farthest is kept).
         if (seen++ < kAddCap) out.push_back(j);
         if (d2 > far) {
           far = d2;
@@ -436,13 +453,14 @@ Sphere fit_min_sphere(PointsView points, double trim) {
     ms = min_sphere_exact(points, &core);
     s.center = round_to_vec3(ms.center);
     const P3 c{ms.center[0], ms.center[1], ms.center[2]};
-    OutsidePass pass = outside_pass(points, idx, c, ms.radius * ms.radius, to_p3(s.center));
+    OutsidePass pass = outside_pass(points, idx, c, ms.radius * ms.radius, s.center);
     r2 = pass.max_d2_rounded;
     if (pass.outside.empty()) break;
     if (round == kMaxRounds) {  // never seen; the one-shot exact fit is the answer then
       ms = min_sphere_exact(points, idx);
       s.center = round_to_vec3(ms.center);
-      r2 = outside_pass(points, idx, c, INFINITY, to_p3(s.center)).max_d2_rounded;
+      const P3 all_c{ms.center[0], ms.center[1], ms.center[2]};
+      r2 = outside_pass(points, idx, all_c, ms.radius * ms.radius, s.center).max_d2_rounded;
       break;
     }
     // The core set grows by the points outside (so each round's ball is larger than the last).

@@ -161,13 +161,22 @@ class BakeJob:
             live.check_job(self)  # what auto chose, a frame cache: refused unwritten
         t0 = time.perf_counter()
         txn = Transaction()
+        # Only vertex attributes, no instances, AOV or Cycles check: the report can be made
+        # first (it reads no write), and then nothing that can fail follows the last target's
+        # write, which therefore copies no old values to undo it (commit.Transaction).
+        vertex_only = (all(t.kind == "vertex" for t in self.targets) and not self.prototypes
+                       and not o["add_aov"] and not o["check_cycles"])
         try:
+            rep = self._report() if vertex_only else None
             if o["atlas"] and o["mode"] == 'TEXEL':  # one image for every object
                 rep_atlas = tiles_io.write_atlas(self.targets, txn, o)
             else:
                 rep_atlas = None
-                for t in self.targets:
-                    t.write(txn, o)
+                for i, t in enumerate(self.targets):
+                    if vertex_only and i == len(self.targets) - 1:
+                        t.write(txn, o, last=True)
+                    else:
+                        t.write(txn, o)
             self.prototypes.commit(txn, o)
             if o["add_aov"]:
                 if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
@@ -175,7 +184,8 @@ class BakeJob:
                     txn.add(lambda: materials.remove_view_layer_aov(self.scene, o["aov_name"]))
                 materials.ensure_view_layer_aov(self.scene, o["aov_name"])
             t0 = self._lap("write", t0)
-            rep = self._report()
+            if rep is None:
+                rep = self._report()
             if rep_atlas is not None:
                 rep["atlas"] = {"name": o["atlas"], "paths": rep_atlas["paths"],
                                 "shared_texels": rep_atlas["shared_texels"]}
