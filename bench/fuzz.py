@@ -433,6 +433,30 @@ def c_properties(g, core, tmp):
     return call, None
 
 
+def c_to_world(g, core, tmp):
+    p, nrm, n = receivers(g)
+    m = None if g.chance(0.2) else g.mutate(np.vstack([np.c_[g.axes() * g.scalar(0.1, 3),
+                                                             g.vec3()], [0, 0, 0, 1]]))
+
+    def call():
+        core.to_world(p, nrm, m)
+        return nrm
+
+    def check(r):
+        assert np.allclose(np.linalg.norm(r.astype(np.float64), axis=1), 1, atol=1e-5), \
+            "normals not unit"
+    return call, check
+
+
+def c_gray_rgba(g, core, tmp):
+    v = g.mutate(g.r.random(g.count()).astype(np.float32))
+
+    def check(r):
+        assert r.shape == (len(v), 4) and np.all(r[:, 3] == 1), "not (N, 4) with alpha 1"
+        assert np.array_equal(r[:, 0], v, equal_nan=True), "grey is not the value"
+    return (lambda: core.gray_rgba(v)), check
+
+
 def c_threads(g, core, tmp):
     def call():
         previous = core.set_max_threads(g.integer(0, 4))

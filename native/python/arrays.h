@@ -18,6 +18,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -132,6 +134,18 @@ inline PointsView rows3_arg(const py::array& a, const char* name, bool allow_emp
   return v;
 }
 
+/// Floats checked per branch-free block by the array checks below.
+constexpr std::size_t kCheckBlock = 3 * 1024;
+
+/// |x| as the bits of a non-negative float: ordered as the values are (+0 < denormals < normals
+/// < inf < NaN), so range and finiteness checks are integer compares, which vectorise.
+inline std::uint32_t abs_bits(float x) {
+  std::uint32_t u;
+  std::memcpy(&u, &x, sizeof u);
+  return u & 0x7fffffffu;
+}
+constexpr std::uint32_t kInfBits = 0x7f800000u;
+
 inline void throw_bad_value(const char* name, float x, std::size_t row, double limit) {
   std::ostringstream s;
   if (!std::isfinite(x)) {
@@ -148,8 +162,17 @@ inline void throw_bad_value(const char* name, float x, std::size_t row, double l
 inline PointsView points_arg(const py::array& a, const char* name, bool allow_empty = false) {
   const PointsView v = rows3_arg(a, name, allow_empty);
   const float limit = static_cast<float>(kMaxCoordinate);
-  for (std::size_t i = 0; i < 3 * v.size; ++i) {
-    if (!(std::fabs(v.data[i]) <= limit)) throw_bad_value(name, v.data[i], i / 3, kMaxCoordinate);
+  const std::size_t m = 3 * v.size;
+  // Branch-free over a block (it vectorises; NaN fails the comparison); the first bad value is
+  // looked for only in a block that has one. Every call checks every point, so this matters.
+  for (std::size_t b = 0; b < m; b += kCheckBlock) {
+    const std::size_t e = std::min(m, b + kCheckBlock);
+    const std::uint32_t top = abs_bits(limit);
+    std::uint32_t bad = 0;
+    for (std::size_t i = b; i < e; ++i) bad |= abs_bits(v.data[i]) > top;  // NaN too
+    if (!bad) continue;
+    for (std::size_t i = b; i < e; ++i)
+      if (!(std::fabs(v.data[i]) <= limit)) throw_bad_value(name, v.data[i], i / 3, kMaxCoordinate);
   }
   return v;
 }
@@ -166,15 +189,23 @@ struct NormalsArg {
 inline NormalsArg normals_arg(const py::array& a, const char* name) {
   NormalsArg r{rows3_arg(a, name, /*allow_empty=*/true), py::array()};
   const float* d = r.view.data;
-  bool rescale = false;
-  for (std::size_t i = 0; i < r.view.size; ++i) {
-    float m = 0;
-    for (int k = 0; k < 3; ++k) {
-      const float x = d[3 * i + k];
-      if (!std::isfinite(x)) throw_bad_value(name, x, i, 0);
-      m = std::max(m, std::fabs(x));
+  std::uint32_t rescale = 0;
+  const std::uint32_t lo = abs_bits(0x1p-10f), hi = abs_bits(0x1p10f);
+  const std::size_t rows = r.view.size, block = kCheckBlock / 3;
+  for (std::size_t b = 0; b < rows; b += block) {  // branch-free per block, as points_arg
+    const std::size_t e = std::min(rows, b + block);
+    std::uint32_t bad = 0;
+    for (std::size_t i = b; i < e; ++i) {
+      const std::uint32_t x = abs_bits(d[3 * i]), y = abs_bits(d[3 * i + 1]),
+                          z = abs_bits(d[3 * i + 2]);
+      const std::uint32_t m = std::max(x, std::max(y, z));
+      bad |= m >= kInfBits;  // inf or NaN in the row
+      rescale |= (m != 0) & ((m < lo) | (m > hi));
     }
-    rescale = rescale || (m != 0 && (m < 0x1p-10f || m > 0x1p10f));
+    if (!bad) continue;
+    for (std::size_t i = b; i < e; ++i)
+      for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(d[3 * i + k])) throw_bad_value(name, d[3 * i + k], i, 0);
   }
   if (!rescale) return r;
   py::array_t<float> copy({static_cast<py::ssize_t>(r.view.size), py::ssize_t{3}});

@@ -17,6 +17,7 @@
 #include "arrays.h"
 #include "canopy_ao/ellipsoid_fit.h"
 #include "canopy_ao/geometry.h"
+#include "canopy_ao/parallel.h"
 #include "canopy_ao/shells.h"
 #include "canopy_ao/sphere_fit.h"
 
@@ -103,16 +104,19 @@ Ellipsoid make_ellipsoid(const py::object& center, const py::object& axes,
 
 // Containment in double with a relative slack of `tol` on the squared unit-frame norm, so a
 // point on the surface (up to float32 round-off) counts as inside.
-py::array_t<bool> contains_points(const py::array& points, double tol,
-                                  bool (*inside)(const void*, const float*, double),
-                                  const void* shape) {
+// `inside(x, tol)` is a template argument, so the test inlines into the loop.
+template <class Inside>
+py::array_t<bool> contains_points(const py::array& points, double tol, const Inside& inside) {
   const PointsView p = points_arg(points, "points", /*allow_empty=*/true);
   if (!std::isfinite(tol) || tol < 0) throw py::value_error("tol must be finite and >= 0");
   py::array_t<bool> out(static_cast<py::ssize_t>(p.size));
   bool* o = out.mutable_data();
   {
     py::gil_scoped_release release;
-    for (std::size_t i = 0; i < p.size; ++i) o[i] = inside(shape, p.data + 3 * i, tol);
+    // Points are independent: parallel blocks, the same answer on any thread count.
+    parallel_for_blocks(p.size, 1 << 15, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) o[i] = inside(p.data + 3 * i, tol);
+    });
   }
   return out;
 }
@@ -197,7 +201,9 @@ void bind_fitting(py::module_& m) {
       .def(
           "contains",
           [](const Sphere& s, const py::array& points, double tol) {
-            return contains_points(points, tol, &sphere_inside, &s);
+            return contains_points(points, tol, [&s](const float* x, double t) {
+              return sphere_inside(&s, x, t);
+            });
           },
           py::arg("points"), py::arg("tol") = 1e-5,
           "contains(points, tol=1e-5) -> bool (N,): |p - center|^2 <= radius^2 (1 + tol); "
@@ -252,7 +258,9 @@ void bind_fitting(py::module_& m) {
       .def(
           "contains",
           [](const Ellipsoid& e, const py::array& points, double tol) {
-            return contains_points(points, tol, &ellipsoid_inside, &e);
+            return contains_points(points, tol, [&e](const float* x, double t) {
+              return ellipsoid_inside(&e, x, t);
+            });
           },
           py::arg("points"), py::arg("tol") = 1e-5,
           "contains(points, tol=1e-5) -> bool (N,): |diag(1/r) Q^T (p - c)|^2 <= 1 + tol; "

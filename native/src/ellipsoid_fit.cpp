@@ -204,12 +204,15 @@ std::vector<int> extreme_points(const std::vector<P3>& z, int d) {
 }
 
 // Largest g over all points, in parallel with a thread-count-independent max.
-double max_g(const LocalEllipsoid& e, const std::vector<P3>& z) {
+// Largest of fn(i) over i in [0, n), ≥ 0: parallel blocks of a fixed size, so the result does
+// not depend on the thread count.
+template <class Fn>
+double parallel_max(std::size_t n, const Fn& fn) {
   constexpr std::size_t grain = 1 << 14;
-  std::vector<double> block((z.size() + grain - 1) / grain, 0.0);
-  parallel_for_blocks(z.size(), grain, [&](std::size_t b, std::size_t en) {
+  std::vector<double> block((n + grain - 1) / grain, 0.0);
+  parallel_for_blocks(n, grain, [&](std::size_t b, std::size_t en) {
     double mx = 0;
-    for (std::size_t i = b; i < en; ++i) mx = std::max(mx, e.g(z[i]));
+    for (std::size_t i = b; i < en; ++i) mx = std::max(mx, fn(i));
     block[b / grain] = mx;
   });
   double mx = 0;
@@ -217,22 +220,43 @@ double max_g(const LocalEllipsoid& e, const std::vector<P3>& z) {
   return mx;
 }
 
+// Mean and covariance of points[idx]: per-block sums (fixed blocks, added in block order, so
+// the result does not depend on the thread count), two streaming passes.
 void mean_cov(PointsView points, const std::vector<std::size_t>& idx, P3* mean, double cov[3][3]) {
+  constexpr std::size_t grain = 1 << 14;
+  const std::size_t n = idx.size(), blocks = (n + grain - 1) / grain;
+  std::vector<std::array<double, 9>> part(blocks);
+  parallel_for_blocks(n, grain, [&](std::size_t b, std::size_t e) {
+    double m[3] = {0, 0, 0};
+    for (std::size_t i = b; i < e; ++i) {
+      const P3 p = to_p3(points[idx[i]]);
+      for (int k = 0; k < 3; ++k) m[k] += p[k];
+    }
+    for (int k = 0; k < 3; ++k) part[b / grain][k] = m[k];
+  });
   P3 m{0, 0, 0};
-  for (std::size_t i : idx) {
-    const P3 p = to_p3(points[i]);
-    for (int k = 0; k < 3; ++k) m[k] += p[k];
-  }
-  for (int k = 0; k < 3; ++k) m[k] /= double(idx.size());
+  for (const auto& q : part)
+    for (int k = 0; k < 3; ++k) m[k] += q[k];
+  for (int k = 0; k < 3; ++k) m[k] /= double(n);
+  parallel_for_blocks(n, grain, [&](std::size_t b, std::size_t e) {
+    double c[3][3] = {};
+    const P3 mm = m;
+    for (std::size_t i = b; i < e; ++i) {
+      const P3 p = to_p3(points[idx[i]]);
+      const double d[3] = {p[0] - mm[0], p[1] - mm[1], p[2] - mm[2]};
+      for (int r = 0; r < 3; ++r)
+        for (int cc = 0; cc < 3; ++cc) c[r][cc] += d[r] * d[cc];
+    }
+    for (int r = 0; r < 3; ++r)
+      for (int cc = 0; cc < 3; ++cc) part[b / grain][3 * r + cc] = c[r][cc];
+  });
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) cov[r][c] = 0;
-  for (std::size_t i : idx) {
-    const P3 p = to_p3(points[i]);
+  for (const auto& q : part)
     for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) cov[r][c] += (p[r] - m[r]) * (p[c] - m[c]);
-  }
+      for (int c = 0; c < 3; ++c) cov[r][c] += q[3 * r + c];
   for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) cov[r][c] /= double(idx.size());
+    for (int c = 0; c < 3; ++c) cov[r][c] /= double(n);
   *mean = m;
 }
 
@@ -358,15 +382,35 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
   double cov[3][3], w[3], V[3][3];
   mean_cov(points, indices, &mean, cov);
   symmetric_eigen(3, cov, w, V);
-  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  std::vector<P3> y(n);
-  for (std::size_t i = 0; i < n; ++i) {
+  // A point's coordinates in the PCA frame, computed where needed (streaming passes over the
+  // points, no per-point copies: the fit must cost little beside reading the mesh).
+  auto frame_y = [&](std::size_t i) {
     const P3 p = to_p3(points[indices[i]]);
-    for (int k = 0; k < 3; ++k) {
-      y[i][k] = V[0][k] * (p[0] - mean[0]) + V[1][k] * (p[1] - mean[1]) + V[2][k] * (p[2] - mean[2]);
-      lo[k] = std::min(lo[k], y[i][k]);
-      hi[k] = std::max(hi[k], y[i][k]);
-    }
+    P3 y;
+    for (int k = 0; k < 3; ++k)
+      y[k] = V[0][k] * (p[0] - mean[0]) + V[1][k] * (p[1] - mean[1]) + V[2][k] * (p[2] - mean[2]);
+    return y;
+  };
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  {
+    constexpr std::size_t grain = 1 << 14;
+    std::vector<std::array<double, 6>> box((n + grain - 1) / grain);
+    parallel_for_blocks(n, grain, [&](std::size_t b, std::size_t e) {
+      std::array<double, 6> bx = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+      for (std::size_t i = b; i < e; ++i) {
+        const P3 y = frame_y(i);
+        for (int k = 0; k < 3; ++k) {
+          bx[k] = std::min(bx[k], y[k]);
+          bx[3 + k] = std::max(bx[3 + k], y[k]);
+        }
+      }
+      box[b / grain] = bx;
+    });
+    for (const auto& bx : box)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], bx[k]);
+        hi[k] = std::max(hi[k], bx[3 + k]);
+      }
   }
   double b[3], h[3], hmax = 0;
   for (int k = 0; k < 3; ++k) {
@@ -391,16 +435,32 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
 
   if (d > 0) {
     // 3. Normalised frame z = (y − b) / h on the non-degenerate axes.
-    std::vector<P3> z(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      z[i] = {0, 0, 0};
-      for (int j = 0; j < d; ++j) z[i][j] = (y[i][dims[j]] - b[dims[j]]) / h[dims[j]];
-    }
+    auto frame_z = [&](std::size_t i) {
+      const P3 y = frame_y(i);
+      P3 z{0, 0, 0};
+      for (int j = 0; j < d; ++j) z[j] = (y[dims[j]] - b[dims[j]]) / h[dims[j]];
+      return z;
+    };
+    auto max_g = [&](const LocalEllipsoid& e) {
+      if (d == 3 && e.d == 3) {  // the usual case with fixed loop bounds (it unrolls): the
+        // same operations in the same order as frame_z and LocalEllipsoid::g
+        const LocalEllipsoid el = e;
+        return parallel_max(n, [&](std::size_t i) {
+          const P3 y = frame_y(i);
+          double u[3], g = 0;
+          for (int k = 0; k < 3; ++k) u[k] = (y[k] - b[k]) / h[k] - el.c[k];
+          for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c) g += u[r] * el.A[r][c] * u[c];
+          return g;
+        });
+      }
+      return parallel_max(n, [&](std::size_t i) { return e.g(frame_z(i)); });
+    };
     // PCA ellipsoid: the box's aspect, scaled to contain every point.
     LocalEllipsoid pca;
     pca.d = d;
     for (int j = 0; j < d; ++j) pca.A[j][j] = 1;
-    pca.scale(std::max(max_g(pca, z), 1e-300));
+    pca.scale(std::max(max_g(pca), 1e-300));
     LocalEllipsoid best = pca;
     info.method_used = EllipsoidMethod::Pca;
 
@@ -410,7 +470,7 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
       const std::size_t np = std::min(n, options.max_points);
       for (std::size_t j = 0; j < np; ++j) pool.push_back(j * n / np);
       std::vector<P3> zp(np);
-      for (std::size_t j = 0; j < np; ++j) zp[j] = z[pool[j]];
+      for (std::size_t j = 0; j < np; ++j) zp[j] = frame_z(pool[j]);
       std::vector<int> active = extreme_points(zp, d);
       std::vector<char> in_active(np, 0);
       for (int a : active) in_active[a] = 1;
@@ -443,7 +503,7 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
       info.active_points = active.size();
       info.converged = ok && conv;
       if (ok) {
-        const double g = max_g(kh, z);
+        const double g = max_g(kh);
         if (std::isfinite(g) && g > 0) {
           info.containment_scale = std::sqrt(g);
           kh.scale(g);
@@ -505,17 +565,17 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
 
   // 7. Containment certificate on the rounded ellipsoid, in double: inflate if needed.
   const P3 c = to_p3(e.center);
-  double gmax = 0;
-  for (std::size_t i : indices) {
-    const P3 p = to_p3(points[i]);
+  const P3 ea[3] = {to_p3(e.axes[0]), to_p3(e.axes[1]), to_p3(e.axes[2])};
+  const double gmax = parallel_max(n, [&](std::size_t i) {
+    const P3 p = to_p3(points[indices[i]]);
     const P3 dp{p[0] - c[0], p[1] - c[1], p[2] - c[2]};
     double g = 0;
     for (int k = 0; k < 3; ++k) {
-      const double u = dotp(to_p3(e.axes[k]), dp) / r[k];
+      const double u = dotp(ea[k], dp) / r[k];
       g += u * u;
     }
-    gmax = std::max(gmax, g);
-  }
+    return g;
+  });
   const double s = std::max(1.0, std::sqrt(gmax)) * (1 + 1e-6);
   for (int k = 0; k < 3; ++k) {
     const double rk = r[k] * s;

@@ -96,6 +96,42 @@ def test_a_failure_during_commit_writes_nothing(plane_under_disk, monkeypatch):
     assert "CanopyAO" not in l.data.attributes and not mesh_io.owned_attributes(l)
 
 
+def test_the_last_write_copies_nothing_and_a_failure_in_it_still_changes_nothing(
+        plane_under_disk, monkeypatch):
+    """One vertex target and nothing after it in the commit: its attribute is overwritten in
+    place without a copy of the old values (16 bytes a vertex), while a Cycles check after it
+    keeps the copy; a write that fails leaves the old values and marks."""
+    from canopy_ao.blender import commit
+    g = plane_under_disk["ground"]
+    run_bake(bpy.context, ["Ground"], opts(tau=0.5))
+    before = mesh_io.read_ao_attribute(g, "CanopyAO")
+    marks = mesh_io.owned_attributes(g)
+    copies = []
+    real_attribute = commit.Transaction.attribute
+
+    def spy(self, obj, name, last=False):
+        attr = obj.data.attributes.get(name)
+        copies.append((name, last, attr is not None and not (
+            last and attr.data_type == 'FLOAT_COLOR' and attr.domain == 'POINT')))
+        return real_attribute(self, obj, name, last)
+    monkeypatch.setattr(commit.Transaction, "attribute", spy)
+    run_bake(bpy.context, ["Ground"], opts(tau=3.0))
+    assert copies == [("CanopyAO", True, False)]  # last, in place: no copy
+    changed = mesh_io.read_ao_attribute(g, "CanopyAO")
+    assert not np.array_equal(changed, before)
+    copies.clear()
+    run_bake(bpy.context, ["Ground"], opts(tau=3.0, check_cycles=True, cycles_samples=4))
+    assert copies == [("CanopyAO", False, True)]  # the check follows: old values kept
+
+    def fails(obj, name, ao, overwrite=False):
+        raise RuntimeError("disk full, say")
+    monkeypatch.setattr(mesh_io, "write_ao_attribute", fails)
+    with pytest.raises(RuntimeError, match="disk full"):
+        run_bake(bpy.context, ["Ground"], opts(tau=0.5))
+    np.testing.assert_array_equal(mesh_io.read_ao_attribute(g, "CanopyAO"), changed)
+    assert mesh_io.owned_attributes(g) == marks
+
+
 def test_a_failed_texel_commit_leaves_no_image_and_keeps_the_old_file(plane_under_disk,
                                                                       monkeypatch):
     d = plane_under_disk["image_dir"]

@@ -4,6 +4,8 @@
 // (the float result carries the documented 1e-6 inflation plus float rounding).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -273,4 +275,58 @@ TEST(SphereFit, BadInputThrows) {
   EXPECT_THROW(fit_min_sphere(view(ok), 0.5), std::invalid_argument);
   EXPECT_THROW(fit_min_sphere(view(ok), -0.1), std::invalid_argument);
   EXPECT_THROW(fit_min_sphere(view(ok), NAN), std::invalid_argument);
+}
+
+// fit_min_sphere solves the exact problem on a core set and grows it by the points left
+// outside: on inputs far larger than the core set it must give the one-shot exact ball.
+TEST(SphereFit, CoreSetFitEqualsExactOnLargeInputs) {
+  std::mt19937 g(17);
+  std::normal_distribution<double> n01;
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<std::vector<float>> clouds;
+  clouds.push_back(random_cloud(200000, 3, 2.0, 5.0));  // a cube
+  {  // cospherical: every point on one sphere (the core set's worst case), a few inside
+    std::vector<float> p;
+    for (int i = 0; i < 100000; ++i) {
+      const double x = n01(g), y = n01(g), z = n01(g), l = std::sqrt(x * x + y * y + z * z);
+      const double r = i % 10 ? 3.0 : 3.0 * u(g);
+      add(p, -4 + r * x / l, 2 + r * y / l, 9 + r * z / l);
+    }
+    clouds.push_back(p);
+  }
+  {  // a crown with a few far outliers at the end of the input (a stray branch)
+    std::vector<float> p;
+    for (int i = 0; i < 150000; ++i) add(p, 2.5 * n01(g), 2.5 * n01(g), 4 + 2 * n01(g));
+    for (int i = 0; i < 5; ++i) add(p, 40.0 + i, -30.0, 12.0 * i);
+    clouds.push_back(p);
+  }
+  {  // sorted along x (a strided sample sees the order, not a random one)
+    auto p = random_cloud(120000, 9, 1.0);
+    std::vector<std::array<float, 3>> rows(p.size() / 3);
+    for (std::size_t i = 0; i < rows.size(); ++i) rows[i] = {p[3 * i], p[3 * i + 1], p[3 * i + 2]};
+    std::sort(rows.begin(), rows.end());
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      for (int k = 0; k < 3; ++k) p[3 * i + k] = rows[i][k];
+    clouds.push_back(p);
+  }
+  for (std::size_t c = 0; c < clouds.size(); ++c) {
+    const PointsView p = view(clouds[c]);
+    const Sphere s = fit_min_sphere(p);
+    const MinSphere ms = min_sphere_exact(p);
+    ASSERT_TRUE(sphere_fit_check(p, ms).is_valid(1e-9)) << "cloud " << c;
+    EXPECT_TRUE(contains_all(s, p, 0.0)) << "cloud " << c;
+    // The same ball: the radius carries only the documented inflation and float rounding.
+    EXPECT_GE(s.radius, ms.radius * (1 - 1e-7)) << "cloud " << c;
+    EXPECT_LE(s.radius, ms.radius * (1 + 3e-6)) << "cloud " << c;
+    for (int k = 0; k < 3; ++k)
+      EXPECT_NEAR(s.center[k], ms.center[k], 1e-6 * (ms.radius + std::fabs(ms.center[k])))
+          << "cloud " << c;
+  }
+  // With a trim the same holds for the kept points.
+  const PointsView p = view(clouds[2]);
+  const auto keep = trimmed_indices(p, 0.01);
+  const MinSphere ms = min_sphere_exact(p, &keep);
+  const Sphere t = fit_min_sphere(p, 0.01);
+  EXPECT_GE(t.radius, ms.radius * (1 - 1e-7));
+  EXPECT_LE(t.radius, ms.radius * (1 + 3e-6));
 }

@@ -26,14 +26,20 @@ class Transaction:
         """Record undo() for a write just made (or about to be)."""
         self._undo.append(undo)
 
-    def attribute(self, obj, name):
+    def attribute(self, obj, name, last=False):
         """Record obj's attribute ``name`` (or its absence) and its ownership marks, before a
-        write replaces them."""
+        write replaces them. last: nothing that can fail follows this write, and a FLOAT_COLOR
+        POINT attribute is overwritten in place (whole, or not at all), so its old values are
+        never needed again: they are not copied (16 bytes a vertex)."""
         mesh = obj.data
         marks = [(idb, idb.get(mesh_io.OWNED_PROP)) for idb in (obj, mesh)]
         attr = mesh.attributes.get(name)
         old = None
-        if attr is not None and attr.data_type in _LAYOUT:
+        in_place = (last and attr is not None and attr.data_type == 'FLOAT_COLOR'
+                    and attr.domain == 'POINT')
+        if in_place:
+            old = "in place"
+        elif attr is not None and attr.data_type in _LAYOUT:
             key, width, dtype = _LAYOUT[attr.data_type]
             buf = np.empty(len(attr.data) * width, dtype=dtype)
             attr.data.foreach_get(key, buf)
@@ -44,6 +50,8 @@ class Transaction:
             if old is None:
                 if cur is not None:
                     mesh.attributes.remove(cur)
+            elif old == "in place":
+                pass  # its values were not overwritten: the write failed before it wrote
             else:
                 kind, domain, key, buf = old
                 if cur is None or cur.data_type != kind or cur.domain != domain:

@@ -11,6 +11,7 @@ import time
 import bpy
 import numpy as np
 
+from ..core import native
 from ..core.native import CanopyAOError
 
 # Object custom property listing the attributes Canopy AO made (a JSON list of names): only
@@ -97,29 +98,13 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
 
 
 def _to_world(co, nor, matrix_world):
-    """Positions and unit normals (float32 (V, 3), modified in place) in world space. float32
-    throughout: a float64 round trip costs ~40 ms per million vertices."""
-    m = np.array(matrix_world, dtype=np.float64)
-    identity = np.array_equal(m, np.eye(4))
-    if not identity:
-        co = co @ m[:3, :3].T.astype(np.float32)
-        co += m[:3, 3].astype(np.float32)
-        # Normals transform by the inverse transpose (non-uniform scale).
-        try:
-            nm = np.linalg.inv(m[:3, :3]).T
-        except np.linalg.LinAlgError:
-            nm = np.eye(3)
-        nor = nor @ nm.T.astype(np.float32)
-    l2 = np.einsum("ij,ij->i", nor, nor)
-    if identity and len(l2) and l2.min() >= 1.0 - 1e-6 and l2.max() <= 1.0 + 1e-6:
-        return co, nor  # Blender's own unit normals (NaN fails the test and is fixed below)
-    zero = ~(l2 > 1e-40)  # also NaN
-    if zero.any():
-        nor[zero] = (0.0, 0.0, 1.0)
-        l2[zero] = 1.0
-    if len(l2) and (not identity or np.abs(l2 - 1.0).max() > 1e-6):  # empty: GN scatter
-        nor /= np.sqrt(l2)[:, None]
-    return np.ascontiguousarray(co), np.ascontiguousarray(nor)
+    """Positions and unit normals (float32 (V, 3), modified in place) in world space: one
+    native pass (mesh_arrays.h), which skips the transform for an identity matrix and keeps
+    Blender's own unit normals bit for bit (a zero or NaN normal becomes +Z)."""
+    co = np.ascontiguousarray(co, dtype=np.float32)
+    nor = np.ascontiguousarray(nor, dtype=np.float32)
+    native.require().to_world(co, nor, np.array(matrix_world, dtype=np.float64))
+    return co, nor
 
 
 def _owned(idblock):
@@ -202,12 +187,8 @@ def write_ao_attribute(obj, name, ao, overwrite=False):
     Replaces an attribute Canopy AO made (or any, with overwrite); refuses otherwise.
     """
     attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite)
-    mesh, n = obj.data, len(ao)
-    rgba = np.ones((n, 4), dtype=np.float32)  # column by column: the fastest fill measured
-    rgba[:, 0] = ao
-    rgba[:, 1] = ao
-    rgba[:, 2] = ao
-    attr.data.foreach_set("color", rgba.reshape(-1))
+    mesh = obj.data
+    attr.data.foreach_set("color", native.require().gray_rgba(ao).reshape(-1))
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
     mesh.update_tag()

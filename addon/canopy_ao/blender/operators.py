@@ -107,7 +107,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
     def execute(self, context):
         wm = context.window_manager
         try:
-            job = BakeJob(context, self._names(), self._opts(context))
+            job = BakeJob(context, self._names(), self._opts(context), blocking=True)
             wm.progress_begin(0, job.steps)
             try:
                 job.prepare()
@@ -195,7 +195,7 @@ class CANOPY_AO_OT_guess_roles(bpy.types.Operator):
                 continue
             try:
                 pos, _nor, tris = mesh_io.evaluated_arrays(obj, depsgraph)
-            except mesh_io.MeshIOError as exc:
+            except CanopyAOError as exc:  # a mesh it cannot read, or no native module
                 self.report({'WARNING'}, str(exc))
                 continue
             role, why = roles.guess_role(pos, tris)

@@ -59,14 +59,9 @@ class VertexTarget(Target):
             self.frames = bent_io.vertex_frames(obj, depsgraph, opts["uv_map"] or None,
                                                 self.count)
 
-    def write(self, txn, opts):
-        txn.attribute(self.obj, opts["attribute"])
-        if opts["channel"] != "RGBA":
-            maps_io.write_attribute_channel(self.obj, opts["attribute"], self.ao,
-                                            opts["channel"])
-        else:
-            mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
-                                       overwrite=opts["overwrite"])
+    def write(self, txn, opts, last=False):
+        """last: nothing that can fail follows this write in the commit; the AO attribute is
+        then written last here too, and its old values need no copy (commit.Transaction)."""
         if self.thickness is not None:
             txn.attribute(self.obj, opts["thickness_name"])
             mesh_io.write_ao_attribute(self.obj, opts["thickness_name"], self.thickness,
@@ -75,13 +70,21 @@ class VertexTarget(Target):
             txn.attribute(self.obj, opts["bent_normals_name"])
             bent_io.write_attribute(self.obj, opts["bent_normals_name"], self.bent,
                                     overwrite=opts["overwrite"])
-        if opts["wire_material"]:
+        if opts["wire_material"]:  # the nodes name the attributes: they need not exist yet
             wire_undo(txn, self.obj)
             if opts["channel"] == "RGBA":  # a packed channel is for engines, not multiplied
                 materials.wire_vertex_ao(self.obj, opts["attribute"], opts["aov_name"])
             if self.thickness is not None:
                 maps_io.wire_thickness(self.obj, "vertex", opts["thickness_name"],
                                        opts["thickness_name"])
+        if opts["channel"] != "RGBA":
+            txn.attribute(self.obj, opts["attribute"])
+            maps_io.write_attribute_channel(self.obj, opts["attribute"], self.ao,
+                                            opts["channel"])
+        else:
+            txn.attribute(self.obj, opts["attribute"], last=last)
+            mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
+                                       overwrite=opts["overwrite"])
 
 
 class TexelTarget(Target):

@@ -128,6 +128,8 @@ def own_primitives(item: SceneItem, vertices=None, triangles=None):
     tracer's mesh): {"vertex_ids": ...} for its vertices ``vertices`` (an index array or
     slice), else {"triangle_ids": ...} for texels on ``triangles`` (int32 (N,), -1 =
     unknown), else None."""
+    if isinstance(vertices, slice):  # a chunk of the item's vertices: its ids, made alone
+        return {"vertex_ids": np.arange(*vertices.indices(len(item.positions)), dtype=np.int32)}
     if vertices is not None:
         return {"vertex_ids": np.arange(len(item.positions), dtype=np.int32)[vertices]}
     if triangles is not None:
