@@ -160,3 +160,43 @@ def test_empty_receivers_and_no_trees():
     assert np.all(empty.evaluate(p, n, "GROUND", -1, "medium", 1.0) == 1.0)
     blades = empty.evaluate(p, n, "GRASS", -1, "medium", 1.0, grass=(0.0, 0.3))
     np.testing.assert_allclose(blades, _core.ao_grass(p, n, 0.0, 0.3), atol=1e-7)
+
+
+@pytest.mark.parametrize("method", ["ellipsoid", "medium"])
+def test_an_item_holding_several_trees_is_one_call_with_a_tree_per_receiver(method):
+    """One mesh holding the trunks of A and B (a grove exported as one object): each vertex
+    is lit with its own tree, its own trunk left out, as a per-tree evaluation would."""
+    items = forest_items()
+    ta, tb = (it for it in items if it.name in ("TrunkA", "TrunkB"))
+    both = core.SceneItem("Trunks", "TRUNK", "A", np.concatenate([ta.positions, tb.positions]),
+                          np.concatenate([ta.normals, tb.normals]),
+                          np.concatenate([ta.triangles, tb.triangles + len(ta.positions)]),
+                          tree_labels=np.repeat(np.int32([0, 1]), [len(ta.positions),
+                                                                   len(tb.positions)]),
+                          tree_names=("A", "B"))
+    items = [it for it in items if it.name not in ("TrunkA", "TrunkB")] + [both]
+    plan = core.prepare(items, core.BakeSettings(method=method, tau=1.5, distance=0.0))
+    calls = []
+    real = lighting.lights(plan).native.evaluate
+
+    class Counting:
+        def evaluate(self, *args, **kwargs):
+            calls.append(1)
+            return real(*args, **kwargs)
+
+    lit = lighting.lights(plan)
+    lit.native, saved = Counting(), lit.native
+    try:
+        got = core.evaluate_receivers(plan, both, both.positions, both.normals,
+                                      vertices=slice(None))
+    finally:
+        lit.native = saved
+    assert len(calls) == 1
+    want = np.concatenate([
+        lighting_reference.evaluate(plan, "TRUNK", t, "Trunks", it.positions, it.normals,
+                                    method, plan.taus()) for t, it in (("A", ta), ("B", tb))])
+    np.testing.assert_allclose(got, want, atol=2e-6)
+    # The comparison tells the trees apart: every vertex lit as tree A's would differ.
+    as_a = lighting.evaluate_points(plan, "TRUNK", "A", "Trunks", both.positions, both.normals,
+                                    method, plan.taus())
+    assert float(np.max(np.abs(as_a - want))) > 1e-5

@@ -52,6 +52,15 @@ class Lights:
         """One τ per tree of the plan (tau_of)."""
         return [tau_of(tau, t) for t in self.trees]
 
+    def tree_ids(self, tree):
+        """The plan's index of a tree name (-1: none), or for (names, labels) — receivers of an
+        item holding several trees, labels indexing names — an int32 index per receiver."""
+        if not isinstance(tree, tuple):
+            return self.index.get(tree, -1)
+        names, labels = tree
+        ids = np.array([self.index.get(t, -1) for t in names], np.int32)
+        return np.ascontiguousarray(ids[np.asarray(labels, np.intp)])
+
 
 def _lights_key(plan: Plan):
     """What Lights is built from: the proxies' identities and the AO distance."""
@@ -73,6 +82,7 @@ def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
                     own=None) -> np.ndarray:
     """AO for receiver points p, n of an item: the scene's own objects (below) times the
     instanced trees of attach_forest, if any (V = Π (1 − occ), so the fields multiply).
+    tree: the item's tree, or for the analytic rungs (names, labels): a tree per receiver.
     own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
     in its item (-1 = none), so the exact rung's rays skip only what they start on."""
     ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
@@ -104,7 +114,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     # (docs/DESIGN.md, 'How each role is lit').
     lit = lights(plan)
     grass = _blades(plan, grass_key, p) if role == "GRASS" else None
-    ao = lit.native.evaluate(p, n, role, lit.index.get(tree, -1), method, lit.taus(tau),
+    ao = lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
                              grass=grass)
     return _ground_layers(plan, role, p, ao)
 
