@@ -200,3 +200,27 @@ def test_an_item_holding_several_trees_is_one_call_with_a_tree_per_receiver(meth
     as_a = lighting.evaluate_points(plan, "TRUNK", "A", "Trunks", both.positions, both.normals,
                                     method, plan.taus())
     assert float(np.max(np.abs(as_a - want))) > 1e-5
+
+
+def test_calibration_batches_equal_per_item_evaluation(items):
+    """Calibration evaluates its sample in one scene-plan call per role (ladder._batches),
+    which must give each point what its own item's evaluation gives."""
+    from canopy_ao.core import ladder
+    plan = plan_for(items, "shells", 2.0)
+    split = core.scene.split_trees(items)
+    groups = []
+    for it, idx in ladder.sample_receivers(split, 300, seed=3):
+        groups.append((it, np.ascontiguousarray(it.positions[idx]),
+                       np.ascontiguousarray(it.normals[idx]), None))
+    taus = {"A": 0.5, "B": 3.0, "C": 1.1, None: 1.5}
+    batches = ladder._batches(groups)
+    assert {role for role, _key in batches} == {"CANOPY", "TRUNK", "GROUND", "GRASS"}
+    assert len(batches) < len(groups)
+    for method in ("ellipsoid", "medium"):
+        want = np.concatenate([lighting.evaluate_points(plan, it.role, it.tree, it.name, p, n,
+                                                        method, taus)
+                               for it, p, n, _own in groups])
+        got = np.full(len(want), np.nan, np.float32)
+        for (role, key), (trees, p, n, where) in batches.items():
+            got[where] = lighting.evaluate_points(plan, role, trees, key, p, n, method, taus)
+        np.testing.assert_allclose(got, want, atol=1e-6)
