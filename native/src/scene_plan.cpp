@@ -69,6 +69,29 @@ void in_shell(PointsView p, PointsView n, const TreeProxies& t, PlanMethod m, fl
   }
 }
 
+// A sphere holding every shell (each within its largest radius of its centre), its squared
+// radius grown by 1e-3: far more than Ellipsoid::contains' slack (|x'|² ≤ 1 + 1e-5) and float
+// round-off, so a point outside it is outside every shell. −1: no shells.
+std::pair<Vec3, float> bound(const std::vector<Ellipsoid>& shells) {
+  if (shells.empty()) return {Vec3{0, 0, 0}, -1.0f};
+  double c[3] = {0, 0, 0};
+  for (const Ellipsoid& e : shells) {
+    for (int k = 0; k < 3; ++k) c[k] += double(e.center[k]) / double(shells.size());
+  }
+  const Vec3 cf{float(c[0]), float(c[1]), float(c[2])};  // the radius is measured from it
+  double r = 0;
+  for (const Ellipsoid& e : shells) {
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      d2 += (double(e.center[k]) - double(cf[k])) * (double(e.center[k]) - double(cf[k]));
+    }
+    const double rmax = std::max({e.radii.x, e.radii.y, e.radii.z});
+    r = std::max(r, std::sqrt(d2) + rmax);
+  }
+  r *= 1.001;
+  return {cf, float(r * r)};
+}
+
 }  // namespace
 
 int ScenePlan::set_of(PlanMethod m) {
@@ -90,7 +113,10 @@ ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& opt
                                    : std::vector<Ellipsoid>{});
     sets_[2].push_back(t.has_crown ? t.shells : std::vector<Ellipsoid>{});
   }
-  for (auto& set : sets_) crowns_.push_back(grouped_field(set, /*solid=*/false, options));
+  for (int k = 0; k < 3; ++k) {
+    crowns_.push_back(grouped_field(sets_[k], /*solid=*/false, options));
+    for (const std::vector<Ellipsoid>& shells : sets_[k]) bounds_[k].push_back(bound(shells));
+  }
 }
 
 std::shared_ptr<const OccluderMaterial> ScenePlan::material(float tau) const {
@@ -166,6 +192,8 @@ void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanRec
     for (std::size_t i = b; i < e; ++i) {
       const Vec3 x = positions[i];
       for (std::size_t t = 0; t < n_trees && claim[i] < 0; ++t) {
+        const Vec3 d = x - bounds_[set][t].first;
+        if (!(dot(d, d) <= bounds_[set][t].second)) continue;  // also no shells (−1)
         for (const Ellipsoid& s : shells[t]) {
           if (s.contains(x)) {
             claim[i] = static_cast<std::int32_t>(t);

@@ -96,6 +96,9 @@ class ScenePlan {
 
   std::vector<TreeProxies> trees_;
   std::vector<std::vector<Ellipsoid>> sets_[3];  // per shell set, per tree: its shells
+  // Per shell set, per tree: a sphere holding its shells (centre, squared radius with slack;
+  // −1 without shells), so finding a receiver's crown skips far trees cheaply.
+  std::vector<std::pair<Vec3, float>> bounds_[3];
   std::vector<OccluderField> crowns_;            // per shell set: every crown, grouped by tree
   OccluderField trunks_;                         // every trunk (solid), grouped by tree
   mutable std::mutex cache_mutex_;               // guards materials_ (evaluate is const)
