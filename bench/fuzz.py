@@ -256,6 +256,31 @@ c_occluders = ao_case(lambda g, core, p, n: lambda: core.ao_occluders(
 c_occluder_field = ao_case(lambda g, core, p, n: lambda: core.OccluderField(
     g.shells(core), g.tau(), g.scalar(0, 0.1), g.chance(0.3),
     g.pick(["medium", "solid_opacity"])).ao(p, n))
+
+
+def c_scene_plan(g, core, tmp):
+    p, nrm, n = receivers(g)
+    trees = int(g.r.integers(0, 5))
+    crowns = [None if g.chance(0.3) else (g.sphere(core), g.ellipsoid(core), g.shells(core))
+              for _ in range(trees)]
+    trunks = [g.shells(core) if g.chance(0.5) else [] for _ in range(trees)]
+    roles = ["CANOPY", "TRUNK", "GROUND", "GRASS"]
+    role = g.pick(roles) if g.chance(0.95) else "LEAF"
+    if g.chance(0.8):
+        tree = g.integer(-1, trees - 1)
+    else:
+        tree = g.r.integers(-1, max(trees, 1), n, dtype=np.int32)
+    tau = [g.tau() for _ in range(trees if g.chance(0.9) else trees + 1)] \
+        if g.chance(0.5) else g.tau()
+    grass = (g.scalar(-1, 1), g.scalar(0.05, 2)) if role == "GRASS" or g.chance(0.03) else None
+    kw = dict(distance=g.scalar(0.1, 10) if g.chance(0.3) else float("inf"),
+              epsilon=g.scalar(0, 0.1))
+    methods = ["sphere", "ellipsoid", "reeves_blau", "shells", "medium"]
+    method = g.pick(methods) if g.chance(0.95) else "grid"
+    return (lambda: core.ScenePlan(crowns, trunks, **kw).evaluate(
+        p, nrm, role, tree, method, tau, grass)), (lambda r: check_ao(r, n))
+
+
 c_grass = ao_case(lambda g, core, p, n: lambda: core.ao_grass(
     p, n, g.scalar(-1, 1), g.scalar(0.05, 2), g.vec3(direction=True), g.scalar(0, 1, 0.2)))
 c_medium_sphere = ao_case(lambda g, core, p, n: lambda: core.ao_medium_sphere(

@@ -133,15 +133,7 @@ bool sphere_inside(const void* shape, const float* x, double tol) {
 }
 
 bool ellipsoid_inside(const void* shape, const float* x, double tol) {
-  const auto& e = *static_cast<const Ellipsoid*>(shape);
-  double d[3], u2 = 0;
-  for (int k = 0; k < 3; ++k) d[k] = double(x[k]) - double(e.center[k]);
-  for (int k = 0; k < 3; ++k) {
-    const double u = (e.axes[k].x * d[0] + e.axes[k].y * d[1] + e.axes[k].z * d[2]) /
-                     double(e.radii[k]);
-    u2 += u * u;
-  }
-  return u2 <= 1 + tol;
+  return static_cast<const Ellipsoid*>(shape)->contains(Vec3{x[0], x[1], x[2]}, tol);
 }
 
 std::string fmt(Vec3 v) {

@@ -18,6 +18,7 @@ void bind_texel(py::module_& m);
 void bind_medium(py::module_& m);
 void bind_features(py::module_& m);
 void bind_mesh_arrays(py::module_& m);
+void bind_scene_plan(py::module_& m);
 }  // namespace canopy_ao::py_bind
 
 PYBIND11_MODULE(_core, m) {
@@ -78,4 +79,5 @@ PYBIND11_MODULE(_core, m) {
   py_bind::bind_medium(m);
   py_bind::bind_features(m);
   py_bind::bind_mesh_arrays(m);
+  py_bind::bind_scene_plan(m);
 }

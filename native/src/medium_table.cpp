@@ -353,10 +353,27 @@ void ao_medium_shells(PointsView positions, PointsView normals,
   for (float t : taus) require_tau(t);
   require_receivers(positions, normals);
   const MediumTable& table = MediumTable::get();
-  std::vector<MediumTable::Slice> slices;
-  for (std::size_t k = 0; k < shells.size(); ++k) {
-    slices.push_back(table.slice(taus.size() == 1 ? taus[0] : taus[k]));
+  std::vector<MediumTable::Slice> slices;  // one per τ given (one τ: one slice for all)
+  for (float t : taus) slices.push_back(table.slice(t));
+  std::vector<const MediumTable::Slice*> ptrs;
+  for (const MediumTable::Slice& sl : slices) ptrs.push_back(&sl);
+  ao_medium_shells_sliced(positions, normals, shells, ptrs, combine, out);
+}
+
+void ao_medium_shells_sliced(PointsView positions, PointsView normals,
+                             const std::vector<Ellipsoid>& shells,
+                             const std::vector<const MediumTable::Slice*>& slices,
+                             MediumCombine combine, float* out) {
+  if (!(slices.size() == 1 || slices.size() == shells.size())) {
+    throw std::invalid_argument("slices must hold one or one per shell (" +
+                                std::to_string(shells.size()) + "), got " +
+                                std::to_string(slices.size()));
   }
+  for (std::size_t k = 0; k < shells.size(); ++k) {
+    require_ellipsoid(shells[k], ("shells[" + std::to_string(k) + "]").c_str());
+  }
+  require_receivers(positions, normals);
+  const std::size_t per_shell = slices.size() == 1 ? 0 : 1;
   parallel_for_blocks(positions.size, kGrain, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Vec3 x = positions[i], n = normals[i];
@@ -365,7 +382,7 @@ void ao_medium_shells(PointsView positions, PointsView normals,
         for (std::size_t k = 0; k < shells.size(); ++k) {
           float r, c;
           if (unit_frame_coords(shells[k].to_unit(x), shells[k].normal_to_unit(n), &r, &c)) {
-            v *= slices[k].ao(r, c);
+            v *= slices[k * per_shell]->ao(r, c);
           }
         }
       } else if (!shells.empty()) {
@@ -378,7 +395,7 @@ void ao_medium_shells(PointsView positions, PointsView normals,
         }
         float r, c;
         if (unit_frame_coords(shells[best].to_unit(x), shells[best].normal_to_unit(n), &r, &c)) {
-          v = slices[best].ao(r, c);
+          v = slices[best * per_shell]->ao(r, c);
         }
       }
       out[i] = v;

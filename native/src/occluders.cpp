@@ -99,10 +99,30 @@ float occluder_visibility_medium(Vec3 x, Vec3 n, const Ellipsoid& shell,
   return std::clamp(1.0f - (1.0f - v) * reach_share(c, d2, r2, distance), 0.0f, 1.0f);
 }
 
+OccluderMaterial OccluderMaterial::of(const OccluderOptions& options) {
+  OccluderMaterial m;
+  if (options.solid) return m;  // opaque: τ and law not used
+  check_tau(options.tau);
+  m.opacity = shell_opacity(options.tau);
+  m.medium = options.law == OccluderLaw::Medium;
+  if (m.medium) m.slice = MediumTable::get().slice(options.tau);
+  return m;
+}
+
 // === OccluderField
-OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options)
-    : shells_(std::move(shells)) {
-  if (!options.solid) check_tau(options.tau);
+OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options,
+                             std::vector<std::int32_t> groups)
+    : shells_(std::move(shells)), groups_(std::move(groups)) {
+  if (!groups_.empty()) {
+    if (groups_.size() != shells_.size()) {
+      throw std::invalid_argument("groups must be empty or one per shell, got " +
+                                  std::to_string(groups_.size()) + " for " +
+                                  std::to_string(shells_.size()) + " shells");
+    }
+    for (std::int32_t g : groups_) {
+      if (g < 0) throw std::invalid_argument("groups must be >= 0, got " + std::to_string(g));
+    }
+  }
   if (!std::isfinite(options.epsilon) || options.epsilon < 0 || options.epsilon >= 1) {
     throw std::invalid_argument("epsilon must be in [0, 1), got " +
                                 std::to_string(options.epsilon));
@@ -113,9 +133,7 @@ OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOption
                                 std::to_string(options.distance));
   }
   distance_ = options.distance;
-  opacity_ = options.solid ? 1.0f : shell_opacity(options.tau);
-  medium_ = !options.solid && options.law == OccluderLaw::Medium;
-  if (medium_) slice_ = MediumTable::get().slice(options.tau);  // outside any parallel body
+  material_ = OccluderMaterial::of(options);  // outside any parallel body (the medium table)
   const std::size_t n = shells_.size();
   if (n >= std::numeric_limits<std::uint32_t>::max()) throw std::invalid_argument("too many shells");
   far_.resize(n);
@@ -216,7 +234,9 @@ OccluderField::OccluderField(std::vector<Ellipsoid> shells, const OccluderOption
     for_cells(i, [&](std::size_t c) { items_[fill[c]++] = static_cast<std::uint32_t>(i); });
 }
 
-float OccluderField::visibility(Vec3 x, Vec3 n) const {
+// material_of(i): shell i's material, or nullptr to leave the shell out.
+template <class MaterialOf>
+float OccluderField::visit(Vec3 x, Vec3 n, MaterialOf&& material_of) const {
   std::size_t cell = 0;
   if (!unbounded_) {
     int idx[3];
@@ -238,10 +258,24 @@ float OccluderField::visibility(Vec3 x, Vec3 n) const {
     // Bounding sphere wholly below the tangent plane (cos θ ≤ −sin σ): blocks nothing. Cheap,
     // and it removes about half the pairs before any transcendental function.
     if (dot(nu, dv) <= -rmax_[i]) continue;
-    v *= medium_ ? occluder_visibility_medium(x, nu, shells_[i], slice_, distance_)
-                 : occluder_visibility(x, nu, shells_[i], opacity_, distance_);  // Π (1 − occ_i)
+    const OccluderMaterial* m = material_of(i);
+    if (m == nullptr) continue;
+    v *= m->medium ? occluder_visibility_medium(x, nu, shells_[i], m->slice, distance_)
+                   : occluder_visibility(x, nu, shells_[i], m->opacity, distance_);  // Π (1 − occ_i)
   }
   return v;
+}
+
+float OccluderField::visibility(Vec3 x, Vec3 n) const {
+  return visit(x, n, [this](std::uint32_t) -> const OccluderMaterial* { return &material_; });
+}
+
+float OccluderField::visibility(Vec3 x, Vec3 n, const OccluderMaterial* const* by_group,
+                                std::int32_t skip) const {
+  return visit(x, n, [&](std::uint32_t i) -> const OccluderMaterial* {
+    const std::int32_t g = group(i);
+    return g == skip ? nullptr : by_group[g];
+  });
 }
 
 void OccluderField::ao(PointsView positions, PointsView normals, float* out) const {

@@ -42,6 +42,10 @@ def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
     whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
+    if settings.method in ladder.TAU_METHODS + ("auto",) and (plan.fits or plan.trunks):
+        t0 = time.perf_counter()
+        lighting.lights(plan)  # the native scene plan: built once, calibration reuses it
+        plan.timings["scene_plan"] = time.perf_counter() - t0
 
     if prototypes:
         _attach(plan, prototypes, None)
@@ -137,14 +141,18 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     else:
         labels = (item.tree_labels[vertices] if vertices is not None
                   else _nearest_crown(plan, item.tree_names, p))
-        ao = np.ones(len(p), np.float32)
-        for k, tree in enumerate(item.tree_names):
-            sel = np.flatnonzero(labels == k)
-            if len(sel):
-                ao[sel] = lighting.evaluate_points(
-                    plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
-                    np.ascontiguousarray(n[sel]), plan.method, plan.taus(),
-                    {k: v[sel] for k, v in own.items()} if own else None)
+        if plan.method in ladder.TAU_METHODS:  # the scene plan: one call, a tree per receiver
+            ao = lighting.evaluate_points(plan, item.role, (item.tree_names, labels), item.name,
+                                          p, n, plan.method, plan.taus(), own)
+        else:
+            ao = np.ones(len(p), np.float32)
+            for k, tree in enumerate(item.tree_names):
+                sel = np.flatnonzero(labels == k)
+                if len(sel):
+                    ao[sel] = lighting.evaluate_points(
+                        plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
+                        np.ascontiguousarray(n[sel]), plan.method, plan.taus(),
+                        {k: v[sel] for k, v in own.items()} if own else None)
     if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     return ao

@@ -164,11 +164,17 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         else np.zeros(0, bool)
     t_trace = time.perf_counter() - t0
 
+    batches = _batches(groups)
+
     def err(method, tau):
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
             got = [trace(plan, p, n, s.samples, seed=s.seed + 7919, own=own)
                    for _it, p, n, own in groups]
+        elif method in TAU_METHODS:  # the scene plan: one call per role, a tree per point
+            got = [np.empty(len(ref), np.float32)]
+            for (role, key), (trees, p, n, where) in batches.items():
+                got[0][where] = evaluate_points(plan, role, trees, key, p, n, method, tau)
         else:
             got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
                    for it, p, n, _own in groups]
@@ -228,6 +234,25 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
                        "formula": cost.FORMULA},
     }
     return chosen, results[chosen][0], info
+
+
+def _batches(groups):
+    """The calibration sample as one batch per role (and per grass item, whose blade height
+    is its own): {(role, grass item or None): ((tree names, label per point), positions,
+    normals, the points' indices in the sample)}, for the scene plan's tree per receiver."""
+    parts, start = {}, 0
+    for it, p, n, _own in groups:
+        key = (it.role, it.name if it.role == "GRASS" else None)
+        parts.setdefault(key, []).append((it.tree, p, n, np.arange(start, start + len(p))))
+        start += len(p)
+    out = {}
+    for key, rows in parts.items():
+        names = sorted({t for t, *_ in rows})
+        labels = np.concatenate([np.full(len(p), names.index(t), np.int32)
+                                 for t, p, _n, _w in rows])
+        out[key] = ((tuple(names), labels), np.concatenate([r[1] for r in rows]),
+                    np.concatenate([r[2] for r in rows]), np.concatenate([r[3] for r in rows]))
+    return out
 
 
 def _scene_tau(tau):

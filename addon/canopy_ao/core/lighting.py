@@ -9,6 +9,9 @@ ray tracer or density grid (docs/DESIGN.md, 'How each role is lit').
 - GRASS: Hegeman Eq. 9 with ground level and blade height found from the blades (connected
   components) × the same occluders as the ground.
 - method "raytrace": Embree rays against every non-ignored triangle of the scene.
+
+The analytic rungs' composition is the native scene plan's (_core.ScenePlan, scene_plan.h),
+built once per bake from the fitted proxies (Lights); this module only chooses the call.
 """
 
 from __future__ import annotations
@@ -18,7 +21,6 @@ import math
 import numpy as np
 
 from .native import CanopyAOError, _core
-from .proxies import own_shells
 from .scene import Plan
 
 
@@ -30,44 +32,49 @@ def tau_of(tau, tree):
     return float(tau)
 
 
-def _occluders(p, n, shells, tau, distance, solid=False):
-    """Visibility through shells (or solids) seen from outside, cut at the AO distance
-    (0 = unlimited; occluders.h, 'AO distance')."""
-    if not shells or len(p) == 0:
-        return np.ones(len(p), np.float32)
-    kw = {"distance": float(distance)} if distance > 0 else {}
-    return _core.ao_occluders(p, n, list(shells), float(tau), solid=solid, **kw)
+class Lights:
+    """The scene's lighting as data: the native ScenePlan (every tree's crown proxies and solid
+    trunks with their occluder grids, built once per bake) and the tree names its indices
+    stand for. Calibration's τ search and every item's evaluation reuse it."""
+
+    def __init__(self, plan: Plan):
+        # Crowns first, in plan.fits order (a receiver inside two crowns takes the first's
+        # model), then trees that have a trunk but no leaves.
+        self.trees = list(plan.fits) + [t for t in plan.trunks if t not in plan.fits]
+        self.index = {t: i for i, t in enumerate(self.trees)}
+        d = plan.settings.distance
+        self.native = _core.ScenePlan([plan.fits.get(t) for t in self.trees],
+                                      [list(plan.trunks.get(t, ())) for t in self.trees],
+                                      distance=float(d) if d > 0 else math.inf)
+        self.key = _lights_key(plan)
+
+    def taus(self, tau) -> list:
+        """One τ per tree of the plan (tau_of)."""
+        return [tau_of(tau, t) for t in self.trees]
+
+    def tree_ids(self, tree):
+        """The plan's index of a tree name (-1: none), or for (names, labels) — receivers of an
+        item holding several trees, labels indexing names — an int32 index per receiver."""
+        if not isinstance(tree, tuple):
+            return self.index.get(tree, -1)
+        names, labels = tree
+        ids = np.array([self.index.get(t, -1) for t in names], np.int32)
+        return np.ascontiguousarray(ids[np.asarray(labels, np.intp)])
 
 
-def _tree_occluders(p, n, shells_by_tree, tau, distance):
-    """Visibility through every tree's shells, each with its own τ: V = Π (1 − occ) over the
-    shells (occluders.h), so one call per distinct τ multiplied is the same field."""
-    groups = {}
-    for t, es in shells_by_tree.items():
-        groups.setdefault(tau_of(tau, t), []).extend(es)
-    ao = None
-    for tt, es in groups.items():
-        v = _occluders(p, n, es, tt, distance)
-        ao = v if ao is None else ao * v
-    return np.ones(len(p), np.float32) if ao is None else ao
+def _lights_key(plan: Plan):
+    """What Lights is built from: the proxies' identities and the AO distance."""
+    return (tuple((t, id(f)) for t, f in plan.fits.items()),
+            tuple((t, tuple(map(id, es))) for t, es in plan.trunks.items()),
+            plan.settings.distance)
 
 
-def _in_shell(p, n, tree_fit, method, tau):
-    """The in-shell model for a tree's own receivers (docs/DESIGN.md, 'The method ladder')."""
-    sphere, ell, shells = tree_fit
-    if method == "sphere":
-        return _core.ao_canopy_sphere(p, n, sphere, float(tau))
-    if method == "ellipsoid":
-        return _core.ao_canopy_ellipsoid(p, n, ell, float(tau))
-    if method == "reeves_blau":
-        return _core.ao_reeves_blau(p, n, ell, float(tau))
-    if method == "shells":
-        if len(shells) == 1:
-            return _core.ao_canopy_ellipsoid(p, n, shells[0], float(tau))
-        return _core.ao_canopy_shells(p, n, list(shells), float(tau), combine="product")
-    if method == "medium":
-        return _core.ao_medium_shells(p, n, list(shells), float(tau), combine="product")
-    raise CanopyAOError(f"unknown analytic method {method!r}")
+def lights(plan: Plan) -> Lights:
+    """plan.lights, built on first use after the proxies are fitted (bake.prepare builds it
+    there) and again only if the proxies or the AO distance changed since."""
+    if plan.lights is None or plan.lights.key != _lights_key(plan):
+        plan.lights = Lights(plan)
+    return plan.lights
 
 
 def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
@@ -75,6 +82,7 @@ def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
                     own=None) -> np.ndarray:
     """AO for receiver points p, n of an item: the scene's own objects (below) times the
     instanced trees of attach_forest, if any (V = Π (1 − occ), so the fields multiply).
+    tree: the item's tree, or for the analytic rungs (names, labels): a tree per receiver.
     own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
     in its item (-1 = none), so the exact rung's rays skip only what they start on."""
     ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
@@ -104,59 +112,39 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         return plan.regression.ao(role, tree, p, n)
     if method == "hybrid":
         return _grass(plan, role, grass_key, p, n, _hybrid_ao(plan, p, n))
-    ao = np.ones(len(p), np.float32)
-    dist = plan.settings.distance
-    shells = {t: own_shells(plan, t, method) for t in plan.fits}
-    inside = {}
-    for t, es in shells.items():
-        ins = np.zeros(len(p), bool)
-        for e in es:
-            ins |= np.asarray(e.contains(p), bool)
-        if ins.any():
-            inside[t] = ins
-    outside_all = np.ones(len(p), bool)
-    for ins in inside.values():
-        outside_all &= ~ins
-    if outside_all.any():  # the common case for ground: one call, the core's spatial grid
-        po, no = np.ascontiguousarray(p[outside_all]), np.ascontiguousarray(n[outside_all])
-        ao[outside_all] = _tree_occluders(po, no, shells, tau, dist)
-    claimed = np.zeros(len(p), bool)
-    for t, ins in inside.items():
-        done = ins & ~claimed
-        claimed |= ins
-        if not done.any():
-            continue
-        every = bool(done.all())  # one crown and all its leaves: no gather / scatter copies
-        pi, ni = (p, n) if every else (np.ascontiguousarray(p[done]),
-                                       np.ascontiguousarray(n[done]))
-        # Inside several trees' shells (crowns that interlock): the in-shell model of the
-        # first, the others as occluders (which skip shells a point is inside).
-        others = {u: es for u, es in shells.items() if u != t}
-        val = _in_shell(pi, ni, plan.fits[t], method, tau_of(tau, t))
-        if others:
-            val = val * _tree_occluders(pi, ni, others, tau, dist)
-        if every:
-            ao = np.asarray(val, dtype=np.float32)
-        else:
-            ao[done] = val
-    solids = [e for t, es in plan.trunks.items()
-              if t != tree or role in ("GROUND", "GRASS") for e in es]
-    if solids:
-        ao = ao * _occluders(p, n, solids, 1.0, dist, solid=True)  # opaque: τ is not used
-    return _grass(plan, role, grass_key, p, n, ao)
+    # The analytic rungs: the whole per-receiver composition in one native call
+    # (docs/DESIGN.md, 'How each role is lit').
+    lit = lights(plan)
+    grass = _blades(plan, grass_key, p) if role == "GRASS" else None
+    ao = lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
+                             grass=grass)
+    return _ground_layers(plan, role, p, ao)
+
+
+def _blades(plan: Plan, grass_key, p):
+    """(ground height, blade height) of a grass item (its blades' lowest point and 1 when it
+    was not seen when the plan was made)."""
+    ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
+    return float(ground), float(blade)
+
+
+def _ground_layers(plan: Plan, role, p, ao):
+    """ao (a fresh float32 array, changed in place) times every grass layer over the ground
+    (grass_layer.py) for a ground point, clipped to [0, 1]."""
+    if role == "GROUND" and plan.grass_layers:
+        for layer in plan.grass_layers:
+            ao *= layer.ground_visibility(p)
+        np.clip(ao, 0.0, 1.0, out=ao)
+    return ao
 
 
 def _grass(plan: Plan, role, grass_key, p, n, ao):
-    """ao times the grass: Hegeman Eq. 9 for a blade, every grass layer over the ground
-    (grass_layer.py) for a ground point. Returns a new float32 array clipped to [0, 1]."""
+    """ao times the grass, for the rungs the scene plan does not light: Hegeman Eq. 9 for a
+    blade, the grass layers for a ground point. Returns a new float32 array in [0, 1]."""
     ao = np.array(ao, dtype=np.float32)
     if role == "GRASS":
-        ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
-        ao *= _core.ao_grass(p, n, float(ground), float(blade))
-    elif role == "GROUND":
-        for layer in plan.grass_layers:
-            ao *= layer.ground_visibility(p)
-    return np.clip(ao, 0.0, 1.0, out=ao)
+        ao *= _core.ao_grass(p, n, *_blades(plan, grass_key, p))
+    return np.clip(_ground_layers(plan, role, p, ao), 0.0, 1.0, out=ao)
 
 
 def own_ids(plan: Plan, name, own):

@@ -74,6 +74,8 @@ class Plan:
     tau_by_tree: dict = field(default_factory=dict)  # τ calibrated per tree (else plan.tau)
     # tree -> int32 (N,): the k-means shell of each of its canopy points (kept by live AO)
     shell_labels: dict = field(default_factory=dict)
+    # lighting.Lights: the native scene plan of fits and trunks, built once (lighting.lights)
+    lights: object = None
 
     def taus(self):
         """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""

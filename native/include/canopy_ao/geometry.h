@@ -90,6 +90,19 @@ struct Ellipsoid {
                           dot(axes[2], n) * radii.z});
   }
   float volume() const { return 4.0f / 3.0f * 3.14159265358979f * radii.x * radii.y * radii.z; }
+  /// Whether p is inside, in double with a relative slack `tol` on the squared unit-frame
+  /// norm (|x'|² ≤ 1 + tol), so a point on the surface up to float32 round-off counts.
+  bool contains(Vec3 p, double tol = 1e-5) const {
+    const double d[3] = {double(p.x) - double(center.x), double(p.y) - double(center.y),
+                         double(p.z) - double(center.z)};
+    double u2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double u = (axes[k].x * d[0] + axes[k].y * d[1] + axes[k].z * d[2]) /
+                       double(radii[k]);
+      u2 += u * u;
+    }
+    return u2 <= 1 + tol;
+  }
   static Ellipsoid from_sphere(const Sphere& s) {
     Ellipsoid e;
     e.center = s.center;

@@ -119,5 +119,11 @@ enum class MediumCombine {
 void ao_medium_shells(PointsView positions, PointsView normals,
                       const std::vector<Ellipsoid>& shells, const std::vector<float>& taus,
                       MediumCombine combine, float* out);
+/// The same with the table's slices given (one for every shell, or one per shell; each
+/// MediumTable::get().slice(τ)), for a caller that keeps them across calls (scene_plan.h).
+void ao_medium_shells_sliced(PointsView positions, PointsView normals,
+                             const std::vector<Ellipsoid>& shells,
+                             const std::vector<const MediumTable::Slice*>& slices,
+                             MediumCombine combine, float* out);
 
 }  // namespace canopy_ao

@@ -139,19 +139,40 @@ struct OccluderOptions {
   float distance = std::numeric_limits<float>::infinity();
 };
 
+/// The τ-dependent part of a shell's law: what OccluderOptions' τ, solid and law select. The
+/// spatial grid does not depend on it (the reach is r_max, ε and D alone), so a field built
+/// once can be evaluated under other τ (a calibration's search, one τ per tree).
+struct OccluderMaterial {
+  float opacity = 1.0f;       ///< SolidOpacity (solid: 1)
+  bool medium = false;        ///< OccluderLaw::Medium and not solid
+  MediumTable::Slice slice;   ///< the medium table at τ (medium only)
+  /// The material options ask for. PRE: τ valid unless solid (std::invalid_argument). Builds
+  /// the medium table on first use: call outside any parallel_for_blocks body.
+  static OccluderMaterial of(const OccluderOptions& options);
+};
+
 /// A set of occluders with their spatial grid, built once, evaluated many times.
 class OccluderField {
  public:
   // === Constructor
   /// PRE: each shell valid (radii > 0, orthonormal axes); options valid. Throws
   /// std::invalid_argument otherwise. An empty list is allowed (V = 1 everywhere).
-  OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options);
+  /// groups: empty, or one group ≥ 0 per shell (e.g. the tree it belongs to) for the grouped
+  /// visibility below, where each group gets its own material.
+  OccluderField(std::vector<Ellipsoid> shells, const OccluderOptions& options,
+                std::vector<std::int32_t> groups = {});
 
   // === Methods
   /// positions, normals: N×3; out: N floats in [0, 1].
   void ao(PointsView positions, PointsView normals, float* out) const;
   /// One receiver.
   float visibility(Vec3 x, Vec3 n) const;
+  /// One receiver, shell i with material *by_group[group(i)] (a field built with groups; the
+  /// caller's array covers every group), the shells of group `skip` left out (−1: none).
+  float visibility(Vec3 x, Vec3 n, const OccluderMaterial* const* by_group,
+                   std::int32_t skip) const;
+  /// The group of shell i (0 for a field built without groups).
+  std::int32_t group(std::size_t i) const { return groups_.empty() ? 0 : groups_[i]; }
 
   // === Introspection (tests, reports)
   std::size_t size() const { return shells_.size(); }
@@ -164,10 +185,12 @@ class OccluderField {
   std::vector<Ellipsoid> shells_;
   std::vector<float> far_;   // d_far per occluder
   std::vector<float> rmax_;  // largest semi-axis per occluder (bounding sphere)
-  float opacity_ = 1.0f;
+  template <class MaterialOf>
+  float visit(Vec3 x, Vec3 n, MaterialOf&& material_of) const;
+
+  std::vector<std::int32_t> groups_;  // per shell (empty: ungrouped)
   float distance_ = std::numeric_limits<float>::infinity();
-  bool medium_ = false;          // OccluderLaw::Medium (and not solid)
-  MediumTable::Slice slice_;     // medium table at τ (medium_ only)
+  OccluderMaterial material_;  // the options' material (ungrouped visibility)
   bool unbounded_ = false;  // ε = 0: one list holds every occluder
   Vec3 lo_;                 // grid origin
   float inv_cell_ = 1.0f;

@@ -1,0 +1,127 @@
+"""Calibration and evaluation with the native scene plan against the Python composition it
+replaced, on a multi-tree scene, in one run (bench/README.md, "The scene plan").
+
+    /usr/bin/python3 bench/scene_plan_speed.py [--trees 5] [--leaves 12000] [--repeat 3]
+
+The scene is examples/canopy_scenes.grove (mixed trees on a ground, trunks). One plan is
+prepared (fits, ray tracer); then, both ways, best of --repeat:
+
+- calibrate: core/ladder.calibrate over the analytic rungs (sphere, ellipsoid, shells,
+  medium), τ searched per rung and per tree (golden section: many evaluations of the same
+  few hundred sample points); the reference rays are traced inside it, the same cost both ways;
+- evaluate: every item's vertices with the chosen rung and τ.
+
+"python" runs lighting's analytic branch as tests/python/lighting_reference.py (the old
+composition: containment, gather/scatter per tree, an OccluderField built per call), "native"
+the one _core.ScenePlan.evaluate call per item. The results of both are compared too.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+for sub in ("addon", "examples", os.path.join("tests", "python")):
+    sys.path.insert(0, os.path.join(ROOT, sub))
+
+import canopy_scenes  # noqa: E402
+import lighting_reference  # noqa: E402
+from canopy_ao import core  # noqa: E402
+from canopy_ao.core import ladder, lighting  # noqa: E402
+
+RUNGS = ["sphere", "ellipsoid", "shells", "medium"]
+
+
+def grove_items(trees, leaves):
+    scene = canopy_scenes.grove(n_trees=trees, leaves=leaves)
+    return [core.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
+                           canopy_scenes.vertex_normals(p.vertices, p.triangles), p.triangles)
+            for p in scene]
+
+
+def python_composition():
+    """lighting._evaluate_scene_points with its analytic branch as the old Python code."""
+    native = lighting._evaluate_scene_points
+
+    def old(plan, role, tree, grass_key, p, n, method, tau, own=None):
+        if method not in ladder.TAU_METHODS:
+            return native(plan, role, tree, grass_key, p, n, method, tau, own)
+        if not isinstance(tree, tuple):
+            return lighting_reference.evaluate(plan, role, tree, grass_key, p, n, method, tau)
+        # A tree per point (calibration's batches): one call per tree, as the old code made
+        # one per item.
+        names, labels = tree
+        out = np.ones(len(p), np.float32)
+        for k, name in enumerate(names):
+            sel = np.flatnonzero(labels == k)
+            out[sel] = lighting_reference.evaluate(
+                plan, role, name, grass_key, np.ascontiguousarray(p[sel]),
+                np.ascontiguousarray(n[sel]), method, tau)
+        return out
+    return native, old
+
+
+def run(plan, items, repeat):
+    """(calibrate seconds, of which tracing, evaluate seconds, the AO arrays), best of repeat."""
+    best_cal = best_eval = best_trace = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        method, tau, info = ladder.calibrate(plan, items, RUNGS)
+        best_cal = min(best_cal, time.perf_counter() - t0)
+        best_trace = min(best_trace, info["trace_seconds"])
+        t0 = time.perf_counter()
+        aos = [lighting.evaluate_points(plan, it.role, it.tree, it.name, it.positions,
+                                        it.normals, method, tau) for it in items]
+        best_eval = min(best_eval, time.perf_counter() - t0)
+    return best_cal, best_trace, best_eval, (method, tau, aos)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--trees", type=int, default=5)
+    ap.add_argument("--leaves", type=int, default=12000)
+    ap.add_argument("--repeat", type=int, default=3)
+    a = ap.parse_args()
+    items = grove_items(a.trees, a.leaves)
+    settings = core.BakeSettings(method="shells", tau=None, distance=0.0)
+    plan = core.prepare(items, settings)  # fits, tracer, one calibration (warms the caches)
+    split = core.scene.split_trees(items)
+    receivers = sum(len(it.positions) for it in split if it.role in core.RECEIVER_ROLES)
+    print(f"grove: {len(plan.fits)} crowns, {sum(map(len, plan.trunks.values()))} trunks, "
+          f"{receivers} receivers; calibration of {', '.join(RUNGS)} on "
+          f"{settings.calibration_points} points; best of {a.repeat}; "
+          f"load {os.getloadavg()[0]:.1f}")
+    native, old = python_composition()
+    figures = {}
+    for name, fn in (("python", old), ("native", native)):
+        lighting._evaluate_scene_points = fn
+        try:
+            figures[name] = run(plan, split, a.repeat)
+        finally:
+            lighting._evaluate_scene_points = native
+    print(f"{'':8} {'calibrate s':>12} {'(tracing s)':>12} {'evaluate s':>11}")
+    for name, (cal, trace, ev, _res) in figures.items():
+        print(f"{name:8} {cal:12.3f} {trace:12.3f} {ev:11.3f}")
+    (pc, pt, pe, (pm, ptau, pao)), (nc, nt, ne, (nm, ntau, nao)) = figures.values()
+    print(f"native / python: calibrate {nc / pc:.2f}x, calibrate without tracing "
+          f"{(nc - nt) / max(pc - pt, 1e-9):.2f}x, evaluate {ne / pe:.2f}x")
+    # Calibration may settle on τ a hair apart (round-off flips a comparison in the search):
+    # compare both compositions at the native run's rung and τ.
+    lighting._evaluate_scene_points = old
+    try:
+        pao = [lighting.evaluate_points(plan, it.role, it.tree, it.name, it.positions,
+                                        it.normals, nm, ntau) for it in split]
+    finally:
+        lighting._evaluate_scene_points = native
+    diff = max(float(np.max(np.abs(x - y))) if len(x) else 0.0 for x, y in zip(pao, nao))
+    print(f"chosen: python {pm}, native {nm}; largest difference of the scene-wide τ "
+          f"{abs(ladder._scene_tau(ptau) - ladder._scene_tau(ntau)):.1e}; largest AO "
+          f"difference at the same rung and τ {diff:.2e}")
+
+
+if __name__ == "__main__":
+    main()
