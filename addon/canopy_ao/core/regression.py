@@ -23,15 +23,23 @@ import time
 import numpy as np
 
 from . import native
+from .ladder import BURIED_RAYS as LADDER_BURIED_RAYS, BURIED_SCALE
 from .native import CanopyAOError
 from .scene import RECEIVER_ROLES
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
-BURIED_FRACTION = 0.01   # of the receiver's object bbox diagonal
-BURIED_RAYS = 32
+# Buried: every one of BURIED_RAYS rays stops within BURIED_FRACTION of the receiver's object
+# bounding-box diagonal (auto's test, ladder.py, with twice its rays: with 16 rays more of the
+# darkest unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046).
+BURIED_FRACTION = BURIED_SCALE
+BURIED_RAYS = 2 * LADDER_BURIED_RAYS
 LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
 MIN_GROUP = 96           # sample points a group needs for its own fit
 POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
+# Sizing on small scenes (calibration_size): counted work, scale-free.
+RAYS_PER_RECEIVER = 8    # calibration rays per receiver at most: 1/8 of a 64-ray bake
+MIN_SAMPLES = 32         # rays per calibration point at least
+MIN_POINTS = 256         # calibration points at least (when the scene has them)
 
 
 def _merged(items):
@@ -60,30 +68,36 @@ def tree_frame(points):
 
 def ridge(X, y, lambdas=LAMBDAS, folds=5, seed=0):
     """Weights of a ridge fit (intercept column 0 not penalised), λ by k-fold CV. Returns
-    (weights float64 (P,), λ, CV mean absolute error)."""
+    (weights float64 (P,), λ, CV mean absolute error).
+
+    One Gram matrix per fold, the training folds' as the total minus the held-out one, so the
+    search costs k products of the sample and k·|λ| small P × P solves."""
     X = np.asarray(X, np.float64)
     y = np.asarray(y, np.float64)
     n, p = X.shape
     pen = np.eye(p)
     pen[0, 0] = 0.0
-
-    def solve(A, b, lam):
-        return np.linalg.solve(A.T @ A + lam * len(A) * pen, A.T @ b)
+    G, b = X.T @ X, X.T @ y
 
     fold = np.random.default_rng(seed).permutation(n) % folds
+    parts = []
+    for f in range(folds):
+        te = fold == f
+        ntr = n - int(te.sum())
+        if ntr <= 1 or not te.any():
+            continue
+        Xt = X[te]
+        parts.append((G - Xt.T @ Xt, b - Xt.T @ y[te], ntr, Xt, y[te]))
     best = (np.inf, lambdas[0])
     for lam in lambdas:
         err = 0.0
-        for f in range(folds):
-            tr, te = fold != f, fold == f
-            if tr.sum() <= 1 or te.sum() == 0:
-                continue
-            w = solve(X[tr], y[tr], lam)
-            err += float(np.abs(np.clip(X[te] @ w, 0, 1) - y[te]).sum())
+        for Gt, bt, ntr, Xt, yt in parts:
+            w = np.linalg.solve(Gt + lam * ntr * pen, bt)
+            err += float(np.abs(np.clip(Xt @ w, 0, 1) - yt).sum())
         err /= max(n, 1)
         if err < best[0]:
             best = (err, lam)
-    return solve(X, y, best[1]), best[1], best[0]
+    return np.linalg.solve(G + best[1] * n * pen, b), best[1], best[0]
 
 
 class Model:
@@ -120,23 +134,57 @@ def _sample(groups, count, seed):
     return out
 
 
+def calibration_size(receivers, points=POINTS, samples=128):
+    """(points, rays per point) of the calibration sample for ``receivers`` receiver points,
+    sized so the sample stays a fraction of a ray-traced bake of the same scene whatever its
+    size (docs/DESIGN.md, 'The ray-free rung'): it traces at most RAYS_PER_RECEIVER rays per
+    receiver (an eighth of a 64-ray bake), fewer rays per point first (down to MIN_SAMPLES:
+    the fit averages their noise out), then fewer points (down to MIN_POINTS). Counted, never
+    timed: the same scene always gets the same sample. (The grid keeps its resolution: at 32,
+    40 or 56 voxels a leaf vertex on the grid's top face changes its features by up to 0.2
+    between a scene and the same ×100, tests/python/test_regression.py.)"""
+    receivers = max(int(receivers), 1)
+    budget = RAYS_PER_RECEIVER * receivers
+    pts = min(int(points), receivers)
+    spp = int(min(samples, max(MIN_SAMPLES, budget // max(pts, 1))))
+    if pts * spp > budget:
+        pts = min(pts, max(MIN_POINTS, budget // spp))
+    return pts, spp
+
+
+def _own_ids_from(bases):
+    def ids(item, idx):
+        b = bases.get(item.name)
+        if b is None:
+            return None
+        whole = item.vertex_map[idx] if item.vertex_map is not None else idx
+        return (np.asarray(whole, np.int64) + b).astype(np.int32)
+    return ids
+
+
 class RegressionRung:
     """The fitted rung for one scene: build once (grid, sweeps, calibration sample, fits), then
     :meth:`ao` for any receiver points of an item, in any number of calls.
 
     items: SceneItems (roles upper case; IGNORE skipped). distance: the AO distance of the
-    calibration rays (0 = unlimited). points × samples: the calibration sample's size. The
-    sample is traced against every non-ignored triangle with each point's own vertex named,
-    so a receiver skips only the triangles it starts on (as Cycles)."""
+    calibration rays (0 = unlimited). points × samples: the calibration sample's largest size
+    (calibration_size shrinks it on small scenes); resolution: the grid's. The sample is traced
+    against every non-ignored triangle with each
+    point's own vertex named, so a receiver skips only the triangles it starts on (as Cycles).
+    tracer, ids: the plan's ray tracer over the same triangles and ids(item, idx) -> its vertex
+    ids of those rows (ladder.sample_ids), so a bake builds one BVH; None = the rung's own."""
 
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
-                 directions=24, seed=0):
+                 directions=24, seed=0, tracer=None, ids=None):
         _core = native.require()
         t0 = time.perf_counter()
         items = [it for it in items if it.role != "IGNORE"]
         occ = [it for it in items if it.role in OCCLUDER_ROLES]
         if not occ:
             raise CanopyAOError("method 'regression' needs a CANOPY, TRUNK or GRASS object")
+        receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
+        n_recv = sum(len(it.positions) for it in receivers)
+        points, samples = calibration_size(n_recv, points, samples)
         grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
@@ -150,13 +198,15 @@ class RegressionRung:
             self._frames[tree] = tree_frame(np.concatenate(pts)) if pts else self._scene_frame
 
         # Calibration sample, stratified by (tree, role); traced with each point's own vertex.
-        receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
-        traced = occ + [it for it in items if it.role == "GROUND"]
-        bases, base = {}, 0
-        for it in traced:
-            bases[it.name] = base
-            base += len(it.positions)
-        tracer = _core.RayTracer(*_merged(traced))
+        own_tracer = tracer is None
+        if own_tracer:
+            bases, base = {}, 0
+            traced = occ + [it for it in items if it.role == "GROUND"]
+            for it in traced:
+                bases[it.name] = base
+                base += len(it.positions)
+            tracer, ids = _core.RayTracer(*_merged(traced)), _own_ids_from(bases)
+        t_tracer = time.perf_counter()
         groups = {}
         for it in receivers:
             groups.setdefault((it.tree, it.role), []).append(it)
@@ -170,15 +220,18 @@ class RegressionRung:
             owner = np.searchsorted(offs, idx, side="right") - 1
             P = np.concatenate([it.positions for it in its])[idx]
             N = np.concatenate([it.normals for it in its])[idx]
-            ids = (np.array([bases[it.name] for it in its])[owner] + idx - offs[owner]).astype(
-                np.int32)
+            own = np.full(len(idx), -1, np.int32)
+            for k, it in enumerate(its):
+                m = owner == k
+                got = ids(it, idx[m] - offs[k]) if m.any() else None
+                if got is not None:
+                    own[m] = got
             diag = np.array([_diag(it.positions) for it in its])[owner]
-            ao = _trace(tracer, P, N, samples, d, seed + 1, ids)
-            buried = _near_ao(tracer, P, N, diag, ids) <= 0.0
+            ao = _trace(tracer, P, N, samples, d, seed + 1, own)
+            buried = _near_ao(tracer, P, N, diag, own) <= 0.0
             F = self._compute(its[0].tree, P, N)
             sample[g] = dict(features=F[~buried], ao=ao[~buried], buried=int(buried.sum()))
         t_cal = time.perf_counter()
-
         # Fit per group, falling back to the role's pooled sample, then to everything.
         by_role = {}
         for g, s_ in sample.items():
@@ -212,8 +265,11 @@ class RegressionRung:
         self.report = dict(method="regression", groups=self.fits, resolution=resolution,
                            directions=directions, calibration_samples=samples,
                            calibration_points=int(sum(len(v) for v in picks.values())),
-                           timings=dict(grid=t_grid - t0, calibration=t_cal - t_grid,
-                                        fit=t_fit - t_cal))
+                           calibration_rays=int(samples * sum(len(v) for v in picks.values())),
+                           receivers=int(n_recv),
+                           shared_tracer=not own_tracer,
+                           timings=dict(grid=t_grid - t0, tracer=t_tracer - t_grid,
+                                        calibration=t_cal - t_tracer, fit=t_fit - t_cal))
 
     def _compute(self, tree, p, n):
         c, r, z0, z1 = self._frames.get(tree, self._scene_frame)
