@@ -77,6 +77,39 @@ def test_deterministic_and_scale_free(method):
     assert np.abs(big - a).max() < 0.02, np.abs(big - a).max()
 
 
+@pytest.mark.parametrize("resolution", [32, 47, 56])
+def test_features_scale_free_at_any_resolution(resolution):
+    """A leaf vertex on the grid box's top face (the crown's highest point) reads the same
+    features in a scene and the same ×1000: the swept field has an empty rim."""
+    small, big = items(), items(scale=1000.0)
+    a = regression.RegressionRung(small, resolution=resolution)
+    b = regression.RegressionRung(big, resolution=resolution)
+    for s_, b_ in zip(small, big):
+        fa = np.asarray(a._compute(s_.tree, s_.positions, s_.normals))
+        fb = np.asarray(b._compute(b_.tree, b_.positions, b_.normals))
+        assert np.abs(fa - fb).max() < 1e-2, (s_.name, np.abs(fa - fb).max())
+        got = a.ao(s_.role, s_.tree, s_.positions, s_.normals)
+        assert np.abs(got - b.ao(b_.role, b_.tree, b_.positions, b_.normals)).max() < 0.02
+
+
+def test_calibration_is_sized_to_the_scene_and_shares_the_bvh(scene):
+    its, _ = scene
+    receivers = sum(len(it.positions) for it in its)
+    _, rep = bake(its, "regression")
+    cal = rep["calibration"]
+    assert cal["receivers"] == receivers
+    # No rays beyond the sample, and the sample at most RAYS_PER_RECEIVER per receiver (or the
+    # floor of MIN_POINTS × MIN_SAMPLES rays).
+    floor = regression.MIN_POINTS * regression.MIN_SAMPLES
+    assert cal["calibration_rays"] <= max(regression.RAYS_PER_RECEIVER * receivers, floor)
+    assert cal["calibration_points"] <= regression.POINTS
+    assert cal["shared_tracer"]  # the bake's BVH, not a second one
+    assert regression.calibration_size(10 ** 6) == (regression.POINTS, 128)
+    pts, spp = regression.calibration_size(2000)
+    assert spp == regression.MIN_SAMPLES and pts * spp <= regression.RAYS_PER_RECEIVER * 2000
+    assert regression.calibration_size(100) == (100, regression.MIN_SAMPLES)  # every point
+
+
 def test_regression_bakes_grass_without_a_tree_and_grass_shades_the_ground():
     its = items(("Grass", "Ground"))
     got, _ = bake(its, "regression")
