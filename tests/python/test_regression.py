@@ -104,6 +104,10 @@ def test_calibration_is_sized_to_the_scene_and_shares_the_bvh(scene):
     assert cal["calibration_rays"] <= max(regression.RAYS_PER_RECEIVER * receivers, floor)
     assert cal["calibration_points"] <= regression.POINTS
     assert cal["shared_tracer"]  # the bake's BVH, not a second one
+    own, rep_own = regression.bake(its)  # the rung's own BVH: the same sample, the same AO
+    assert not rep_own["shared_tracer"]
+    got, _ = bake(its, "regression")
+    np.testing.assert_allclose(np.concatenate([own[it.name] for it in its]), got, atol=2e-3)
     assert regression.calibration_size(10 ** 6) == (regression.POINTS, 128)
     pts, spp = regression.calibration_size(2000)
     assert spp == regression.MIN_SAMPLES and pts * spp <= regression.RAYS_PER_RECEIVER * 2000

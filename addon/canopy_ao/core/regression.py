@@ -160,12 +160,10 @@ def calibration_size(receivers, points=POINTS, samples=128):
 
 
 def _own_ids_from(bases):
+    """ids(item, idx) for the rung's own tracer: the rows' place in its merged mesh (bases:
+    {id(item): its first vertex there}; a part of an item is its own mesh there)."""
     def ids(item, idx):
-        b = bases.get(item.name)
-        if b is None:
-            return None
-        whole = item.vertex_map[idx] if item.vertex_map is not None else idx
-        return (np.asarray(whole, np.int64) + b).astype(np.int32)
+        return (np.asarray(idx, np.int64) + bases[id(item)]).astype(np.int32)
     return ids
 
 
@@ -210,7 +208,7 @@ class RegressionRung:
             bases, base = {}, 0
             traced = occ + [it for it in items if it.role == "GROUND"]
             for it in traced:
-                bases[it.name] = base
+                bases[id(it)] = base
                 base += len(it.positions)
             tracer, ids = _core.RayTracer(*_merged(traced)), _own_ids_from(bases)
         t_tracer = time.perf_counter()
