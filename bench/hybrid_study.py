@@ -1,6 +1,7 @@
 """Why the near/far hybrid does or does not reach 64 plain rays' error at half their time.
 
-    /usr/bin/python3 bench/hybrid_study.py [--scenes sap_callistemon ...] [--voxels 1 2 4 8 16] [--full]
+    /usr/bin/python3 bench/hybrid_study.py [--scenes sap_callistemon ...] [--voxels 1 2 4 8 16]
+                                           [--full]
 
 On the real-generator scenes (bench/out/real, examples/sapling_scenes.py; Embree 1024 rays as
 the reference, buried vertices left out as in bench/real_assets.py). The hybrid's AO is the
@@ -58,7 +59,8 @@ def study(name, voxels, quick=True):
     print(f"\n== {name}: {sc.n_vertices} vertices; 64 rays MAE {m64:.4f} in {t64:.3f} s; "
           f"target MAE <= {TARGET_MAE * m64:.4f} in <= {TARGET_TIME * t64:.3f} s")
     print(f"{'voxels':>6s} {'near':>8s} {'near share':>10s} {'floor':>7s} "
-          f"{'16: MAE':>8s} {'time':>6s} {'64: MAE':>8s} {'time':>6s} {'ladder 64':>9s} {'time':>6s}")
+          f"{'16: MAE':>8s} {'time':>6s} {'64: MAE':>8s} {'time':>6s} {'ladder 64':>9s} "
+          f"{'time':>6s}")
     occl = float(np.mean(1.0 - ref[keep]))
     for c in voxels:
         near = near_distance(sc, c)

@@ -85,11 +85,13 @@ def test_features_scale_free_at_any_resolution(resolution):
     a = regression.RegressionRung(small, resolution=resolution)
     b = regression.RegressionRung(big, resolution=resolution)
     for s_, b_ in zip(small, big):
-        fa = np.asarray(a._compute(s_.tree, s_.positions, s_.normals))
-        fb = np.asarray(b._compute(b_.tree, b_.positions, b_.normals))
+        own = {"vertex_ids": np.arange(len(s_.positions))}
+        fa = np.asarray(a._compute(s_.tree, s_.positions, s_.normals, s_.name, own))
+        fb = np.asarray(b._compute(b_.tree, b_.positions, b_.normals, b_.name, own))
         assert np.abs(fa - fb).max() < 1e-2, (s_.name, np.abs(fa - fb).max())
-        got = a.ao(s_.role, s_.tree, s_.positions, s_.normals)
-        assert np.abs(got - b.ao(b_.role, b_.tree, b_.positions, b_.normals)).max() < 0.02
+        got = a.ao(s_.role, s_.tree, s_.positions, s_.normals, s_.name, own)
+        assert np.abs(got - b.ao(b_.role, b_.tree, b_.positions, b_.normals, b_.name,
+                                 own)).max() < 0.02
 
 
 def test_calibration_is_sized_to_the_scene_and_shares_the_bvh(scene):
@@ -112,6 +114,30 @@ def test_calibration_is_sized_to_the_scene_and_shares_the_bvh(scene):
     pts, spp = regression.calibration_size(2000)
     assert spp == regression.MIN_SAMPLES and pts * spp <= regression.RAYS_PER_RECEIVER * 2000
     assert regression.calibration_size(100) == (100, regression.MIN_SAMPLES)  # every point
+
+
+def test_leaf_table_finds_each_leaf_and_places_points_on_it():
+    # Two unit quads (two triangles each), the second 10 units off and twice the size.
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], np.float64)
+    P = np.concatenate([quad, quad * 2 + [10, 0, 0]]).astype(np.float32)
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], np.int32)
+    leaves = regression.LeafTable(P, T)
+    assert len(leaves.size) == 2 and leaves.labels[0] != leaves.labels[4]
+    np.testing.assert_allclose(leaves.size, [np.sqrt(0.5), 2 * np.sqrt(0.5)], rtol=1e-6)
+    frame = (np.zeros(3, np.float32), 1.0, 0.0, 2.0)
+    by_vertex = leaves.features(P, leaves.labels_of({"vertex_ids": np.arange(8)}, 8), frame)
+    # Scale-free: the big leaf's corners sit where the small one's do, in its own size (up,
+    # out of the axis and the length; toward the crown's middle depends on where a leaf is).
+    np.testing.assert_allclose(by_vertex[:4, [0, 1, 3]], by_vertex[4:, [0, 1, 3]], atol=1e-6)
+    h = np.sqrt(0.5)
+    np.testing.assert_allclose(by_vertex[:, 0], [-h, -h, h, h] * 2, atol=1e-5)  # below / above
+    np.testing.assert_allclose(by_vertex[:, 3], 1.0, atol=1e-5)  # every corner one radius out
+    # A texel names its triangle: the same leaf, the same features at the same point.
+    by_tri = leaves.features(P[[2, 6]], leaves.labels_of({"triangle_ids": [1, 3]}, 2), frame)
+    np.testing.assert_allclose(by_tri, by_vertex[[2, 6]], atol=1e-6)
+    # Unknown (-1) or no ids: the leaf's centre, all zero.
+    assert not leaves.features(P[:2], leaves.labels_of({"vertex_ids": [-1, -1]}, 2), frame).any()
+    assert not leaves.features(P[:2], leaves.labels_of(None, 2), frame).any()
 
 
 def test_regression_bakes_grass_without_a_tree_and_grass_shades_the_ground():

@@ -61,7 +61,8 @@ def prepare(items, settings: BakeSettings) -> Plan:
                 ids=lambda it, idx: (ladder.sample_ids(plan, it, idx) or {}).get("vertex_ids"))
             plan.regression = regression.RegressionRung(
                 items, settings.distance, points=regression.POINTS,
-                samples=settings.calibration_samples, seed=settings.seed, **shared)
+                samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
+                **shared)
         except CanopyAOError as exc:
             if settings.method == "regression":
                 raise

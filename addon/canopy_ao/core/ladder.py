@@ -29,9 +29,9 @@ RUNGS = (
                               "AO of a uniform medium (tabulated)"),
     ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
     ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
-    ("regression", "Regression", "Ray-free: 1024 ray-traced points fitted on cheap per-vertex "
-                                 "features of the density grid and the tree's shape; no rays "
-                                 "beyond them, cost independent of the leaf count"),
+    ("regression", "Regression", "Ray-free: up to 1024 ray-traced points fitted on cheap "
+                                 "per-vertex features of the density grid and the tree's shape; "
+                                 "no rays beyond them, cost independent of the leaf count"),
     ("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels, the grid beyond"),
     ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
 )

@@ -99,7 +99,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     if method == "regression":
-        return plan.regression.ao(role, tree, p, n)
+        return plan.regression.ao(role, tree, p, n, grass_key, own)
     if method == "hybrid":
         return _grass(plan, role, grass_key, p, n, _hybrid_ao(plan, p, n))
     ao = np.ones(len(p), np.float32)

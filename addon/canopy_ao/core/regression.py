@@ -1,11 +1,11 @@
 """The ray-free "regression" rung: a ridge fit of the traced calibration sample on cheap
 per-vertex occlusion features, carried over to every vertex. No bpy.
 
-Why (docs/DESIGN.md, "The method ladder", "The ray-free rung"): the leaf-density grid follows where the leaves are but
-misses what is below a voxel (a leaf shaded by its neighbour or by its own branch); the
-calibration sample measures exactly that, per scene. The features and the model's evaluation are
-native (``_core.OcclusionFeatures``, ``_core.predict_features``: occlusion_features.h); here are
-the sample, the fit and the bookkeeping.
+Why (docs/DESIGN.md, "The method ladder", "The ray-free rung"): the leaf-density grid follows
+where the leaves are but misses what is below a voxel (a leaf shaded by its neighbour or by its
+own branch); the calibration sample measures exactly that, per scene. The features and the
+model's evaluation are native (``_core.OcclusionFeatures``, ``_core.predict_features``:
+occlusion_features.h); here are the sample, the fit and the bookkeeping.
 
 Cost: grids O(triangles), one Embree BVH (the bake's, when it has one) and ``points`` ×
 ``samples`` calibration rays (calibration_size: at most 1024 × 128, fewer on a small scene),
@@ -13,10 +13,11 @@ then a fixed number of grid lookups per vertex, whatever the leaf count. No rays
 sample.
 
 Fit, per (tree, role) group with enough sample points (else per role, else scene-wide):
-standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ chosen
-by 5-fold cross-validation on the sample (ties to the larger λ). Buried sample points (every ray stops within
-``BURIED_FRACTION`` of the object's size: a leaf base inside its branch) are kept out of the fit —
-their AO of 0 says nothing about the rest of the leaf; the model predicts them like any vertex.
+standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ
+chosen by 5-fold cross-validation on the sample (ties to the larger λ). Buried sample points
+(every ray stops within ``BURIED_FRACTION`` of the object's size: a leaf base inside its branch)
+are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
+predicts them like any vertex.
 """
 from __future__ import annotations
 
@@ -38,6 +39,9 @@ BURIED_RAYS = 2 * LADDER_BURIED_RAYS
 LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
 CV_TOLERANCE = 0.005     # relative: CV errors closer than this are a tie (ridge)
 MIN_GROUP = 96           # sample points a group needs for its own fit
+NATIVE = 13              # OcclusionFeatures' columns (occlusion_features.h); LeafTable's follow
+LEAF_ITERATIONS = 32     # label-propagation rounds of _components
+CHUNK = 65536            # rows of φ expanded at a time (Model.predict)
 POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
 # Sizing on small scenes (calibration_size): counted work, scale-free.
 RAYS_PER_RECEIVER = 8    # calibration rays per receiver at most: 1/8 of a 64-ray bake
@@ -107,21 +111,117 @@ def ridge(X, y, lambdas=LAMBDAS, folds=5, seed=0):
 
 
 class Model:
-    """One fitted group: feature mean/scale and the expanded weights (float32, native layout)."""
+    """One fitted group: feature mean/scale and the expanded weights. The NATIVE columns expand
+    natively (occlusion_features.h: [1, z, z², z_grid·z] and the shape pairs); the leaf
+    columns after them (LeafTable) add [z, z², z_grid·z] each."""
 
     def __init__(self, feats, target):
-        _core = native.require()
         self.mean = feats.mean(0).astype(np.float32)
         sd = feats.std(0)
         self.scale = np.where(sd > 1e-6, sd, 1.0).astype(np.float32)
-        X = _core.expand_features(np.ascontiguousarray(feats, np.float32), self.mean, self.scale)
-        w, self.lam, self.cv_mae = ridge(X, target)
+        w, self.lam, self.cv_mae = ridge(self.expand(feats), target)
         self.weights = w.astype(np.float32)
         self.n = len(target)
 
+    def expand(self, feats):
+        f = np.ascontiguousarray(feats, np.float32)
+        X = np.asarray(native.require().expand_features(
+            np.ascontiguousarray(f[:, :NATIVE]), self.mean[:NATIVE], self.scale[:NATIVE]))
+        if f.shape[1] == NATIVE:
+            return X
+        z = (f[:, NATIVE:] - self.mean[NATIVE:]) / self.scale[NATIVE:]
+        zg = ((f[:, 1] - self.mean[1]) / self.scale[1])[:, None]  # the grid AO, standardised
+        return np.concatenate([X, z, z * z, z * zg], axis=1)
+
     def predict(self, feats):
-        return np.asarray(native.require().predict_features(np.ascontiguousarray(feats, np.float32),
-                                                 self.mean, self.scale, self.weights))
+        if feats.shape[1] == NATIVE:
+            return np.asarray(native.require().predict_features(
+                np.ascontiguousarray(feats, np.float32), self.mean, self.scale, self.weights))
+        out = np.empty(len(feats), np.float32)
+        for a in range(0, len(feats), CHUNK):  # φ of CHUNK rows at a time: bounded memory
+            out[a:a + CHUNK] = self.expand(feats[a:a + CHUNK]) @ self.weights
+        return np.clip(out, 0.0, 1.0, out=out)
+
+
+def _components(n, triangles):
+    """Connected pieces of a mesh (int64 labels 0..L-1 per vertex) by min-label propagation
+    over the triangles, at most LEAF_ITERATIONS rounds (a leaf card settles in one or two; a
+    long branch mesh that does not settle stays split into pieces, deterministically)."""
+    lab = np.arange(n)
+    if len(triangles):
+        tris = np.asarray(triangles, np.int64)
+        for _ in range(LEAF_ITERATIONS):
+            low = lab[tris].min(axis=1)
+            new = lab.copy()
+            for c in range(3):
+                np.minimum.at(new, tris[:, c], low)
+            new = new[new]
+            if np.array_equal(new, lab):
+                break
+            lab = new
+    return np.unique(lab, return_inverse=True)[1].reshape(-1)
+
+
+class LeafTable:
+    """Where a receiver sits on its own leaf (docs/DESIGN.md, 'The ray-free rung'): each
+    connected piece of a CANOPY mesh (a leaf card), its centroid and mean radius. Most of a real
+    leaf's AO varies within the leaf (its base by the twig, its inner half toward the crown),
+    below any voxel; the features say where on the leaf a point is, in the leaf's own size:
+    its offset from the centroid, over the mean radius, along up, along the horizontal
+    direction out of the tree's axis and toward the crown's middle, and its length. Scale-free;
+    O(vertices) to build, O(1) per receiver."""
+
+    COUNT = 4
+
+    def __init__(self, positions, triangles):
+        P = np.asarray(positions, np.float64)
+        lab = _components(len(P), triangles)
+        cnt = np.maximum(np.bincount(lab), 1).astype(np.float64)
+        self.centroid = np.stack([np.bincount(lab, P[:, a]) for a in range(3)], 1) / cnt[:, None]
+        d = np.linalg.norm(P - self.centroid[lab], axis=1)
+        self.size = np.bincount(lab, d) / cnt
+        self.labels = lab
+        self.tri_labels = lab[np.asarray(triangles, np.int64)[:, 0]] if len(triangles) \
+            else np.zeros(0, np.int64)
+
+    def labels_of(self, own, count):
+        """Leaf of each of `count` points from own ({"vertex_ids" | "triangle_ids"}: the item's
+        vertex or triangle of each point, -1 = none); -1 where unknown."""
+        out = np.full(count, -1, np.int64)
+        for key, table in (("vertex_ids", self.labels), ("triangle_ids", self.tri_labels)):
+            ids = None if not own else own.get(key)
+            if ids is not None:
+                ids = np.asarray(ids, np.int64)
+                ok = (ids >= 0) & (ids < len(table))
+                out[ok] = table[ids[ok]]
+                break
+        return out
+
+    def features(self, p, labels, frame):
+        """(N, COUNT) float32; 0 (a leaf's centre) where the leaf is unknown or a point."""
+        out = np.zeros((len(p), self.COUNT), np.float32)
+        ok = labels >= 0
+        ok[ok] = self.size[labels[ok]] > 0
+        if not ok.any():
+            return out
+        lab = labels[ok]
+        c = self.centroid[lab]
+        u = (np.asarray(p, np.float64)[ok] - c) / self.size[lab][:, None]
+        center, _r, z0, z1 = frame
+        out_dir = c - np.asarray(center, np.float64)
+        out_dir[:, 2] = 0.0
+        mid = np.array([center[0], center[1], 0.5 * (z0 + z1)], np.float64)
+        in_dir = mid - c
+        out[ok, 0] = u[:, 2]
+        out[ok, 1] = np.einsum("ij,ij->i", u, _unit(out_dir))
+        out[ok, 2] = np.einsum("ij,ij->i", u, _unit(in_dir))
+        out[ok, 3] = np.linalg.norm(u, axis=1)
+        return out
+
+
+def _unit(v):
+    n = np.linalg.norm(v, axis=1)
+    return v / np.where(n > 0, n, 1.0)[:, None]
 
 
 def _sample(groups, count, seed):
@@ -177,10 +277,12 @@ class RegressionRung:
     against every non-ignored triangle with each
     point's own vertex named, so a receiver skips only the triangles it starts on (as Cycles).
     tracer, ids: the plan's ray tracer over the same triangles and ids(item, idx) -> its vertex
-    ids of those rows (ladder.sample_ids), so a bake builds one BVH; None = the rung's own."""
+    ids of those rows (ladder.sample_ids), so a bake builds one BVH; None = the rung's own.
+    meshes: the unsplit items when ``items`` are split per tree (scene.parts), for the leaf
+    tables (LeafTable) by item name; None = the items themselves."""
 
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
-                 directions=24, seed=0, tracer=None, ids=None):
+                 directions=24, seed=0, tracer=None, ids=None, meshes=None):
         _core = native.require()
         t0 = time.perf_counter()
         items = [it for it in items if it.role != "IGNORE"]
@@ -193,6 +295,16 @@ class RegressionRung:
         grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
+
+        # Leaf tables of the CANOPY meshes, by name over the whole mesh (meshes: the unsplit
+        # items of a scene whose items are split per tree; a name seen twice gets none).
+        whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
+        self._leaves = {}
+        for it in whole:
+            if it.role == "CANOPY":
+                self._leaves[it.name] = None if it.name in self._leaves else LeafTable(
+                    it.positions, it.triangles)
+        t_leaves = time.perf_counter()
 
         # Frames: one per tree (its leaves and branches), the occluders' for everything else.
         self._scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
@@ -234,7 +346,13 @@ class RegressionRung:
             diag = np.array([_diag(it.positions) for it in its])[owner]
             ao = _trace(tracer, P, N, samples, d, seed + 1, own)
             buried = _near_ao(tracer, P, N, diag, own) <= 0.0
-            F = self._compute(its[0].tree, P, N)
+            F = np.zeros((len(idx), NATIVE + LeafTable.COUNT), np.float32)
+            for k, it in enumerate(its):
+                m = owner == k
+                if m.any():
+                    rows = idx[m] - offs[k]
+                    whole = it.vertex_map[rows] if it.vertex_map is not None else rows
+                    F[m] = self._compute(it.tree, P[m], N[m], it.name, {"vertex_ids": whole})
             sample[g] = dict(features=F[~buried], ao=ao[~buried], buried=int(buried.sum()))
         t_cal = time.perf_counter()
         # Fit per group, falling back to the role's pooled sample, then to everything.
@@ -273,22 +391,31 @@ class RegressionRung:
                            calibration_rays=int(samples * sum(len(v) for v in picks.values())),
                            receivers=int(n_recv),
                            shared_tracer=not own_tracer,
-                           timings=dict(grid=t_grid - t0, tracer=t_tracer - t_grid,
+                           leaves={k: int(len(v.size)) for k, v in self._leaves.items() if v},
+                           timings=dict(grid=t_grid - t0, leaves=t_leaves - t_grid,
+                                        tracer=t_tracer - t_leaves,
                                         calibration=t_cal - t_tracer, fit=t_fit - t_cal))
 
-    def _compute(self, tree, p, n):
-        c, r, z0, z1 = self._frames.get(tree, self._scene_frame)
-        return self._features.compute(np.ascontiguousarray(p, np.float32),
-                                      np.ascontiguousarray(n, np.float32), c, r, z0, z1)
+    def _compute(self, tree, p, n, name=None, own=None):
+        frame = self._frames.get(tree, self._scene_frame)
+        p = np.ascontiguousarray(p, np.float32)
+        f = np.asarray(self._features.compute(p, np.ascontiguousarray(n, np.float32), *frame))
+        leaves = self._leaves.get(name)
+        extra = (leaves.features(p, leaves.labels_of(own, len(p)), frame) if leaves is not None
+                 else np.zeros((len(p), LeafTable.COUNT), np.float32))
+        return np.concatenate([f, extra], axis=1)
 
-    def ao(self, role, tree, p, n):
-        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree."""
+    def ao(self, role, tree, p, n, name=None, own=None):
+        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree.
+        name, own: the item's name and {"vertex_ids" | "triangle_ids"} of each point in it
+        (-1 = none), so a leaf's points know their leaf (LeafTable); without them a point
+        reads as its leaf's centre."""
         if len(p) == 0:
             return np.ones(0, np.float32)
         model = self._models.get((tree, role))
         if model is None:  # an item the sample did not see: its role's fit, else any
             model = next((m for (t, r), m in self._models.items() if r == role), self._fallback)
-        return model.predict(self._compute(tree, p, n))
+        return model.predict(self._compute(tree, p, n, name, own))
 
 
 def bake(items, distance=0.0, **options):
@@ -296,7 +423,8 @@ def bake(items, distance=0.0, **options):
     RegressionRung; IGNORE items get 1)."""
     t0 = time.perf_counter()
     rung = RegressionRung(items, distance, **options)
-    out = {it.name: (rung.ao(it.role, it.tree, it.positions, it.normals)
+    out = {it.name: (rung.ao(it.role, it.tree, it.positions, it.normals, it.name,
+                             {"vertex_ids": np.arange(len(it.positions))})
                      if it.role in RECEIVER_ROLES else np.ones(len(it.positions), np.float32))
            for it in items}
     rung.report["timings"]["total"] = time.perf_counter() - t0
