@@ -156,22 +156,24 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         n = np.ascontiguousarray(it.normals[idx])
         own = sample_ids(plan, it, idx)
         refs.append(trace(plan, p, n, s.calibration_samples, own=own))
-        groups.append((it, p, n, own))
+        # The rungs' own ids of the points (item vertices; the regression's leaf features).
+        local = {"vertex_ids": it.vertex_map[idx] if it.vertex_map is not None else idx}
+        groups.append((it, p, n, own, local))
     ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
     # Buried points (a leaf's base inside its twig): kept out of the fit, which they would
     # darken everything else to match (docs/DESIGN.md, 'Auto mode').
-    keep = ~np.concatenate([buried(plan, it, p, n, own) for it, p, n, own in groups]) if groups \
-        else np.zeros(0, bool)
+    keep = ~np.concatenate([buried(plan, it, p, n, own) for it, p, n, own, _ in groups]) \
+        if groups else np.zeros(0, bool)
     t_trace = time.perf_counter() - t0
 
     def err(method, tau):
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
             got = [trace(plan, p, n, s.samples, seed=s.seed + 7919, own=own)
-                   for _it, p, n, own in groups]
+                   for _it, p, n, own, _ in groups]
         else:
-            got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
-                   for it, p, n, _own in groups]
+            got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau, local)
+                   for it, p, n, _own, local in groups]
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
 

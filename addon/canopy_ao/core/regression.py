@@ -124,22 +124,29 @@ class Model:
         self.n = len(target)
 
     def expand(self, feats):
+        """φ: the native part, then the leaf part (_extra), side by side."""
         f = np.ascontiguousarray(feats, np.float32)
         X = np.asarray(native.require().expand_features(
             np.ascontiguousarray(f[:, :NATIVE]), self.mean[:NATIVE], self.scale[:NATIVE]))
-        if f.shape[1] == NATIVE:
-            return X
+        return X if f.shape[1] == NATIVE else np.concatenate([X, self._extra(f)], axis=1)
+
+    def _extra(self, f):
         z = (f[:, NATIVE:] - self.mean[NATIVE:]) / self.scale[NATIVE:]
         zg = ((f[:, 1] - self.mean[1]) / self.scale[1])[:, None]  # the grid AO, standardised
-        return np.concatenate([X, z, z * z, z * zg], axis=1)
+        return np.concatenate([z, z * z, z * zg], axis=1)
 
     def predict(self, feats):
-        if feats.shape[1] == NATIVE:
-            return np.asarray(native.require().predict_features(
-                np.ascontiguousarray(feats, np.float32), self.mean, self.scale, self.weights))
-        out = np.empty(len(feats), np.float32)
-        for a in range(0, len(feats), CHUNK):  # φ of CHUNK rows at a time: bounded memory
-            out[a:a + CHUNK] = self.expand(feats[a:a + CHUNK]) @ self.weights
+        f = np.ascontiguousarray(feats, np.float32)
+        if f.shape[1] == NATIVE:
+            return np.asarray(native.require().predict_features(f, self.mean, self.scale,
+                                                                self.weights))
+        out = np.empty(len(f), np.float32)
+        for a in range(0, len(f), CHUNK):  # CHUNK rows at a time: bounded memory
+            rows = f[a:a + CHUNK]
+            X = np.asarray(native.require().expand_features(
+                np.ascontiguousarray(rows[:, :NATIVE]), self.mean[:NATIVE], self.scale[:NATIVE]))
+            k = X.shape[1]
+            out[a:a + CHUNK] = X @ self.weights[:k] + self._extra(rows) @ self.weights[k:]
         return np.clip(out, 0.0, 1.0, out=out)
 
 
