@@ -22,19 +22,13 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 OUT = os.path.join(HERE, "out")
 sys.path.insert(0, HERE)
 
+import chart  # noqa: E402
 from chart import pareto  # noqa: E402
 
-STYLE = {  # family -> (colour, marker)
-    "sphere": ("#1f77b4", "o"),
-    "ellipsoid": ("#2ca02c", "s"),
-    "shells": ("#17becf", "D"),
-    "medium": ("#000000", "h"),
-    "grid": ("#bcbd22", "P"),
-    "regression": ("#9467bd", "*"),
-    "hybrid": ("#8c564b", "v"),
-    "rays": ("#d62728", "^"),
-    "cycles": ("#ff7f0e", "X"),
-}
+# family -> (colour, marker): chart.py's, plus the two rungs it does not draw.
+STYLE = {f: chart.STYLE[f] for f in ("sphere", "ellipsoid", "shells", "medium", "grid")}
+STYLE.update(regression=("#9467bd", "*"), hybrid=("#8c564b", "v"), rays=chart.STYLE["raytrace"],
+             cycles=chart.STYLE["cycles"])
 
 
 def family(method):

@@ -16,8 +16,9 @@ Per scene and c, it prints:
   and the product of two averages instead of one average along each ray) costs whatever
   the rays, against the target 1.1 × the MAE of 64 plain rays;
 - the hybrid at 16 and 64 near rays with each receiver's own vertex named (a ray skips only
-  the triangles it starts on, as the plain rays and Cycles), MAE and time / time of 64 rays;
-- the ladder's hybrid (core/lighting.py: ao_near_far, 64 rays, no own-vertex ids).
+  the triangles it starts on, as the plain rays and Cycles; the ladder's, core/lighting.py
+  _hybrid_ao), MAE and time / time of 64 rays;
+- native ao_near_far at 64 rays (its near rays name no vertex: the normal-offset path).
 
 Times include the BVH (and the grid, for the hybrid); one run, ratios only.
 """
@@ -59,7 +60,7 @@ def study(name, voxels, quick=True):
     print(f"\n== {name}: {sc.n_vertices} vertices; 64 rays MAE {m64:.4f} in {t64:.3f} s; "
           f"target MAE <= {TARGET_MAE * m64:.4f} in <= {TARGET_TIME * t64:.3f} s")
     print(f"{'voxels':>6s} {'near':>8s} {'near share':>10s} {'floor':>7s} "
-          f"{'16: MAE':>8s} {'time':>6s} {'64: MAE':>8s} {'time':>6s} {'ladder 64':>9s} "
+          f"{'16: MAE':>8s} {'time':>6s} {'64: MAE':>8s} {'time':>6s} {'native 64':>9s} "
           f"{'time':>6s}")
     occl = float(np.mean(1.0 - ref[keep]))
     for c in voxels:

@@ -74,7 +74,11 @@ def test_deterministic_and_scale_free(method):
     b, _ = bake(items(), method)
     np.testing.assert_array_equal(a, b)
     big, _ = bake(items(scale=100.0), method)
-    assert np.abs(big - a).max() < 0.02, np.abs(big - a).max()
+    d = np.abs(big - a)
+    # The hybrid's near rays, as the exact rung's, may flip one grazing ray of 64 at a few
+    # vertices (1/64 = 0.016; raytrace alone: 0.016 at 16 of 8,000 vertices here).
+    assert d.max() < (0.02 if method == "regression" else 1 / 64 + 0.01), d.max()
+    assert d.mean() < 1e-3, d.mean()
 
 
 @pytest.mark.parametrize("resolution", [32, 47, 56])
