@@ -144,6 +144,16 @@ def test_leaf_table_finds_each_leaf_and_places_points_on_it():
     assert not leaves.features(P[:2], leaves.labels_of(None, 2), frame).any()
 
 
+def test_the_sample_never_exceeds_its_points():
+    """Rounding each group's share up must not break the ray-free contract (<= 1024 points):
+    nine similar groups each rounded up once gave 1026."""
+    for sizes in ({i: 1000 + 37 * i for i in range(9)}, {"a": 3, "b": 10 ** 6},
+                  {"a": 10 ** 5, "b": 5 * 10 ** 4, "c": 4096}):
+        picks = regression._sample(sizes, regression.POINTS, 0)
+        assert sum(len(v) for v in picks.values()) <= regression.POINTS
+        assert all(len(v) >= 1 and len(set(v)) == len(v) for v in picks.values())
+
+
 def test_regression_bakes_grass_without_a_tree_and_grass_shades_the_ground():
     its = items(("Grass", "Ground"))
     got, _ = bake(its, "regression")

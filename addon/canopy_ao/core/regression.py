@@ -232,19 +232,20 @@ def _unit(v):
 
 
 def _sample(groups, count, seed):
-    """{group: sorted row indices} of about `count` points in all, every group some, larger
-    groups more (∝ sqrt of their size: small groups such as a trunk are not starved)."""
+    """{group: sorted row indices} of at most `count` points in all (or one per group), every
+    group some, larger groups more (∝ sqrt of their size: small groups such as a trunk are not
+    starved)."""
     rng = np.random.default_rng(seed)
     sizes = {g: n for g, n in groups.items() if n > 0}
     if not sizes:
         return {}
     w = {g: np.sqrt(n) for g, n in sizes.items()}
     tot = sum(w.values())
-    out = {}
-    for g, n in sizes.items():
-        k = min(n, max(1, int(round(count * w[g] / tot))))
-        out[g] = np.sort(rng.choice(n, size=k, replace=False))
-    return out
+    ks = {g: min(n, max(1, int(round(count * w[g] / tot)))) for g, n in sizes.items()}
+    while sum(ks.values()) > max(count, len(ks)):  # rounding up must not break the cap
+        g = max(ks, key=lambda g_: (ks[g_], str(g_)))
+        ks[g] -= 1
+    return {g: np.sort(rng.choice(sizes[g], size=ks[g], replace=False)) for g in sizes}
 
 
 def calibration_size(receivers, points=POINTS, samples=128):
