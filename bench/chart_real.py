@@ -83,7 +83,7 @@ def chart(rows, path):
             if not fr:
                 continue
             ax.plot([r["t"] for r in fr], [r["mae"] for r in fr],
-                    "-" if fam in ("rays", "cycles") else "", color=c, marker=m,
+                    ls="-" if fam in ("rays", "cycles") else "none", color=c, marker=m,
                     ms=9 if fam == "regression" else 6, label=fam, lw=1.2)
             if fam in ("rays", "cycles"):
                 for r in fr:
