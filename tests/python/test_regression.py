@@ -15,7 +15,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, HERE)
 
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import regression  # noqa: E402
+from canopy_ao.core import leaf_features, regression, regression_fit  # noqa: E402
 from canopy_ao.core.native import _core  # noqa: E402
 import tree_scene as ts  # noqa: E402
 
@@ -125,7 +125,7 @@ def test_leaf_table_finds_each_leaf_and_places_points_on_it():
     quad = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], np.float64)
     P = np.concatenate([quad, quad * 2 + [10, 0, 0]]).astype(np.float32)
     T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], np.int32)
-    leaves = regression.LeafTable(P, T)
+    leaves = leaf_features.LeafTable(P, T)
     assert len(leaves.size) == 2 and leaves.labels[0] != leaves.labels[4]
     np.testing.assert_allclose(leaves.size, [np.sqrt(0.5), 2 * np.sqrt(0.5)], rtol=1e-6)
     frame = (np.zeros(3, np.float32), 1.0, 0.0, 2.0)
@@ -175,7 +175,7 @@ def test_ridge_recovers_a_linear_law():
     X = np.c_[np.ones(400), rng.normal(size=(400, 3))]
     w = np.array([0.5, 0.1, -0.05, 0.02])
     y = X @ w + rng.normal(scale=1e-3, size=400)
-    got, lam, cv = regression.ridge(X, y)
+    got, lam, cv = regression_fit.ridge(X, y)
     np.testing.assert_allclose(got, w, atol=5e-3)
     assert cv < 5e-3
 

@@ -27,7 +27,9 @@ import numpy as np
 
 from . import native
 from .ladder import BURIED_RAYS as LADDER_BURIED_RAYS, BURIED_SCALE
+from .leaf_features import LeafTable
 from .native import CanopyAOError
+from .regression_fit import NATIVE, Model
 from .scene import RECEIVER_ROLES
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
@@ -36,12 +38,7 @@ OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
 # darkest unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046).
 BURIED_FRACTION = BURIED_SCALE
 BURIED_RAYS = 2 * LADDER_BURIED_RAYS
-LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
-CV_TOLERANCE = 0.005     # relative: CV errors closer than this are a tie (ridge)
 MIN_GROUP = 96           # sample points a group needs for its own fit
-NATIVE = 13              # OcclusionFeatures' columns (occlusion_features.h); LeafTable's follow
-LEAF_ITERATIONS = 32     # label-propagation rounds of _components
-CHUNK = 65536            # rows of φ expanded at a time (Model.predict)
 POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
 # Sizing on small scenes (calibration_size): counted work, scale-free.
 RAYS_PER_RECEIVER = 8    # calibration rays per receiver at most: 1/8 of a 64-ray bake
@@ -71,164 +68,6 @@ def tree_frame(points):
     extent = float(np.linalg.norm(p.max(0) - p.min(0))) if len(p) else 1.0
     radius = max(radius, 1e-3 * extent, 1e-9)
     return c.astype(np.float32), radius, float(p[:, 2].min()), float(p[:, 2].max())
-
-
-def ridge(X, y, lambdas=LAMBDAS, folds=5, seed=0):
-    """Weights of a ridge fit (intercept column 0 not penalised), λ by k-fold CV. Returns
-    (weights float64 (P,), λ, CV mean absolute error).
-
-    One Gram matrix per fold, the training folds' as the total minus the held-out one, so the
-    search costs k products of the sample and k·|λ| small P × P solves."""
-    X = np.asarray(X, np.float64)
-    y = np.asarray(y, np.float64)
-    n, p = X.shape
-    pen = np.eye(p)
-    pen[0, 0] = 0.0
-    G, b = X.T @ X, X.T @ y
-
-    fold = np.random.default_rng(seed).permutation(n) % folds
-    parts = []
-    for f in range(folds):
-        te = fold == f
-        ntr = n - int(te.sum())
-        if ntr <= 1 or not te.any():
-            continue
-        Xt = X[te]
-        parts.append((G - Xt.T @ Xt, b - Xt.T @ y[te], ntr, Xt, y[te]))
-    errs = []
-    for lam in lambdas:
-        err = 0.0
-        for Gt, bt, ntr, Xt, yt in parts:
-            w = np.linalg.solve(Gt + lam * ntr * pen, bt)
-            err += float(np.abs(np.clip(Xt @ w, 0, 1) - yt).sum())
-        errs.append(err / max(n, 1))
-    # The largest λ whose CV error is within CV_TOLERANCE of the best: where the folds cannot
-    # tell two λ apart, the smoother fit, and a choice that does not flip on rounding (a scene
-    # and the same ×1000 picked 0.01 and 0.001 at equal CV error to four digits).
-    lo = min(errs)
-    lam, err = max((la, e) for la, e in zip(lambdas, errs) if e <= lo * (1 + CV_TOLERANCE))
-    return np.linalg.solve(G + lam * n * pen, b), lam, err
-
-
-class Model:
-    """One fitted group: feature mean/scale and the expanded weights. The NATIVE columns expand
-    natively (occlusion_features.h: [1, z, z², z_grid·z] and the shape pairs); the leaf
-    columns after them (LeafTable) add [z, z², z_grid·z] each."""
-
-    def __init__(self, feats, target):
-        self.mean = feats.mean(0).astype(np.float32)
-        sd = feats.std(0)
-        self.scale = np.where(sd > 1e-6, sd, 1.0).astype(np.float32)
-        w, self.lam, self.cv_mae = ridge(self.expand(feats), target)
-        self.weights = w.astype(np.float32)
-        self.n = len(target)
-
-    def expand(self, feats):
-        """φ: the native part, then the leaf part (_extra), side by side."""
-        f = np.ascontiguousarray(feats, np.float32)
-        X = np.asarray(native.require().expand_features(
-            np.ascontiguousarray(f[:, :NATIVE]), self.mean[:NATIVE], self.scale[:NATIVE]))
-        return X if f.shape[1] == NATIVE else np.concatenate([X, self._extra(f)], axis=1)
-
-    def _extra(self, f):
-        z = (f[:, NATIVE:] - self.mean[NATIVE:]) / self.scale[NATIVE:]
-        zg = ((f[:, 1] - self.mean[1]) / self.scale[1])[:, None]  # the grid AO, standardised
-        return np.concatenate([z, z * z, z * zg], axis=1)
-
-    def predict(self, feats):
-        f = np.ascontiguousarray(feats, np.float32)
-        if f.shape[1] == NATIVE:
-            return np.asarray(native.require().predict_features(f, self.mean, self.scale,
-                                                                self.weights))
-        out = np.empty(len(f), np.float32)
-        for a in range(0, len(f), CHUNK):  # CHUNK rows at a time: bounded memory
-            rows = f[a:a + CHUNK]
-            X = np.asarray(native.require().expand_features(
-                np.ascontiguousarray(rows[:, :NATIVE]), self.mean[:NATIVE], self.scale[:NATIVE]))
-            k = X.shape[1]
-            out[a:a + CHUNK] = X @ self.weights[:k] + self._extra(rows) @ self.weights[k:]
-        return np.clip(out, 0.0, 1.0, out=out)
-
-
-def _components(n, triangles):
-    """Connected pieces of a mesh (int64 labels 0..L-1 per vertex) by min-label propagation
-    over the triangles, at most LEAF_ITERATIONS rounds (a leaf card settles in one or two; a
-    long branch mesh that does not settle stays split into pieces, deterministically)."""
-    lab = np.arange(n)
-    if len(triangles):
-        tris = np.asarray(triangles, np.int64)
-        for _ in range(LEAF_ITERATIONS):
-            low = lab[tris].min(axis=1)
-            new = lab.copy()
-            for c in range(3):
-                np.minimum.at(new, tris[:, c], low)
-            new = new[new]
-            if np.array_equal(new, lab):
-                break
-            lab = new
-    return np.unique(lab, return_inverse=True)[1].reshape(-1)
-
-
-class LeafTable:
-    """Where a receiver sits on its own leaf (docs/DESIGN.md, 'The ray-free rung'): each
-    connected piece of a CANOPY mesh (a leaf card), its centroid and mean radius. Most of a real
-    leaf's AO varies within the leaf (its base by the twig, its inner half toward the crown),
-    below any voxel; the features say where on the leaf a point is, in the leaf's own size:
-    its offset from the centroid, over the mean radius, along up, along the horizontal
-    direction out of the tree's axis and toward the crown's middle, and its length. Scale-free;
-    O(vertices) to build, O(1) per receiver."""
-
-    COUNT = 4
-
-    def __init__(self, positions, triangles):
-        P = np.asarray(positions, np.float64)
-        lab = _components(len(P), triangles)
-        cnt = np.maximum(np.bincount(lab), 1).astype(np.float64)
-        self.centroid = np.stack([np.bincount(lab, P[:, a]) for a in range(3)], 1) / cnt[:, None]
-        d = np.linalg.norm(P - self.centroid[lab], axis=1)
-        self.size = np.bincount(lab, d) / cnt
-        self.labels = lab
-        self.tri_labels = lab[np.asarray(triangles, np.int64)[:, 0]] if len(triangles) \
-            else np.zeros(0, np.int64)
-
-    def labels_of(self, own, count):
-        """Leaf of each of `count` points from own ({"vertex_ids" | "triangle_ids"}: the item's
-        vertex or triangle of each point, -1 = none); -1 where unknown."""
-        out = np.full(count, -1, np.int64)
-        for key, table in (("vertex_ids", self.labels), ("triangle_ids", self.tri_labels)):
-            ids = None if not own else own.get(key)
-            if ids is not None:
-                ids = np.asarray(ids, np.int64)
-                ok = (ids >= 0) & (ids < len(table))
-                out[ok] = table[ids[ok]]
-                break
-        return out
-
-    def features(self, p, labels, frame):
-        """(N, COUNT) float32; 0 (a leaf's centre) where the leaf is unknown or a point."""
-        out = np.zeros((len(p), self.COUNT), np.float32)
-        ok = labels >= 0
-        ok[ok] = self.size[labels[ok]] > 0
-        if not ok.any():
-            return out
-        lab = labels[ok]
-        c = self.centroid[lab]
-        u = (np.asarray(p, np.float64)[ok] - c) / self.size[lab][:, None]
-        center, _r, z0, z1 = frame
-        out_dir = c - np.asarray(center, np.float64)
-        out_dir[:, 2] = 0.0
-        mid = np.array([center[0], center[1], 0.5 * (z0 + z1)], np.float64)
-        in_dir = mid - c
-        out[ok, 0] = u[:, 2]
-        out[ok, 1] = np.einsum("ij,ij->i", u, _unit(out_dir))
-        out[ok, 2] = np.einsum("ij,ij->i", u, _unit(in_dir))
-        out[ok, 3] = np.linalg.norm(u, axis=1)
-        return out
-
-
-def _unit(v):
-    n = np.linalg.norm(v, axis=1)
-    return v / np.where(n > 0, n, 1.0)[:, None]
 
 
 def _sample(groups, count, seed):
