@@ -16,7 +16,8 @@ grids, fits and calibration included):
 - sphere, ellipsoid, shells, medium, grid: the engine's rungs, τ calibrated by the engine;
 - rays N: Embree at N = 1, 4, 16, 64, 256 rays (BVH build included);
 - regression: the ray-free rung (addon/canopy_ao/core/regression.py, occlusion_features.h):
-  1024 traced calibration points, then no rays;
+  a traced calibration sample sized to the scene (at most 1024 points × 128 rays and 8 rays
+  per receiver), then no rays;
 - hybrid c/N: ao_near_far with N rays out to near = c grid voxels, the grid beyond
   (near is scale-free: the voxel is the grid's box / its resolution);
 - cycles N: Cycles' bake at N samples, when cached (time: the bake call).
@@ -109,7 +110,8 @@ def methods(sc):
         yield f"rays {n}", ao, dt + t_bvh, ""
     (per, rep), dt = timed(lambda: regression.bake(items, distance=D))
     yield "regression", np.concatenate([per[n] for n in sc.names]), dt, \
-        " ".join(f"{k}:{v['source']}" for k, v in rep["groups"].items())
+        (f"sample {rep['calibration_points']} x {rep['calibration_samples']} rays; " +
+         " ".join(f"{k}:{v['source']}" for k, v in rep["groups"].items()))
     occ = np.isin(sc.role, ("canopy", "trunk", "grass"))
     keep_t = np.all(occ[sc.T], axis=1)
     grid, t_grid = timed(lambda: _core.DensityGrid(sc.V, np.ascontiguousarray(sc.T[keep_t]),

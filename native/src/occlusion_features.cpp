@@ -60,10 +60,22 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
                                                    const std::vector<Vec3>& dirs) {
   Field f;
   const std::array<int, 3> d = level_dims(g, level);
-  f.n[0] = d[0], f.n[1] = d[1], f.n[2] = d[2];
+  // One empty voxel around the grid's box, which is tight on the geometry: σ and τ then fall
+  // to 0 at the box's faces, so a receiver on the outermost leaf reads the same features just
+  // inside the box as just outside it (features continuous in x: a scene and the same scaled
+  // bake the same AO, whatever the resolution).
+  f.n[0] = d[0] + 2, f.n[1] = d[1] + 2, f.n[2] = d[2] + 2;
   f.h = g.voxel_size() * static_cast<float>(1 << level);
-  f.origin = g.origin() + Vec3{0.5f * f.h, 0.5f * f.h, 0.5f * f.h};
-  f.sigma = g.sigma_level(level);
+  f.origin = g.origin() - Vec3{0.5f * f.h, 0.5f * f.h, 0.5f * f.h};
+  {
+    const std::vector<float>& inner = g.sigma_level(level);
+    const int di[3] = {d[0], d[1], d[2]};
+    f.sigma.assign(static_cast<std::size_t>(f.n[0]) * f.n[1] * f.n[2], 0.0f);
+    for (int k = 0; k < d[2]; ++k)
+      for (int j = 0; j < d[1]; ++j)
+        for (int i = 0; i < d[0]; ++i)
+          f.sigma[vidx(f.n, i + 1, j + 1, k + 1)] = inner[vidx(di, i, j, k)];
+  }
   const std::size_t V = f.sigma.size(), K = dirs.size();
   const int* n = f.n;
   const std::size_t stride[3] = {1, static_cast<std::size_t>(n[0]),

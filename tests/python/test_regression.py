@@ -15,7 +15,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 sys.path.insert(0, HERE)
 
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import regression  # noqa: E402
+from canopy_ao.core import leaf_features, regression, regression_fit  # noqa: E402
 from canopy_ao.core.native import _core  # noqa: E402
 import tree_scene as ts  # noqa: E402
 
@@ -74,7 +74,84 @@ def test_deterministic_and_scale_free(method):
     b, _ = bake(items(), method)
     np.testing.assert_array_equal(a, b)
     big, _ = bake(items(scale=100.0), method)
-    assert np.abs(big - a).max() < 0.02, np.abs(big - a).max()
+    d = np.abs(big - a)
+    # The hybrid's near rays, as the exact rung's, may flip one grazing ray of 64 at a few
+    # vertices (1/64 = 0.016; raytrace alone: 0.016 at 16 of 8,000 vertices here).
+    assert d.max() < (0.02 if method == "regression" else 1 / 64 + 0.01), d.max()
+    assert d.mean() < 1e-3, d.mean()
+
+
+@pytest.mark.parametrize("resolution", [32, 47, 56])
+def test_features_scale_free_at_any_resolution(resolution):
+    """A leaf vertex on the grid box's top face (the crown's highest point) reads the same
+    features in a scene and the same ×1000: the swept field has an empty rim."""
+    small, big = items(), items(scale=1000.0)
+    a = regression.RegressionRung(small, resolution=resolution)
+    b = regression.RegressionRung(big, resolution=resolution)
+    for s_, b_ in zip(small, big):
+        own = {"vertex_ids": np.arange(len(s_.positions))}
+        fa = np.asarray(a._compute(s_.tree, s_.positions, s_.normals, s_.name, own))
+        fb = np.asarray(b._compute(b_.tree, b_.positions, b_.normals, b_.name, own))
+        assert np.abs(fa - fb).max() < 1e-2, (s_.name, np.abs(fa - fb).max())
+        got = a.ao(s_.role, s_.tree, s_.positions, s_.normals, s_.name, own)
+        assert np.abs(got - b.ao(b_.role, b_.tree, b_.positions, b_.normals, b_.name,
+                                 own)).max() < 0.02
+
+
+def test_calibration_is_sized_to_the_scene_and_shares_the_bvh(scene):
+    its, _ = scene
+    receivers = sum(len(it.positions) for it in its)
+    _, rep = bake(its, "regression")
+    cal = rep["calibration"]
+    assert cal["receivers"] == receivers
+    # No rays beyond the sample, and the sample at most RAYS_PER_RECEIVER per receiver (or the
+    # floor of MIN_POINTS × MIN_SAMPLES rays).
+    floor = regression.MIN_POINTS * regression.MIN_SAMPLES
+    assert cal["calibration_rays"] <= max(regression.RAYS_PER_RECEIVER * receivers, floor)
+    assert cal["calibration_points"] <= regression.POINTS
+    assert cal["shared_tracer"]  # the bake's BVH, not a second one
+    own, rep_own = regression.bake(its)  # the rung's own BVH: the same sample, the same AO
+    assert not rep_own["shared_tracer"]
+    got, _ = bake(its, "regression")
+    np.testing.assert_allclose(np.concatenate([own[it.name] for it in its]), got, atol=2e-3)
+    assert regression.calibration_size(10 ** 6) == (regression.POINTS, 128)
+    pts, spp = regression.calibration_size(2000)
+    assert spp == regression.MIN_SAMPLES and pts * spp <= regression.RAYS_PER_RECEIVER * 2000
+    assert regression.calibration_size(100) == (100, regression.MIN_SAMPLES)  # every point
+
+
+def test_leaf_table_finds_each_leaf_and_places_points_on_it():
+    # Two unit quads (two triangles each), the second 10 units off and twice the size.
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], np.float64)
+    P = np.concatenate([quad, quad * 2 + [10, 0, 0]]).astype(np.float32)
+    T = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], np.int32)
+    leaves = leaf_features.LeafTable(P, T)
+    assert len(leaves.size) == 2 and leaves.labels[0] != leaves.labels[4]
+    np.testing.assert_allclose(leaves.size, [np.sqrt(0.5), 2 * np.sqrt(0.5)], rtol=1e-6)
+    frame = (np.zeros(3, np.float32), 1.0, 0.0, 2.0)
+    by_vertex = leaves.features(P, leaves.labels_of({"vertex_ids": np.arange(8)}, 8), frame)
+    # Scale-free: the big leaf's corners sit where the small one's do, in its own size (up,
+    # out of the axis and the length; toward the crown's middle depends on where a leaf is).
+    np.testing.assert_allclose(by_vertex[:4, [0, 1, 3]], by_vertex[4:, [0, 1, 3]], atol=1e-6)
+    h = np.sqrt(0.5)
+    np.testing.assert_allclose(by_vertex[:, 0], [-h, -h, h, h] * 2, atol=1e-5)  # below / above
+    np.testing.assert_allclose(by_vertex[:, 3], 1.0, atol=1e-5)  # every corner one radius out
+    # A texel names its triangle: the same leaf, the same features at the same point.
+    by_tri = leaves.features(P[[2, 6]], leaves.labels_of({"triangle_ids": [1, 3]}, 2), frame)
+    np.testing.assert_allclose(by_tri, by_vertex[[2, 6]], atol=1e-6)
+    # Unknown (-1) or no ids: the leaf's centre, all zero.
+    assert not leaves.features(P[:2], leaves.labels_of({"vertex_ids": [-1, -1]}, 2), frame).any()
+    assert not leaves.features(P[:2], leaves.labels_of(None, 2), frame).any()
+
+
+def test_the_sample_never_exceeds_its_points():
+    """Rounding each group's share up must not break the ray-free contract (<= 1024 points):
+    nine similar groups each rounded up once gave 1026."""
+    for sizes in ({i: 1000 + 37 * i for i in range(9)}, {"a": 3, "b": 10 ** 6},
+                  {"a": 10 ** 5, "b": 5 * 10 ** 4, "c": 4096}):
+        picks = regression._sample(sizes, regression.POINTS, 0)
+        assert sum(len(v) for v in picks.values()) <= regression.POINTS
+        assert all(len(v) >= 1 and len(set(v)) == len(v) for v in picks.values())
 
 
 def test_regression_bakes_grass_without_a_tree_and_grass_shades_the_ground():
@@ -98,7 +175,7 @@ def test_ridge_recovers_a_linear_law():
     X = np.c_[np.ones(400), rng.normal(size=(400, 3))]
     w = np.array([0.5, 0.1, -0.05, 0.02])
     y = X @ w + rng.normal(scale=1e-3, size=400)
-    got, lam, cv = regression.ridge(X, y)
+    got, lam, cv = regression_fit.ridge(X, y)
     np.testing.assert_allclose(got, w, atol=5e-3)
     assert cv < 5e-3
 

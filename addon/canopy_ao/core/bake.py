@@ -74,9 +74,13 @@ def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
     if _wants_regression(plan, items, settings):
         t0 = time.perf_counter()
         try:
+            shared = {} if plan.tracer is None else dict(  # one BVH for the bake
+                tracer=plan.tracer,
+                ids=lambda it, idx: (ladder.sample_ids(plan, it, idx) or {}).get("vertex_ids"))
             plan.regression = regression.RegressionRung(
                 items, settings.distance, points=regression.POINTS,
-                samples=settings.calibration_samples, seed=settings.seed)
+                samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
+                **shared)
         except CanopyAOError as exc:
             if settings.method == "regression":
                 raise

@@ -29,9 +29,9 @@ RUNGS = (
                               "AO of a uniform medium (tabulated)"),
     ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
     ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
-    ("regression", "Regression", "Ray-free: 1024 ray-traced points fitted on cheap per-vertex "
-                                 "features of the density grid and the tree's shape; no rays "
-                                 "beyond them, cost independent of the leaf count"),
+    ("regression", "Regression", "Ray-free: up to 1024 ray-traced points fitted on cheap "
+                                 "per-vertex features of the density grid and the tree's shape; "
+                                 "no rays beyond them, cost independent of the leaf count"),
     ("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels, the grid beyond"),
     ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
 )
@@ -156,12 +156,14 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         n = np.ascontiguousarray(it.normals[idx])
         own = sample_ids(plan, it, idx)
         refs.append(trace(plan, p, n, s.calibration_samples, own=own))
-        groups.append((it, p, n, own))
+        # The rungs' own ids of the points (item vertices; the regression's leaf features).
+        local = {"vertex_ids": it.vertex_map[idx] if it.vertex_map is not None else idx}
+        groups.append((it, p, n, own, local))
     ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
     # Buried points (a leaf's base inside its twig): kept out of the fit, which they would
     # darken everything else to match (docs/DESIGN.md, 'Auto mode').
-    keep = ~np.concatenate([buried(plan, it, p, n, own) for it, p, n, own in groups]) if groups \
-        else np.zeros(0, bool)
+    keep = ~np.concatenate([buried(plan, it, p, n, own) for it, p, n, own, _ in groups]) \
+        if groups else np.zeros(0, bool)
     t_trace = time.perf_counter() - t0
 
     batches = _batches(groups)
@@ -170,14 +172,14 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
             got = [trace(plan, p, n, s.samples, seed=s.seed + 7919, own=own)
-                   for _it, p, n, own in groups]
+                   for _it, p, n, own, _ in groups]
         elif method in TAU_METHODS:  # the scene plan: one call per role, a tree per point
             got = [np.empty(len(ref), np.float32)]
             for (role, key), (trees, p, n, where) in batches.items():
                 got[0][where] = evaluate_points(plan, role, trees, key, p, n, method, tau)
         else:
-            got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau)
-                   for it, p, n, _own in groups]
+            got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau, local)
+                   for it, p, n, _own, local in groups]
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
 
@@ -241,7 +243,7 @@ def _batches(groups):
     is its own): {(role, grass item or None): ((tree names, label per point), positions,
     normals, the points' indices in the sample)}, for the scene plan's tree per receiver."""
     parts, start = {}, 0
-    for it, p, n, _own in groups:
+    for it, p, n, *_ in groups:
         key = (it.role, it.name if it.role == "GRASS" else None)
         parts.setdefault(key, []).append((it.tree, p, n, np.arange(start, start + len(p))))
         start += len(p)

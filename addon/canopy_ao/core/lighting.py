@@ -109,9 +109,10 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     if method == "regression":
-        return plan.regression.ao(role, tree, p, n)
+        return plan.regression.ao(role, tree, p, n, grass_key, own)
     if method == "hybrid":
-        return _grass(plan, role, grass_key, p, n, _hybrid_ao(plan, p, n))
+        return _grass(plan, role, grass_key, p, n,
+                      _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own)))
     # The analytic rungs: the whole per-receiver composition in one native call
     # (docs/DESIGN.md, 'How each role is lit').
     lit = lights(plan)
@@ -188,15 +189,18 @@ def _grid_ao(plan, p, n):
 HYBRID_VOXELS = 2.0
 
 
-def _hybrid_ao(plan, p, n):
-    """Near exact, far statistical (native ao_near_far): settings.samples rays out to
-    HYBRID_VOXELS grid voxels, the density grid beyond."""
+def _hybrid_ao(plan, p, n, own=None):
+    """Near exact, far statistical (as native ao_near_far): settings.samples rays out to
+    HYBRID_VOXELS grid voxels, each skipping only its receiver's own triangles (own: the tracer
+    ids of own_ids), times the density grid's transmittance beyond (docs/DESIGN.md, 'The
+    near/far hybrid')."""
     d = plan.settings.distance
-    near = HYBRID_VOXELS * float(plan.grid.voxel_size)
-    return np.asarray(_core.ao_near_far(plan.tracer, plan.grid, p, n, near,
-                                        samples=int(plan.settings.samples),
-                                        distance=float(d) if d > 0 else math.inf,
-                                        seed=plan.settings.seed), dtype=np.float32)
+    far = float(d) if d > 0 else math.inf
+    near = min(HYBRID_VOXELS * float(plan.grid.voxel_size), far)
+    ao = np.asarray(trace(plan, p, n, plan.settings.samples, own=own, distance=near),
+                    dtype=np.float32)
+    tail = plan.grid.ao(p, n, distance=far, start=near, seed=plan.settings.seed)
+    return ao * np.asarray(tail, dtype=np.float32)
 
 
 def _scene_triangles(items, bases=None):

@@ -1,20 +1,23 @@
 """The ray-free "regression" rung: a ridge fit of the traced calibration sample on cheap
 per-vertex occlusion features, carried over to every vertex. No bpy.
 
-Why (docs/DESIGN.md, "The method ladder"): the leaf-density grid follows where the leaves are but
-misses what is below a voxel (a leaf shaded by its neighbour or by its own branch); the
-calibration sample measures exactly that, per scene. The features and the model's evaluation are
-native (``_core.OcclusionFeatures``, ``_core.predict_features``: occlusion_features.h); here are
-the sample, the fit and the bookkeeping.
+Why (docs/DESIGN.md, "The method ladder", "The ray-free rung"): the leaf-density grid follows
+where the leaves are but misses what is below a voxel (a leaf shaded by its neighbour or by its
+own branch); the calibration sample measures exactly that, per scene. The features and the
+model's evaluation are native (``_core.OcclusionFeatures``, ``_core.predict_features``:
+occlusion_features.h); here are the sample, the fit and the bookkeeping.
 
-Cost: grids O(triangles), one Embree BVH and ``points`` × ``samples`` calibration rays, then a
-fixed number of grid lookups per vertex, whatever the leaf count. No rays beyond the sample.
+Cost: grids O(triangles), one Embree BVH (the bake's, when it has one) and ``points`` ×
+``samples`` calibration rays (calibration_size: at most 1024 × 128, fewer on a small scene),
+then a fixed number of grid lookups per vertex, whatever the leaf count. No rays beyond the
+sample.
 
 Fit, per (tree, role) group with enough sample points (else per role, else scene-wide):
-standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ chosen
-by 5-fold cross-validation on the sample. Buried sample points (every ray stops within
-``BURIED_FRACTION`` of the object's size: a leaf base inside its branch) are kept out of the fit —
-their AO of 0 says nothing about the rest of the leaf; the model predicts them like any vertex.
+standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ
+chosen by 5-fold cross-validation on the sample (ties to the larger λ). Buried sample points
+(every ray stops within ``BURIED_FRACTION`` of the object's size: a leaf base inside its branch)
+are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
+predicts them like any vertex.
 """
 from __future__ import annotations
 
@@ -23,15 +26,24 @@ import time
 import numpy as np
 
 from . import native
+from .ladder import BURIED_RAYS as LADDER_BURIED_RAYS, BURIED_SCALE
+from .leaf_features import LeafTable
 from .native import CanopyAOError
+from .regression_fit import NATIVE, Model
 from .scene import RECEIVER_ROLES
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
-BURIED_FRACTION = 0.01   # of the receiver's object bbox diagonal
-BURIED_RAYS = 32
-LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
+# Buried: every one of BURIED_RAYS rays stops within BURIED_FRACTION of the receiver's object
+# bounding-box diagonal (auto's test, ladder.py, with twice its rays: with 16 rays more of the
+# darkest unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046).
+BURIED_FRACTION = BURIED_SCALE
+BURIED_RAYS = 2 * LADDER_BURIED_RAYS
 MIN_GROUP = 96           # sample points a group needs for its own fit
 POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
+# Sizing on small scenes (calibration_size): counted work, scale-free.
+RAYS_PER_RECEIVER = 8    # calibration rays per receiver at most: 1/8 of a 64-ray bake
+MIN_SAMPLES = 32         # rays per calibration point at least
+MIN_POINTS = 256         # calibration points at least (when the scene has them)
 
 
 def _merged(items):
@@ -58,66 +70,48 @@ def tree_frame(points):
     return c.astype(np.float32), radius, float(p[:, 2].min()), float(p[:, 2].max())
 
 
-def ridge(X, y, lambdas=LAMBDAS, folds=5, seed=0):
-    """Weights of a ridge fit (intercept column 0 not penalised), λ by k-fold CV. Returns
-    (weights float64 (P,), λ, CV mean absolute error)."""
-    X = np.asarray(X, np.float64)
-    y = np.asarray(y, np.float64)
-    n, p = X.shape
-    pen = np.eye(p)
-    pen[0, 0] = 0.0
-
-    def solve(A, b, lam):
-        return np.linalg.solve(A.T @ A + lam * len(A) * pen, A.T @ b)
-
-    fold = np.random.default_rng(seed).permutation(n) % folds
-    best = (np.inf, lambdas[0])
-    for lam in lambdas:
-        err = 0.0
-        for f in range(folds):
-            tr, te = fold != f, fold == f
-            if tr.sum() <= 1 or te.sum() == 0:
-                continue
-            w = solve(X[tr], y[tr], lam)
-            err += float(np.abs(np.clip(X[te] @ w, 0, 1) - y[te]).sum())
-        err /= max(n, 1)
-        if err < best[0]:
-            best = (err, lam)
-    return solve(X, y, best[1]), best[1], best[0]
-
-
-class Model:
-    """One fitted group: feature mean/scale and the expanded weights (float32, native layout)."""
-
-    def __init__(self, feats, target):
-        _core = native.require()
-        self.mean = feats.mean(0).astype(np.float32)
-        sd = feats.std(0)
-        self.scale = np.where(sd > 1e-6, sd, 1.0).astype(np.float32)
-        X = _core.expand_features(np.ascontiguousarray(feats, np.float32), self.mean, self.scale)
-        w, self.lam, self.cv_mae = ridge(X, target)
-        self.weights = w.astype(np.float32)
-        self.n = len(target)
-
-    def predict(self, feats):
-        return np.asarray(native.require().predict_features(np.ascontiguousarray(feats, np.float32),
-                                                 self.mean, self.scale, self.weights))
-
-
 def _sample(groups, count, seed):
-    """{group: sorted row indices} of about `count` points in all, every group some, larger
-    groups more (∝ sqrt of their size: small groups such as a trunk are not starved)."""
+    """{group: sorted row indices} of at most `count` points in all (or one per group), every
+    group some, larger groups more (∝ sqrt of their size: small groups such as a trunk are not
+    starved)."""
     rng = np.random.default_rng(seed)
     sizes = {g: n for g, n in groups.items() if n > 0}
     if not sizes:
         return {}
     w = {g: np.sqrt(n) for g, n in sizes.items()}
     tot = sum(w.values())
-    out = {}
-    for g, n in sizes.items():
-        k = min(n, max(1, int(round(count * w[g] / tot))))
-        out[g] = np.sort(rng.choice(n, size=k, replace=False))
-    return out
+    ks = {g: min(n, max(1, int(round(count * w[g] / tot)))) for g, n in sizes.items()}
+    while sum(ks.values()) > max(count, len(ks)):  # rounding up must not break the cap
+        g = max(ks, key=lambda g_: (ks[g_], str(g_)))
+        ks[g] -= 1
+    return {g: np.sort(rng.choice(sizes[g], size=ks[g], replace=False)) for g in sizes}
+
+
+def calibration_size(receivers, points=POINTS, samples=128):
+    """(points, rays per point) of the calibration sample for ``receivers`` receiver points,
+    sized so the sample stays a fraction of a ray-traced bake of the same scene whatever its
+    size (docs/DESIGN.md, 'The ray-free rung'): at most RAYS_PER_RECEIVER rays per receiver
+    (an eighth of a 64-ray bake), fewer rays per point first (down to MIN_SAMPLES: the fit
+    averages their noise out), then fewer points (down to MIN_POINTS; the floor is
+    MIN_POINTS × MIN_SAMPLES rays, or every receiver at MIN_SAMPLES on a smaller scene).
+    Counted, never timed: the same scene always gets the same sample. The grid is not sized
+    down: 48 or 32 voxels instead of 64 cut the rung's time on a 14k-vertex tree by 40-50 %
+    but cost MAE 0.003-0.006 (callistemon)."""
+    receivers = max(int(receivers), 1)
+    budget = RAYS_PER_RECEIVER * receivers
+    pts = min(int(points), receivers)
+    spp = int(min(samples, max(MIN_SAMPLES, budget // max(pts, 1))))
+    if pts * spp > budget:
+        pts = min(pts, max(MIN_POINTS, budget // spp))
+    return pts, spp
+
+
+def _own_ids_from(bases):
+    """ids(item, idx) for the rung's own tracer: the rows' place in its merged mesh (bases:
+    {id(item): its first vertex there}; a part of an item is its own mesh there)."""
+    def ids(item, idx):
+        return (np.asarray(idx, np.int64) + bases[id(item)]).astype(np.int32)
+    return ids
 
 
 class RegressionRung:
@@ -125,21 +119,39 @@ class RegressionRung:
     :meth:`ao` for any receiver points of an item, in any number of calls.
 
     items: SceneItems (roles upper case; IGNORE skipped). distance: the AO distance of the
-    calibration rays (0 = unlimited). points × samples: the calibration sample's size. The
-    sample is traced against every non-ignored triangle with each point's own vertex named,
-    so a receiver skips only the triangles it starts on (as Cycles)."""
+    calibration rays (0 = unlimited). points × samples: the calibration sample's largest size
+    (calibration_size shrinks it on small scenes); resolution: the grid's. The sample is traced
+    against every non-ignored triangle with each
+    point's own vertex named, so a receiver skips only the triangles it starts on (as Cycles).
+    tracer, ids: the plan's ray tracer over the same triangles and ids(item, idx) -> its vertex
+    ids of those rows (ladder.sample_ids), so a bake builds one BVH; None = the rung's own.
+    meshes: the unsplit items when ``items`` are split per tree (scene.parts), for the leaf
+    tables (LeafTable) by item name; None = the items themselves."""
 
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
-                 directions=24, seed=0):
+                 directions=24, seed=0, tracer=None, ids=None, meshes=None):
         _core = native.require()
         t0 = time.perf_counter()
         items = [it for it in items if it.role != "IGNORE"]
         occ = [it for it in items if it.role in OCCLUDER_ROLES]
         if not occ:
             raise CanopyAOError("method 'regression' needs a CANOPY, TRUNK or GRASS object")
+        receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
+        n_recv = sum(len(it.positions) for it in receivers)
+        points, samples = calibration_size(n_recv, points, samples)
         grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
+
+        # Leaf tables of the CANOPY meshes, by name over the whole mesh (meshes: the unsplit
+        # items of a scene whose items are split per tree; a name seen twice gets none).
+        whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
+        self._leaves = {}
+        for it in whole:
+            if it.role == "CANOPY":
+                self._leaves[it.name] = None if it.name in self._leaves else LeafTable(
+                    it.positions, it.triangles)
+        t_leaves = time.perf_counter()
 
         # Frames: one per tree (its leaves and branches), the occluders' for everything else.
         self._scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
@@ -150,13 +162,15 @@ class RegressionRung:
             self._frames[tree] = tree_frame(np.concatenate(pts)) if pts else self._scene_frame
 
         # Calibration sample, stratified by (tree, role); traced with each point's own vertex.
-        receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
-        traced = occ + [it for it in items if it.role == "GROUND"]
-        bases, base = {}, 0
-        for it in traced:
-            bases[it.name] = base
-            base += len(it.positions)
-        tracer = _core.RayTracer(*_merged(traced))
+        own_tracer = tracer is None
+        if own_tracer:
+            bases, base = {}, 0
+            traced = occ + [it for it in items if it.role == "GROUND"]
+            for it in traced:
+                bases[id(it)] = base
+                base += len(it.positions)
+            tracer, ids = _core.RayTracer(*_merged(traced)), _own_ids_from(bases)
+        t_tracer = time.perf_counter()
         groups = {}
         for it in receivers:
             groups.setdefault((it.tree, it.role), []).append(it)
@@ -170,15 +184,24 @@ class RegressionRung:
             owner = np.searchsorted(offs, idx, side="right") - 1
             P = np.concatenate([it.positions for it in its])[idx]
             N = np.concatenate([it.normals for it in its])[idx]
-            ids = (np.array([bases[it.name] for it in its])[owner] + idx - offs[owner]).astype(
-                np.int32)
+            own = np.full(len(idx), -1, np.int32)
+            for k, it in enumerate(its):
+                m = owner == k
+                got = ids(it, idx[m] - offs[k]) if m.any() else None
+                if got is not None:
+                    own[m] = got
             diag = np.array([_diag(it.positions) for it in its])[owner]
-            ao = _trace(tracer, P, N, samples, d, seed + 1, ids)
-            buried = _near_ao(tracer, P, N, diag, ids) <= 0.0
-            F = self._compute(its[0].tree, P, N)
+            ao = _trace(tracer, P, N, samples, d, seed + 1, own)
+            buried = _near_ao(tracer, P, N, diag, own) <= 0.0
+            F = np.zeros((len(idx), NATIVE + LeafTable.COUNT), np.float32)
+            for k, it in enumerate(its):
+                m = owner == k
+                if m.any():
+                    rows = idx[m] - offs[k]
+                    whole = it.vertex_map[rows] if it.vertex_map is not None else rows
+                    F[m] = self._compute(it.tree, P[m], N[m], it.name, {"vertex_ids": whole})
             sample[g] = dict(features=F[~buried], ao=ao[~buried], buried=int(buried.sum()))
         t_cal = time.perf_counter()
-
         # Fit per group, falling back to the role's pooled sample, then to everything.
         by_role = {}
         for g, s_ in sample.items():
@@ -212,22 +235,34 @@ class RegressionRung:
         self.report = dict(method="regression", groups=self.fits, resolution=resolution,
                            directions=directions, calibration_samples=samples,
                            calibration_points=int(sum(len(v) for v in picks.values())),
-                           timings=dict(grid=t_grid - t0, calibration=t_cal - t_grid,
-                                        fit=t_fit - t_cal))
+                           calibration_rays=int(samples * sum(len(v) for v in picks.values())),
+                           receivers=int(n_recv),
+                           shared_tracer=not own_tracer,
+                           leaves={k: int(len(v.size)) for k, v in self._leaves.items() if v},
+                           timings=dict(grid=t_grid - t0, leaves=t_leaves - t_grid,
+                                        tracer=t_tracer - t_leaves,
+                                        calibration=t_cal - t_tracer, fit=t_fit - t_cal))
 
-    def _compute(self, tree, p, n):
-        c, r, z0, z1 = self._frames.get(tree, self._scene_frame)
-        return self._features.compute(np.ascontiguousarray(p, np.float32),
-                                      np.ascontiguousarray(n, np.float32), c, r, z0, z1)
+    def _compute(self, tree, p, n, name=None, own=None):
+        frame = self._frames.get(tree, self._scene_frame)
+        p = np.ascontiguousarray(p, np.float32)
+        f = np.asarray(self._features.compute(p, np.ascontiguousarray(n, np.float32), *frame))
+        leaves = self._leaves.get(name)
+        extra = (leaves.features(p, leaves.labels_of(own, len(p)), frame) if leaves is not None
+                 else np.zeros((len(p), LeafTable.COUNT), np.float32))
+        return np.concatenate([f, extra], axis=1)
 
-    def ao(self, role, tree, p, n):
-        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree."""
+    def ao(self, role, tree, p, n, name=None, own=None):
+        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree.
+        name, own: the item's name and {"vertex_ids" | "triangle_ids"} of each point in it
+        (-1 = none), so a leaf's points know their leaf (LeafTable); without them a point
+        reads as its leaf's centre."""
         if len(p) == 0:
             return np.ones(0, np.float32)
         model = self._models.get((tree, role))
         if model is None:  # an item the sample did not see: its role's fit, else any
             model = next((m for (t, r), m in self._models.items() if r == role), self._fallback)
-        return model.predict(self._compute(tree, p, n))
+        return model.predict(self._compute(tree, p, n, name, own))
 
 
 def bake(items, distance=0.0, **options):
@@ -235,7 +270,8 @@ def bake(items, distance=0.0, **options):
     RegressionRung; IGNORE items get 1)."""
     t0 = time.perf_counter()
     rung = RegressionRung(items, distance, **options)
-    out = {it.name: (rung.ao(it.role, it.tree, it.positions, it.normals)
+    out = {it.name: (rung.ao(it.role, it.tree, it.positions, it.normals, it.name,
+                             {"vertex_ids": np.arange(len(it.positions))})
                      if it.role in RECEIVER_ROLES else np.ones(len(it.positions), np.float32))
            for it in items}
     rung.report["timings"]["total"] = time.perf_counter() - t0

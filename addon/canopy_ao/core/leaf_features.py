@@ -1,0 +1,88 @@
+"""Where a receiver sits on its own leaf: the regression rung's leaf features
+(docs/DESIGN.md, 'The ray-free rung'). No bpy."""
+from __future__ import annotations
+
+import numpy as np
+
+LEAF_ITERATIONS = 32     # label-propagation rounds of _components
+
+
+def _components(n, triangles):
+    """Connected pieces of a mesh (int64 labels 0..L-1 per vertex) by min-label propagation
+    over the triangles, at most LEAF_ITERATIONS rounds (a leaf card settles in one or two; a
+    long branch mesh that does not settle stays split into pieces, deterministically)."""
+    lab = np.arange(n)
+    if len(triangles):
+        tris = np.asarray(triangles, np.int64)
+        for _ in range(LEAF_ITERATIONS):
+            low = lab[tris].min(axis=1)
+            new = lab.copy()
+            for c in range(3):
+                np.minimum.at(new, tris[:, c], low)
+            new = new[new]
+            if np.array_equal(new, lab):
+                break
+            lab = new
+    return np.unique(lab, return_inverse=True)[1].reshape(-1)
+
+
+class LeafTable:
+    """Where a receiver sits on its own leaf (docs/DESIGN.md, 'The ray-free rung'): each
+    connected piece of a CANOPY mesh (a leaf card), its centroid and mean radius. Most of a real
+    leaf's AO varies within the leaf (its base by the twig, its inner half toward the crown),
+    below any voxel; the features say where on the leaf a point is, in the leaf's own size:
+    its offset from the centroid, over the mean radius, along up, along the horizontal
+    direction out of the tree's axis and toward the crown's middle, and its length. Scale-free;
+    O(vertices) to build, O(1) per receiver."""
+
+    COUNT = 4
+
+    def __init__(self, positions, triangles):
+        P = np.asarray(positions, np.float64)
+        lab = _components(len(P), triangles)
+        cnt = np.maximum(np.bincount(lab), 1).astype(np.float64)
+        self.centroid = np.stack([np.bincount(lab, P[:, a]) for a in range(3)], 1) / cnt[:, None]
+        d = np.linalg.norm(P - self.centroid[lab], axis=1)
+        self.size = np.bincount(lab, d) / cnt
+        self.labels = lab
+        self.tri_labels = lab[np.asarray(triangles, np.int64)[:, 0]] if len(triangles) \
+            else np.zeros(0, np.int64)
+
+    def labels_of(self, own, count):
+        """Leaf of each of `count` points from own ({"vertex_ids" | "triangle_ids"}: the item's
+        vertex or triangle of each point, -1 = none); -1 where unknown."""
+        out = np.full(count, -1, np.int64)
+        for key, table in (("vertex_ids", self.labels), ("triangle_ids", self.tri_labels)):
+            ids = None if not own else own.get(key)
+            if ids is not None:
+                ids = np.asarray(ids, np.int64)
+                ok = (ids >= 0) & (ids < len(table))
+                out[ok] = table[ids[ok]]
+                break
+        return out
+
+    def features(self, p, labels, frame):
+        """(N, COUNT) float32; 0 (a leaf's centre) where the leaf is unknown or a point."""
+        out = np.zeros((len(p), self.COUNT), np.float32)
+        ok = labels >= 0
+        ok[ok] = self.size[labels[ok]] > 0
+        if not ok.any():
+            return out
+        lab = labels[ok]
+        c = self.centroid[lab]
+        u = (np.asarray(p, np.float64)[ok] - c) / self.size[lab][:, None]
+        center, _r, z0, z1 = frame
+        out_dir = c - np.asarray(center, np.float64)
+        out_dir[:, 2] = 0.0
+        mid = np.array([center[0], center[1], 0.5 * (z0 + z1)], np.float64)
+        in_dir = mid - c
+        out[ok, 0] = u[:, 2]
+        out[ok, 1] = np.einsum("ij,ij->i", u, _unit(out_dir))
+        out[ok, 2] = np.einsum("ij,ij->i", u, _unit(in_dir))
+        out[ok, 3] = np.linalg.norm(u, axis=1)
+        return out
+
+
+def _unit(v):
+    n = np.linalg.norm(v, axis=1)
+    return v / np.where(n > 0, n, 1.0)[:, None]
