@@ -5,18 +5,7 @@ import os
 import sys
 import traceback
 
-import numpy as np
-
 from . import mesh_io
-
-# foreach_get key, values per element and dtype of each attribute type that can be restored.
-_LAYOUT = {'FLOAT': ("value", 1, np.float32), 'INT': ("value", 1, np.int32),
-           'INT8': ("value", 1, np.int32), 'BOOLEAN': ("value", 1, bool),
-           'FLOAT2': ("vector", 2, np.float32), 'FLOAT_VECTOR': ("vector", 3, np.float32),
-           'FLOAT_COLOR': ("color", 4, np.float32),
-           # the stored bytes / 255, no colour conversion: restored bit for bit
-           'BYTE_COLOR': ("color_srgb", 4, np.float32)}
-
 
 class Transaction:
     def __init__(self):
@@ -27,17 +16,15 @@ class Transaction:
         self._undo.append(undo)
 
     def attribute(self, obj, name):
-        """Record obj's attribute ``name`` (or its absence) and its ownership marks, before a
-        write replaces them."""
+        """Record obj's attribute ``name`` (or its absence) and its mesh's ownership records,
+        before a write replaces them."""
         mesh = obj.data
-        marks = [(idb, idb.get(mesh_io.OWNED_PROP)) for idb in (obj, mesh)]
+        marks = [(key, mesh.get(key)) for key in (mesh_io.OWNED_PROP, mesh_io.LEGACY_OWNED_PROP)]
         attr = mesh.attributes.get(name)
         old = None
-        if attr is not None and attr.data_type in _LAYOUT:
-            key, width, dtype = _LAYOUT[attr.data_type]
-            buf = np.empty(len(attr.data) * width, dtype=dtype)
-            attr.data.foreach_get(key, buf)
-            old = (attr.data_type, attr.domain, key, buf)
+        if attr is not None and attr.data_type in mesh_io.LAYOUT:
+            old = (attr.data_type, attr.domain, mesh_io.LAYOUT[attr.data_type][0],
+                   mesh_io.read_attribute(attr))
 
         def undo():
             cur = mesh.attributes.get(name)
@@ -51,11 +38,11 @@ class Transaction:
                         mesh.attributes.remove(cur)
                     cur = mesh.attributes.new(name, kind, domain)
                 cur.data.foreach_set(key, buf)
-            for idb, raw in marks:
+            for key, raw in marks:
                 if raw is None:
-                    idb.pop(mesh_io.OWNED_PROP, None)
+                    mesh.pop(key, None)
                 else:
-                    idb[mesh_io.OWNED_PROP] = raw
+                    mesh[key] = raw
             mesh.update_tag()
         self.add(undo)
 

@@ -106,27 +106,39 @@ class TexelTarget(Target):
                               packed_into=image.name, channel=opts["channel"])
         elif opts["udim"]:
             image, st = tiles_io.write_tiled(self.obj, [(self.rx, self.ao)],
-                                             opts["image_dir"] or None, txn, tiled=True)
+                                             opts["image_dir"] or None, txn, tiled=True,
+                                             overwrite=opts["overwrite"])
             self.stats = dict(self.rx.stats, path=st["paths"][0], paths=st["paths"],
                               tiles=sorted(st["tiles"]), image_tiles=st["tiles"],
                               notes=self.rx.stats["notes"] + st["notes"])
         else:
             image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
-                                                      opts["image_dir"] or None, txn)
+                                                      opts["image_dir"] or None, txn,
+                                                      overwrite=opts["overwrite"])
         timage = None
         if self.thickness is not None and opts["udim"]:
             timage, tstats = tiles_io.write_tiled(self.obj, [(self.rx, self.thickness)],
                                                   opts["image_dir"] or None, txn,
                                                   suffix=opts["thickness_name"], tiled=True,
-                                                  background=0.0)
+                                                  background=0.0, overwrite=opts["overwrite"])
             self.stats["thickness_path"] = tstats["paths"][0]
         elif self.thickness is not None:
             timage, tstats = texel_io.write_texels(self.obj, self.rx, self.thickness,
                                                    opts["image_dir"] or None, txn,
                                                    suffix=opts["thickness_name"],
-                                                   background=0.0)
+                                                   background=0.0, overwrite=opts["overwrite"])
             self.stats["thickness_path"] = tstats["path"]
         self.wire(txn, opts, image, timage)
+
+    def outputs(self, opts):
+        """(owner, suffix, tile) of every image file write() makes: the AO's and the
+        thickness's, per UDIM tile (tile None: one file), the atlas's when baking into one."""
+        if opts["channel"] != "RGBA":
+            return []  # packed into the user's chosen image (the ask is choosing it)
+        owner = opts["atlas"] if opts["atlas"] else self.obj.name
+        tiles = [n for n, _a, _b in self.rx.tiles] if opts["udim"] else [None]
+        maps = ["CanopyAO"] + ([opts["thickness_name"]] if opts["thickness"] else [])
+        return [(owner, m, n) for m in maps for n in tiles]
 
     def wire(self, txn, opts, image, timage):
         """Wire the AO image (and the thickness's, timage) into obj's materials when asked."""
@@ -142,3 +154,19 @@ class TexelTarget(Target):
     def report(self):
         """The texel stats as plain data for the JSON report."""
         return {k: v for k, v in self.stats.items() if isinstance(v, (int, float, str, list))}
+
+
+def check_outputs(targets, opts):
+    """Refuse, before anything is written, image files of this bake that would collide or
+    replace a file not Canopy AO's own for that output (texel_io.check_outputs)."""
+    from types import SimpleNamespace
+    out = []
+    for t in targets:
+        if t.kind != "texel":
+            continue
+        for owner, suffix, tile in t.outputs(opts):
+            path = texel_io.image_path(SimpleNamespace(name=owner), opts["image_dir"] or None, [],
+                                       suffix, make=False)
+            out.append((texel_io.tile_path(path, tile) if tile is not None else path, owner,
+                        suffix, tile))
+    texel_io.check_outputs(out, opts["overwrite"])
