@@ -399,7 +399,7 @@ def c_write_read(g, core, tmp):
                                     g.pick([1, 3, 4]))).astype(np.float32), 0.1)
     path = g.path(tmp)
     dtype = g.pick(["auto", "float", "half", "uint16", "uint8", "int7"])
-    attrs = g.pick([None, None, {"canopy_ao": '{"owner": "Tree.001"}'}, {"a_1": "", "B": "é"},
+    attrs = g.pick([None, None, {"canopy_ao": '{"owner": "Tree.001"}'}, {"a_1": "", "B": "é"}, {"a_1": "x", "B": "é"},
                     {"bad name": "x"}, {"": "x"}, {"k": 3}, {"k": "a\0b"}, ["k"]])
 
     def call():

@@ -447,8 +447,8 @@ written, ValueError for bad shapes, non-finite pixels (or beyond +-65504 for "ha
 the format cannot hold. The path (str, bytes or os.PathLike) reaches the file system byte for
 byte (os.fsencode); an empty path or one with a NUL is a ValueError. attributes: {name: value}
 strings stored in the header (EXR header attributes, PNG text), read back by
-read_image_attributes; names are letters, digits and '_' (anything else, or a NUL in a value,
-is a ValueError). Releases the GIL.
+read_image_attributes; names are letters, digits and '_' (anything else, or an empty value or
+a NUL in one, is a ValueError). Releases the GIL.
 )doc");
 
   m.def(

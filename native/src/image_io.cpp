@@ -110,8 +110,11 @@ void write_image(const std::string& path, const float* pixels, int width, int he
       throw std::invalid_argument("write_image: attribute names are letters, digits and '_', "
                                   "got '" + name + "'");
     }
-    if (value.find('\0') != std::string::npos) {
-      throw std::invalid_argument("write_image: attribute '" + name + "' holds a NUL byte");
+    // OpenEXR drops an empty string, and a NUL would cut the value short: refused, so what
+    // read_image_attributes returns is what was given.
+    if (value.empty() || value.find('\0') != std::string::npos) {
+      throw std::invalid_argument("write_image: attribute '" + name + "' is empty or holds a "
+                                  "NUL byte");
     }
     spec.attribute(name, value);
   }

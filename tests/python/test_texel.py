@@ -130,7 +130,7 @@ def test_header_attributes_round_trip(tmp_path, name):
 @pytest.mark.parametrize("attrs, match", [
     ({"a:b": "x"}, "letters, digits and '_'"), ({"": "x"}, "letters, digits"),
     ({"é": "x"}, "letters, digits"), ({"k": 3}, "str to str"), ({1: "x"}, "str to str"),
-    ({"k": "a\0b"}, "NUL"), (["k"], "dict of str"),
+    ({"k": "a\0b"}, "NUL"), ({"k": ""}, "empty"), (["k"], "dict of str"),
 ])
 def test_bad_header_attributes_are_value_errors(tmp_path, attrs, match):
     with pytest.raises(ValueError, match=match):

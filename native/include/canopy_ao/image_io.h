@@ -45,7 +45,8 @@ struct ImageWriteOptions {
   bool bottom_up = true;
   /// (name, value) string attributes stored in the file's header (an EXR header attribute, a
   /// PNG text chunk): what read_image_attributes returns. Names are plain identifiers (letters,
-  /// digits, '_'), so no format treats them as its own ("oiio:", "openexr:", ...).
+  /// digits, '_'), so no format treats them as its own ("oiio:", "openexr:", ...); values are
+  /// non-empty and hold no NUL (std::invalid_argument otherwise).
   std::vector<std::pair<std::string, std::string>> attributes;
 };
 
