@@ -178,10 +178,15 @@ def test_a_file_canopy_ao_did_not_write_is_refused_without_overwrite(tree):
         f.write("notes")
     with pytest.raises(CanopyAOError, match="did not write it"):
         run_bake(bpy.context, ["Ground"], _texel(tree))
-    # With Overwrite it goes; the file is then ours, and a re-bake needs no Overwrite.
+    # With Overwrite it goes; the file is then ours, and a re-bake needs no Overwrite. A file
+    # named like the bake's backup of the old one is not the bake's either: it stays.
+    with open(path + ".canopy_ao-previous", "w") as f:
+        f.write("mine")
     run_bake(bpy.context, ["Ground"], _texel(tree, overwrite=True))
     run_bake(bpy.context, ["Ground"], _texel(tree, tau=3.0))
-    assert sorted(os.listdir(d)) == ["Ground_CanopyAO.exr"]
+    assert sorted(os.listdir(d)) == ["Ground_CanopyAO.exr",
+                                     "Ground_CanopyAO.exr.canopy_ao-previous"]
+    assert _bytes(path + ".canopy_ao-previous") == b"mine"
 
 
 def test_a_file_of_ours_that_was_edited_or_belongs_to_another_output_is_refused(tree):

@@ -437,7 +437,9 @@ def keep_file(path):
     was written there). undo.keep is the moved-aside copy's path, or None."""
     backup = None
     if os.path.exists(path):
-        backup = path + ".canopy_ao-previous"
+        backup, k = path + ".canopy_ao-previous", 1
+        while os.path.lexists(backup):  # never over a file that is there already
+            backup, k = f"{path}.canopy_ao-previous{k}", k + 1
         os.replace(path, backup)
 
     def undo():
