@@ -227,6 +227,21 @@ def test_udim_tiles_and_atlases_keep_files_that_are_not_theirs(tree):
     assert os.path.exists(tile)
 
 
+def test_two_objects_packing_into_one_image_are_refused(tree):
+    """Each would replace the other's channel of the one Pack Image: one result would be lost
+    while both were reported baked."""
+    img = bpy.data.images.new("Mask", 16, 16, alpha=True)
+    before = np.empty(16 * 16 * 4, np.float32)
+    img.pixels.foreach_get(before)
+    with pytest.raises(CanopyAOError, match="Ground, Leaves would each pack into channel G "
+                                            "of image 'Mask'"):
+        run_bake(bpy.context, ["Ground", "Leaves"], _texel(tree, channel="G",
+                                                           pack_image="Mask"))
+    after = np.empty_like(before)
+    img.pixels.foreach_get(after)
+    np.testing.assert_array_equal(after, before)
+
+
 def test_the_command_line_refuses_a_users_file_and_overwrites_when_asked(tree, capsys):
     from canopy_ao import cli
     d = tree["image_dir"]

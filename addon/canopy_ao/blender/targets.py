@@ -158,8 +158,15 @@ class TexelTarget(Target):
 
 def check_outputs(targets, opts):
     """Refuse, before anything is written, image files of this bake that would collide or
-    replace a file not Canopy AO's own for that output (texel_io.check_outputs)."""
+    replace a file not Canopy AO's own for that output (texel_io.check_outputs), and several
+    objects packing into the one Pack Image (each would replace the last one's channel)."""
     from types import SimpleNamespace
+    packing = [t.obj.name for t in targets if t.kind == "texel" and opts["channel"] != "RGBA"]
+    if len(packing) > 1:
+        raise CanopyAOError(f"{', '.join(packing)} would each pack into channel "
+                            f"{opts['channel']} of image '{opts['pack_image']}', each replacing "
+                            "the one before; bake them one at a time, into images of their own "
+                            "(nothing was changed)")
     out = []
     for t in targets:
         if t.kind != "texel":
