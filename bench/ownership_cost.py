@@ -29,9 +29,9 @@ def _addon():
         sys.path.insert(0, os.path.join(HERE, "..", "addon"))
     import addon_utils
     addon_utils.enable("canopy_ao", default_set=False)
-    from canopy_ao.blender import mesh_io
+    from canopy_ao.blender import mesh_io, ownership
     from canopy_ao.core.fingerprint import fingerprint
-    return mesh_io, fingerprint
+    return mesh_io, ownership, fingerprint
 
 
 def main(argv):
@@ -39,7 +39,7 @@ def main(argv):
     ap.add_argument("--vertices", type=int, nargs="+", default=[100_000, 1_000_000])
     ap.add_argument("--rounds", type=int, default=9)
     args = ap.parse_args(argv)
-    mesh_io, fingerprint = _addon()
+    mesh_io, ownership, fingerprint = _addon()
     print(f"load average {os.getloadavg()[0]:.1f}; ms, median of {args.rounds} rounds")
     print("| vertices | fingerprint | SHA-1 (same bytes) | check | write | check + write |")
     print("|---|---|---|---|---|---|")
@@ -50,7 +50,7 @@ def main(argv):
         bpy.context.scene.collection.objects.link(ob)
         ao = np.random.default_rng(n).random(n).astype(np.float32)
         mesh_io.write_ao_attribute(ob, "CanopyAO", ao)
-        rgba = mesh_io.read_attribute(me.attributes["CanopyAO"])
+        rgba = ownership.read_attribute(me.attributes["CanopyAO"])
 
         def check():
             assert mesh_io.check_attribute(ob, "CanopyAO", False) is None

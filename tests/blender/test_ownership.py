@@ -11,7 +11,7 @@ import pytest
 
 import helpers_materials as H
 from canopy_ao import _core
-from canopy_ao.blender import mesh_io, texel_io
+from canopy_ao.blender import files_io, mesh_io, ownership
 from canopy_ao.blender.job import run_bake
 from canopy_ao.core.native import CanopyAOError
 from test_maps import opts, tree  # noqa: F401 (tree: the fixture, a plane under leaves)
@@ -47,7 +47,7 @@ def test_a_mesh_swapped_under_a_baked_object_keeps_its_users_attribute(tree):
     assert mesh_io.owned_attributes(g) == [ATTR]
     other = g.data.copy()
     other.attributes.remove(other.attributes[ATTR])
-    other.pop(mesh_io.OWNED_PROP, None)
+    other.pop(ownership.OWNED_PROP, None)
     user = _user_attribute(other)
     g.data = other  # the object's own record (pre-fingerprint add-ons kept one) must not count
     g["canopy_ao_attributes"] = json.dumps([ATTR])
@@ -61,17 +61,17 @@ def test_a_copied_or_typed_record_does_not_vouch_for_another_attribute(tree):
     g, leaves = tree["ground"], tree["leaves"]
     run_bake(bpy.context, ["Ground"], opts())
     user = _user_attribute(leaves.data)
-    for record in (lambda: g.data[mesh_io.OWNED_PROP],  # copied from a baked mesh
+    for record in (lambda: g.data[ownership.OWNED_PROP],  # copied from a baked mesh
                    lambda: json.dumps({ATTR: "0" * 24}),  # typed by hand
-                   lambda: json.dumps({ATTR: mesh_io.attribute_fingerprint(
+                   lambda: json.dumps({ATTR: ownership.attribute_fingerprint(
                        g.data.attributes[ATTR])})):  # another mesh's true fingerprint
-        leaves.data[mesh_io.OWNED_PROP] = record()
+        leaves.data[ownership.OWNED_PROP] = record()
         _refused(["Leaves"])
         np.testing.assert_array_equal(_colors(leaves.data), user)
     # A pre-fingerprint record (a name list) typed onto a mesh with a user's colours.
-    del leaves.data[mesh_io.OWNED_PROP]
-    leaves.data[mesh_io.LEGACY_OWNED_PROP] = json.dumps([ATTR])
-    leaves[mesh_io.LEGACY_OWNED_PROP] = json.dumps([ATTR])
+    del leaves.data[ownership.OWNED_PROP]
+    leaves.data[ownership.LEGACY_OWNED_PROP] = json.dumps([ATTR])
+    leaves[ownership.LEGACY_OWNED_PROP] = json.dumps([ATTR])
     _refused(["Leaves"])
     np.testing.assert_array_equal(_colors(leaves.data), user)
 
@@ -105,12 +105,12 @@ def test_a_file_from_before_fingerprints_migrates_when_its_content_is_ours(tree)
     g = tree["ground"]
     run_bake(bpy.context, ["Ground"], opts())
     for idb in (g, g.data):
-        idb[mesh_io.LEGACY_OWNED_PROP] = json.dumps([ATTR])
-    del g.data[mesh_io.OWNED_PROP]
+        idb[ownership.LEGACY_OWNED_PROP] = json.dumps([ATTR])
+    del g.data[ownership.OWNED_PROP]
     assert mesh_io.owned_attributes(g) == [ATTR]
     run_bake(bpy.context, ["Ground"], opts(tau=3.0))
-    assert mesh_io.LEGACY_OWNED_PROP not in g.data
-    assert ATTR in json.loads(g.data[mesh_io.OWNED_PROP])
+    assert ownership.LEGACY_OWNED_PROP not in g.data
+    assert ATTR in json.loads(g.data[ownership.OWNED_PROP])
 
 
 def test_a_duplicated_mesh_keeps_ownership_of_the_copy(tree):
@@ -193,15 +193,15 @@ def test_a_file_of_ours_that_was_edited_or_belongs_to_another_output_is_refused(
     d = tree["image_dir"]
     _job, rep = run_bake(bpy.context, ["Ground"], _texel(tree))
     path = rep["objects"]["Ground"]["texel"]["path"]
-    record = json.loads(_core.read_image_attributes(path)[texel_io.FILE_RECORD])
+    record = json.loads(_core.read_image_attributes(path)[files_io.FILE_RECORD])
     assert record["owner"] == "Ground" and record["map"] == "CanopyAO"
     img = _core.read_image(path)[:, :, 0].copy()
     img[3, 4] = 0.0  # painted over in an image editor that kept the header
-    _core.write_image(path, img, attributes={texel_io.FILE_RECORD: json.dumps(record)})
+    _core.write_image(path, img, attributes={files_io.FILE_RECORD: json.dumps(record)})
     with pytest.raises(CanopyAOError, match="did not write it \\(or changed since"):
         run_bake(bpy.context, ["Ground"], _texel(tree))
     # A true record, of another object (what a case-insensitive file system would give).
-    texel_io.write_exr(path, img, owner="Leaves")
+    files_io.write_exr(path, img, owner="Leaves")
     with pytest.raises(CanopyAOError, match="holds Canopy AO's 'CanopyAO' of 'Leaves'"):
         run_bake(bpy.context, ["Ground"], _texel(tree))
     assert sorted(os.listdir(d)) == ["Ground_CanopyAO.exr"]
@@ -255,4 +255,4 @@ def test_the_command_line_refuses_a_users_file_and_overwrites_when_asked(tree, c
     with pytest.raises(SystemExit) as exc:
         cli.main(args + ["--overwrite"])
     assert exc.value.code == 0
-    assert texel_io.file_record(path)["owner"] == "Ground"
+    assert files_io.file_record(path)["owner"] == "Ground"

@@ -5,7 +5,7 @@ import os
 import sys
 import traceback
 
-from . import mesh_io
+from . import ownership
 
 class Transaction:
     def __init__(self):
@@ -19,12 +19,12 @@ class Transaction:
         """Record obj's attribute ``name`` (or its absence) and its mesh's ownership records,
         before a write replaces them."""
         mesh = obj.data
-        marks = [(key, mesh.get(key)) for key in (mesh_io.OWNED_PROP, mesh_io.LEGACY_OWNED_PROP)]
+        marks = [(key, mesh.get(key)) for key in (ownership.OWNED_PROP, ownership.LEGACY_OWNED_PROP)]
         attr = mesh.attributes.get(name)
         old = None
-        if attr is not None and attr.data_type in mesh_io.LAYOUT:
-            old = (attr.data_type, attr.domain, mesh_io.LAYOUT[attr.data_type][0],
-                   mesh_io.read_attribute(attr))
+        if attr is not None and attr.data_type in ownership.LAYOUT:
+            old = (attr.data_type, attr.domain, ownership.LAYOUT[attr.data_type][0],
+                   ownership.read_attribute(attr))
 
         def undo():
             cur = mesh.attributes.get(name)

@@ -274,7 +274,7 @@ def write_error_attribute(obj, err, name="CanopyAO_Error", scale=None, overwrite
     colors = error_colors(err, scale).ravel()
     attr.data.foreach_set("color", colors)
     me.update()
-    mesh_io._mark_owned(obj, name, colors)
+    mesh_io.mark_owned(obj, name, colors)
     return attr
 
 

@@ -68,7 +68,7 @@ def write_attribute_channel(obj, name, values, channel):
     attr.data.foreach_set(key, buf)
     mesh.update_tag()
     if ours:  # the record follows the new content (an attribute of the user's stays theirs)
-        mesh_io._mark_owned(obj, name, buf if key == "color" else None)
+        mesh_io.mark_owned(obj, name, buf if key == "color" else None)
     return attr
 
 
@@ -77,7 +77,7 @@ def pack_image_channel(image, img, channel, txn):
     Blender image of the same size; the other channels keep their values (a byte image's
     unchanged bytes write back as themselves). Recorded in txn: undo puts the old pixels back
     (and the image's file, when it is saved to one)."""
-    from .texel_io import keep_file
+    from .files_io import keep_file
     w, h = image.size
     c = channel_index(channel)
     if (h, w) != img.shape:

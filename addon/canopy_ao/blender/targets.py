@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 
 from ..core.native import CanopyAOError
-from . import maps_io, materials, mesh_io, texel_io, tiles_io
+from . import files_io, maps_io, materials, mesh_io, texel_io, tiles_io
 
 
 class Target:
@@ -158,7 +158,7 @@ class TexelTarget(Target):
 
 def check_outputs(targets, opts):
     """Refuse, before anything is written, image files of this bake that would collide or
-    replace a file not Canopy AO's own for that output (texel_io.check_outputs), and several
+    replace a file not Canopy AO's own for that output (files_io.check_outputs), and several
     objects packing into the one Pack Image (each would replace the last one's channel)."""
     from types import SimpleNamespace
     packing = [t.obj.name for t in targets if t.kind == "texel" and opts["channel"] != "RGBA"]
@@ -172,8 +172,8 @@ def check_outputs(targets, opts):
         if t.kind != "texel":
             continue
         for owner, suffix, tile in t.outputs(opts):
-            path = texel_io.image_path(SimpleNamespace(name=owner), opts["image_dir"] or None, [],
+            path = files_io.image_path(SimpleNamespace(name=owner), opts["image_dir"] or None, [],
                                        suffix, make=False)
-            out.append((texel_io.tile_path(path, tile) if tile is not None else path, owner,
+            out.append((files_io.tile_path(path, tile) if tile is not None else path, owner,
                         suffix, tile))
-    texel_io.check_outputs(out, opts["overwrite"])
+    files_io.check_outputs(out, opts["overwrite"])

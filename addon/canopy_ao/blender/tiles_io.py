@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import cycles_check, texel_io
+from . import cycles_check, files_io, texel_io
 from ..core import metrics
 from ..core.native import CanopyAOError
 
@@ -49,15 +49,15 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
     res, margin = rx0.resolution, rx0.margin
     notes = []
     name = owner if atlas else owner.name
-    path0 = texel_io.image_path(SimpleNamespace(name=name), image_dir, notes, suffix)
+    path0 = files_io.image_path(SimpleNamespace(name=name), image_dir, notes, suffix)
     numbers = sorted({n for rx, _v in parts for n, _a, _b in rx.tiles})
     if tiled:  # our tiles of an earlier bake that this one does not write go too (ours only)
         d, stem = os.path.split(path0[:-len(".exr")])
         for f in os.listdir(d):
             rest = f[len(stem) + 1:-len(".exr")] if f.startswith(stem + ".") else ""
             if (f.endswith(".exr") and rest.isdigit() and int(rest) not in numbers
-                    and texel_io.check_file(os.path.join(d, f), name, suffix, int(rest)) is None):
-                txn.add(texel_io.keep_file(os.path.join(d, f)))
+                    and files_io.check_file(os.path.join(d, f), name, suffix, int(rest)) is None):
+                txn.add(files_io.keep_file(os.path.join(d, f)))
     stats = {"tiles": {}, "paths": [], "claimed": {}, "notes": notes}
     # The image's undo is recorded before the files' so that a rollback runs it after theirs,
     # when the old tile files are back for it to find.
@@ -69,8 +69,8 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
         claims = np.bincount(np.concatenate(pix), minlength=res * res).reshape(res, res)
         img, mask = texel_io.splat(np.concatenate(pix), np.concatenate(val), res, res, margin,
                                    background)
-        path = texel_io.tile_path(path0, n) if tiled else path0
-        texel_io.write_own_file(path, img, txn, name, suffix, n if tiled else None, overwrite)
+        path = files_io.tile_path(path0, n) if tiled else path0
+        files_io.write_own_file(path, img, txn, name, suffix, n if tiled else None, overwrite)
         stats["tiles"][n], stats["claimed"][n] = (img, mask), claims
         stats["paths"].append(path)
     stats["shared_texels"] = int(sum(np.count_nonzero(c > 1) for c in stats["claimed"].values()))
