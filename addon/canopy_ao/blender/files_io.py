@@ -6,6 +6,7 @@ copy that lets a failed bake put the old file back."""
 import json
 import os
 import tempfile
+from typing import NamedTuple
 
 import bpy
 import numpy as np
@@ -17,6 +18,20 @@ from ..core.native import CanopyAOError, _core
 # atlas's) exact name, "map": the map's suffix, "tile": the UDIM number or null, "pixels": the
 # pixels' fingerprint} (docs/DESIGN.md, 'Ownership of what a bake writes').
 FILE_RECORD = "canopy_ao"
+
+
+class Output(NamedTuple):
+    """One image file of a bake: whose (an object's exact name, or an atlas's: atlas=True, so
+    an object and an atlas of one name never share a file), which map, which UDIM tile (None:
+    the one file of an untiled image)."""
+
+    owner: str
+    map: str = "CanopyAO"
+    tile: int | None = None
+    atlas: bool = False
+
+    def __str__(self):
+        return f"'{self.map}' of {'atlas ' if self.atlas else ''}'{self.owner}'"
 
 
 def file_stem(name):
@@ -59,16 +74,15 @@ def tile_path(path, number):
     return f"{path[:-len('.exr')]}.{number}.exr"
 
 
-def write_exr(path, ao, owner=None, suffix="CanopyAO", tile=None):
+def write_exr(path, ao, output=None):
     """Write a grey float image (H, W), row 0 = bottom: the writer flips rows so the file
-    shows v = 1 on top. owner (an object's or atlas's exact name): the header records it,
-    the map, the tile and the pixels' fingerprint (FILE_RECORD), so a later bake knows the
-    file as Canopy AO's."""
+    shows v = 1 on top. output (an Output): the header records it and the pixels'
+    fingerprint (FILE_RECORD), so a later bake knows the file as Canopy AO's."""
     ao = np.ascontiguousarray(ao, dtype=np.float32)
     attributes = None
-    if owner is not None:
-        attributes = {FILE_RECORD: json.dumps({"owner": owner, "map": suffix, "tile": tile,
-                                               "pixels": fingerprint(ao, "grey")})}
+    if output is not None:
+        attributes = {FILE_RECORD: json.dumps(dict(output._asdict(),
+                                                   pixels=fingerprint(ao, "grey")))}
     try:
         _core.write_image(path, ao, dtype="float", bottom_up=True, attributes=attributes)
     except (OSError, RuntimeError) as exc:
@@ -110,9 +124,9 @@ def _read_record(path):
     return rec if fingerprint(grey, "grey") == rec["pixels"] else None
 
 
-def check_file(path, owner, suffix="CanopyAO", tile=None, overwrite=False):
-    """None when a bake may write path for (owner, suffix, tile): no file there, Overwrite,
-    or Canopy AO's own unchanged file of that same output; else the reason it may not."""
+def check_file(path, output, overwrite=False):
+    """None when a bake may write path for output (an Output): no file there, Overwrite, or
+    Canopy AO's own unchanged file of that same output; else the reason it may not."""
     if not os.path.lexists(path) or (overwrite and not os.path.isdir(path)):
         return None
     if os.path.isdir(path):
@@ -122,42 +136,42 @@ def check_file(path, owner, suffix="CanopyAO", tile=None, overwrite=False):
         return (f"'{path}' already exists and Canopy AO did not write it (or changed since, or "
                 "written by a Canopy AO whose files carried no record); choose another Image "
                 "Folder or tick Overwrite")
-    if (rec.get("owner"), rec.get("map"), rec.get("tile")) != (owner, suffix, tile):
-        return (f"'{path}' holds Canopy AO's '{rec.get('map')}' of '{rec.get('owner')}', not "
-                f"of '{owner}'; choose another Image Folder or tick Overwrite")
+    theirs = Output(rec.get("owner"), rec.get("map"), rec.get("tile"), rec.get("atlas", False))
+    if theirs != output:
+        return (f"'{path}' holds Canopy AO's {theirs}, not {output}; choose another Image "
+                "Folder or tick Overwrite")
     return None
 
 
 def check_outputs(outputs, overwrite):
     """Refuse, before anything is written, a bake whose image files would collide or replace a
-    file that is not its own: outputs [(path, owner, suffix, tile)] of every target. Two outputs
-    whose paths differ only in case collide too (one file on Windows and macOS)."""
+    file that is not its own: outputs [(path, Output)] of every target. Two outputs whose
+    paths differ only in case collide too (one file on Windows and macOS)."""
     by_file = {}
-    for path, owner, suffix, tile in outputs:
+    for path, output in outputs:
         key = os.path.normcase(os.path.abspath(path)).casefold()
-        by_file.setdefault(key, {})[(owner, suffix, tile)] = path
+        by_file.setdefault(key, {})[output] = path
     for claims in by_file.values():
         if len(claims) > 1:
-            who = " and ".join(f"'{o}' ({s})" for o, s, _t in claims)
+            who = " and ".join(str(o) for o in claims)
             raise CanopyAOError(f"{who} would write the same file '{next(iter(claims.values()))}'"
                                 " (a file system cannot tell their names apart, e.g. they "
                                 "differ only in case); rename one (nothing was changed)")
-        (owner, suffix, tile), path = next(iter(claims.items()))
-        why = check_file(path, owner, suffix, tile, overwrite)
+        output, path = next(iter(claims.items()))
+        why = check_file(path, output, overwrite)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
 
 
-def write_own_file(path, img, txn, owner, suffix, tile, overwrite):
-    """Write img (H, W) to path as owner's map suffix (tile: its UDIM number or None), the old
-    file kept in txn; refused (CanopyAOError, nothing written) when path holds a file that is
-    not this output's own and overwrite is off (check_file: the bake checked before it began,
-    this is the last look)."""
-    why = check_file(path, owner, suffix, tile, overwrite)
+def write_own_file(path, img, txn, output, overwrite):
+    """Write img (H, W) to path as output (an Output), the old file kept in txn; refused
+    (CanopyAOError, nothing written) when path holds a file that is not this output's own and
+    overwrite is off (check_file: the bake checked before it began, this is the last look)."""
+    why = check_file(path, output, overwrite)
     if why:
         raise CanopyAOError(why)
     txn.add(keep_file(path))
-    write_exr(path, img, owner, suffix, tile)
+    write_exr(path, img, output)
 
 
 def keep_file(path):

@@ -131,14 +131,14 @@ class TexelTarget(Target):
         self.wire(txn, opts, image, timage)
 
     def outputs(self, opts):
-        """(owner, suffix, tile) of every image file write() makes: the AO's and the
-        thickness's, per UDIM tile (tile None: one file), the atlas's when baking into one."""
+        """files_io.Output of every image file write() makes: the AO's and the thickness's,
+        per UDIM tile (tile None: one file), the atlas's when baking into one."""
         if opts["channel"] != "RGBA":
             return []  # packed into the user's chosen image (the ask is choosing it)
         owner = opts["atlas"] if opts["atlas"] else self.obj.name
         tiles = [n for n, _a, _b in self.rx.tiles] if opts["udim"] else [None]
         maps = ["CanopyAO"] + ([opts["thickness_name"]] if opts["thickness"] else [])
-        return [(owner, m, n) for m in maps for n in tiles]
+        return [files_io.Output(owner, m, n, bool(opts["atlas"])) for m in maps for n in tiles]
 
     def wire(self, txn, opts, image, timage):
         """Wire the AO image (and the thickness's, timage) into obj's materials when asked."""
@@ -171,9 +171,8 @@ def check_outputs(targets, opts):
     for t in targets:
         if t.kind != "texel":
             continue
-        for owner, suffix, tile in t.outputs(opts):
-            path = files_io.image_path(SimpleNamespace(name=owner), opts["image_dir"] or None, [],
-                                       suffix, make=False)
-            out.append((files_io.tile_path(path, tile) if tile is not None else path, owner,
-                        suffix, tile))
+        for o in t.outputs(opts):
+            path = files_io.image_path(SimpleNamespace(name=o.owner), opts["image_dir"] or None,
+                                       [], o.map, make=False)
+            out.append((files_io.tile_path(path, o.tile) if o.tile is not None else path, o))
     files_io.check_outputs(out, opts["overwrite"])

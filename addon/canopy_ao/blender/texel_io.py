@@ -15,7 +15,7 @@ import bpy
 import numpy as np
 
 from . import materials, mesh_io
-from .files_io import check_outputs, image_path, write_own_file
+from .files_io import Output, check_outputs, image_path, write_own_file
 from ..core.native import CanopyAOError, _core
 
 TAG = "canopy_ao"
@@ -241,8 +241,7 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
     if wire:
         materials.check_aov_name(aov_name)
     rx = receivers(obj, context.evaluated_depsgraph_get(), uv_map, resolution, margin)
-    check_outputs([(image_path(obj, image_dir, [], make=False), obj.name, "CanopyAO", None)],
-                  overwrite)
+    check_outputs([(image_path(obj, image_dir, [], make=False), Output(obj.name))], overwrite)
     ao = np.asarray(ao_fn(rx.positions, rx.normals), dtype=np.float32)
     if ao.shape != (len(rx.pixels),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"Object '{obj.name}': the AO model returned {ao.shape} values "
@@ -271,7 +270,7 @@ def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0,
     stats = dict(rx.stats, margin_texels=int(np.count_nonzero(mask == 2)),
                  notes=list(rx.stats["notes"]))
     path = image_path(obj, image_dir, stats["notes"], suffix)
-    write_own_file(path, img_arr, txn, obj.name, suffix, None, overwrite)
+    write_own_file(path, img_arr, txn, Output(obj.name, suffix), overwrite)
     image, undo_image = load_image(obj, path, suffix)
     txn.add(undo_image)
     stats.update(path=path, writer="native", image=img_arr, mask=mask)

@@ -49,6 +49,9 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
     res, margin = rx0.resolution, rx0.margin
     notes = []
     name = owner if atlas else owner.name
+
+    def out(tile):
+        return files_io.Output(name, suffix, tile, atlas)
     path0 = files_io.image_path(SimpleNamespace(name=name), image_dir, notes, suffix)
     numbers = sorted({n for rx, _v in parts for n, _a, _b in rx.tiles})
     if tiled:  # our tiles of an earlier bake that this one does not write go too (ours only)
@@ -56,7 +59,7 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
         for f in os.listdir(d):
             rest = f[len(stem) + 1:-len(".exr")] if f.startswith(stem + ".") else ""
             if (f.endswith(".exr") and rest.isdigit() and int(rest) not in numbers
-                    and files_io.check_file(os.path.join(d, f), name, suffix, int(rest)) is None):
+                    and files_io.check_file(os.path.join(d, f), out(int(rest))) is None):
                 txn.add(files_io.keep_file(os.path.join(d, f)))
     stats = {"tiles": {}, "paths": [], "claimed": {}, "notes": notes}
     # The image's undo is recorded before the files' so that a rollback runs it after theirs,
@@ -70,7 +73,7 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
         img, mask = texel_io.splat(np.concatenate(pix), np.concatenate(val), res, res, margin,
                                    background)
         path = files_io.tile_path(path0, n) if tiled else path0
-        files_io.write_own_file(path, img, txn, name, suffix, n if tiled else None, overwrite)
+        files_io.write_own_file(path, img, txn, out(n if tiled else None), overwrite)
         stats["tiles"][n], stats["claimed"][n] = (img, mask), claims
         stats["paths"].append(path)
     stats["shared_texels"] = int(sum(np.count_nonzero(c > 1) for c in stats["claimed"].values()))
