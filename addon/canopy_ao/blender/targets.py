@@ -5,8 +5,9 @@ rasteriser finds in its UV layout), the AO evaluated for them, and how that AO i
 import bpy
 import numpy as np
 
+from . import files_io
 from ..core.native import CanopyAOError
-from . import files_io, maps_io, materials, mesh_io, texel_io, tiles_io
+from . import maps_io, materials, mesh_io, texel_io, tiles_io
 
 
 class Target:
