@@ -75,14 +75,14 @@ def tile_path(path, number):
 
 
 def write_exr(path, ao, output=None):
-    """Write a grey float image (H, W), row 0 = bottom: the writer flips rows so the file
-    shows v = 1 on top. output (an Output): the header records it and the pixels'
+    """Write a float image (H, W) (grey) or (H, W, C), row 0 = bottom: the writer flips rows
+    so the file shows v = 1 on top. output (an Output): the header records it and the pixels'
     fingerprint (FILE_RECORD), so a later bake knows the file as Canopy AO's."""
     ao = np.ascontiguousarray(ao, dtype=np.float32)
     attributes = None
     if output is not None:
         attributes = {FILE_RECORD: json.dumps(dict(output._asdict(),
-                                                   pixels=fingerprint(ao, "grey")))}
+                                                   pixels=fingerprint(ao, "pixels")))}
     try:
         _core.write_image(path, ao, dtype="float", bottom_up=True, attributes=attributes)
     except (OSError, RuntimeError) as exc:
@@ -118,10 +118,8 @@ def _read_record(path):
         px = _core.read_image(path, bottom_up=True)
     except (ValueError, RuntimeError, OSError):  # not an image, unreadable, no record
         return None
-    if px.ndim != 3 or px.shape[2] != 1:
-        return None
-    grey = np.ascontiguousarray(px[:, :, 0], dtype=np.float32)
-    return rec if fingerprint(grey, "grey") == rec["pixels"] else None
+    # (H, W, C) as read holds the bytes of the (H, W) or (H, W, C) array written.
+    return rec if fingerprint(px, "pixels") == rec["pixels"] else None
 
 
 def check_file(path, output, overwrite=False):
