@@ -424,10 +424,16 @@ def c_write_read(g, core, tmp):
                                     g.pick([1, 3, 4]))).astype(np.float32), 0.1)
     path = g.path(tmp)
     dtype = g.pick(["auto", "float", "half", "uint16", "uint8", "int7"])
+    attrs = g.pick([None, None, {"canopy_ao": '{"owner": "Tree.001"}'}, {"a_1": "", "B": "é"}, {"a_1": "x", "B": "é"},
+                    {"bad name": "x"}, {"": "x"}, {"k": 3}, {"k": "a\0b"}, ["k"]])
 
     def call():
-        core.write_image(path, img, dtype, g.chance(0.8))
+        core.write_image(path, img, dtype, g.chance(0.8), attrs)
         out = core.read_image(path, g.chance(0.8))
+        got = core.read_image_attributes(path)
+        assert isinstance(got, dict) and all(isinstance(v, str) for v in got.values())
+        if isinstance(attrs, dict) and os.fsdecode(path).endswith(".exr"):
+            assert all(got.get(k) == v for k, v in attrs.items()), f"header {got} lost {attrs}"
         for f in os.listdir(tmp):
             os.remove(os.path.join(tmp, f))
         return out

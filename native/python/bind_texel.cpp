@@ -383,8 +383,23 @@ void bind_texel(py::module_& m) {
   m.def(
       "write_image",
       [](const py::object& path, const py::array& pixels, const std::string& dtype,
-         bool bottom_up) {
+         bool bottom_up, const py::object& attributes) {
         const std::string p = path_arg(path);
+        ImageWriteOptions o;
+        if (!attributes.is_none()) {
+          if (!py::isinstance<py::dict>(attributes)) {
+            throw py::value_error("attributes must be a dict of str to str, got " +
+                                  std::string(py::str(py::type::of(attributes).attr("__name__"))));
+          }
+          for (const auto& kv : attributes.cast<py::dict>()) {
+            if (!py::isinstance<py::str>(kv.first) || !py::isinstance<py::str>(kv.second)) {
+              throw py::value_error("attributes must map str to str, got " +
+                                    std::string(py::repr(kv.first)) + ": " +
+                                    std::string(py::repr(kv.second)));
+            }
+            o.attributes.emplace_back(kv.first.cast<std::string>(), kv.second.cast<std::string>());
+          }
+        }
         require_dtype(pixels, "pixels", py::dtype::of<float>(), "float32");
         if (pixels.ndim() < 2 || pixels.ndim() > 3 ||
             (pixels.ndim() == 3 && (pixels.shape(2) < 1 || pixels.shape(2) > 4)) ||
@@ -392,7 +407,6 @@ void bind_texel(py::module_& m) {
           throw py::value_error("pixels must have shape (H, W) or (H, W, C) with C in 1..4, got " +
                                 shape_str(pixels));
         }
-        ImageWriteOptions o;
         o.bottom_up = bottom_up;
         if (dtype == "auto") o.type = PixelType::Auto;
         else if (dtype == "float") o.type = PixelType::Float;
@@ -422,6 +436,7 @@ void bind_texel(py::module_& m) {
         write_image(p, data, w, h, c, o);
       },
       py::arg("path"), py::arg("pixels"), py::arg("dtype") = "auto", py::arg("bottom_up") = true,
+      py::arg("attributes") = py::none(),
       R"doc(
 Writes float32 pixels (H, W) or (H, W, C), C in 1..4 (1 = grey "Y", 3 = RGB, 4 = RGBA), with
 OpenImageIO; the format follows the extension. dtype "auto": .exr → 32-bit float, .png → 16-bit
@@ -430,7 +445,10 @@ bottom_up=True: row 0 is the bottom (Blender's order), flipped on write so the f
 at the top. Raises CanopyAOError naming the path and OpenImageIO's message if the file cannot be
 written, ValueError for bad shapes, non-finite pixels (or beyond +-65504 for "half") or a dtype
 the format cannot hold. The path (str, bytes or os.PathLike) reaches the file system byte for
-byte (os.fsencode); an empty path or one with a NUL is a ValueError. Releases the GIL.
+byte (os.fsencode); an empty path or one with a NUL is a ValueError. attributes: {name: value}
+strings stored in the header (EXR header attributes, PNG text), read back by
+read_image_attributes; names are letters, digits and '_' (anything else, or an empty value or
+a NUL in one, is a ValueError). Releases the GIL.
 )doc");
 
   m.def(
@@ -448,6 +466,29 @@ byte (os.fsencode); an empty path or one with a NUL is a ValueError. Releases th
       "Reads an image as float32 (H, W, C) (integer formats scaled to [0, 1]); bottom_up=True "
       "returns row 0 = bottom, the order write_image takes. Raises CanopyAOError naming the path "
       "if it cannot be read.");
+
+  m.def(
+      "read_image_attributes",
+      [](const py::object& path) {
+        const std::string p = path_arg(path);
+        std::vector<std::pair<std::string, std::string>> attrs;
+        {
+          py::gil_scoped_release release;
+          attrs = read_image_attributes(p);
+        }
+        // A header is another program's data: bytes that are not UTF-8 must not raise.
+        const auto text = [](const std::string& b) {
+          return py::reinterpret_steal<py::str>(
+              PyUnicode_DecodeUTF8(b.data(), py::ssize_t(b.size()), "replace"));
+        };
+        py::dict d;
+        for (const auto& [name, value] : attrs) d[text(name)] = text(value);
+        return d;
+      },
+      py::arg("path"),
+      "{name: value} of every string attribute in the image's header (what write_image's "
+      "attributes stored, and any other program's); reads the header only. Raises "
+      "CanopyAOError naming the path if it cannot be read.");
 }
 
 }  // namespace canopy_ao::py_bind

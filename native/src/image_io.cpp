@@ -102,6 +102,22 @@ void write_image(const std::string& path, const float* pixels, int width, int he
     default: spec.channelnames = {"R", "G", "B", "A"}; spec.alpha_channel = 3; break;
   }
   if (ext == ".exr") spec.attribute("compression", "zip");
+  for (const auto& [name, value] : options.attributes) {
+    const bool plain = !name.empty() && std::all_of(name.begin(), name.end(), [](unsigned char c) {
+      return std::isalnum(c) || c == '_';
+    });
+    if (!plain) {
+      throw std::invalid_argument("write_image: attribute names are letters, digits and '_', "
+                                  "got '" + name + "'");
+    }
+    // OpenEXR drops an empty string, and a NUL would cut the value short: refused, so what
+    // read_image_attributes returns is what was given.
+    if (value.empty() || value.find('\0') != std::string::npos) {
+      throw std::invalid_argument("write_image: attribute '" + name + "' is empty or holds a "
+                                  "NUL byte");
+    }
+    spec.attribute(name, value);
+  }
   if (!out->open(path, spec)) {
     throw Error("cannot write image '" + path + "': " + oiio_message(out.get()));
   }
@@ -153,6 +169,22 @@ Image read_image(const std::string& path, bool bottom_up) {
   }
   in->close();
   return img;
+}
+
+std::vector<std::pair<std::string, std::string>> read_image_attributes(const std::string& path) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) {
+    throw Error("cannot read image '" + path + "': " +
+                oiio_message(static_cast<const OIIO::ImageInput*>(nullptr)));
+  }
+  std::vector<std::pair<std::string, std::string>> out;
+  for (const OIIO::ParamValue& p : in->spec().extra_attribs) {
+    if (p.type() == OIIO::TypeDesc::STRING && p.nvalues() == 1) {
+      out.emplace_back(p.name().string(), p.get_string());
+    }
+  }
+  in->close();
+  return out;
 }
 
 }  // namespace canopy_ao

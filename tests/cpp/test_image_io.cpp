@@ -1,6 +1,7 @@
 // OpenImageIO round trips and error reporting. Files go to a fresh temporary folder.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -138,4 +139,22 @@ TEST_F(ImageIO, FormatAndTypeMismatchIsBadInput) {
   EXPECT_THROW(write_image(path("five.exr"), five), std::invalid_argument);
   EXPECT_EQ(default_pixel_type("A.PNG"), PixelType::UInt16);
   EXPECT_EQ(default_pixel_type("a.exr"), PixelType::Float);
+}
+
+TEST_F(ImageIO, HeaderAttributesRoundTripInExrAndPng) {
+  const Image img = random_image(5, 4, 1, 0.f, 1.f, 3);
+  for (const char* name : {"attrs.exr", "attrs.png"}) {
+    ImageWriteOptions o;
+    o.attributes = {{"canopy_ao", "{\"owner\": \"Tree.001\"}"}, {"note_2", "Baum \xc3\xa4"}};
+    write_image(path(name), img, o);
+    const auto got = read_image_attributes(path(name));
+    for (const auto& want : o.attributes) {
+      EXPECT_NE(std::find(got.begin(), got.end(), want), got.end()) << name << " " << want.first;
+    }
+  }
+  ImageWriteOptions bad;
+  bad.attributes = {{"openexr:x", "v"}};  // a format's own namespace: refused, nothing written
+  EXPECT_THROW(write_image(path("bad.exr"), img, bad), std::invalid_argument);
+  EXPECT_FALSE(fs::exists(path("bad.exr")));
+  EXPECT_THROW(read_image_attributes(path("missing.exr")), Error);
 }

@@ -116,6 +116,36 @@ def test_image_round_trips(tmp_path):
     np.testing.assert_allclose(core.read_image(tmp_path / "h.exr"), rgb, atol=1e-3)
 
 
+@pytest.mark.parametrize("name", ["h.exr", "h.png"])
+def test_header_attributes_round_trip(tmp_path, name):
+    path = tmp_path / name
+    attrs = {"canopy_ao": '{"owner": "Tree.001", "map": "CanopyAO"}', "note_2": "Baum ä"}
+    core.write_image(path, np.full((4, 5), 0.5, np.float32), attributes=attrs)
+    got = core.read_image_attributes(path)
+    assert {k: got.get(k) for k in attrs} == attrs
+    core.write_image(path, np.full((4, 5), 0.5, np.float32))  # none: none left over
+    assert "canopy_ao" not in core.read_image_attributes(path)
+
+
+@pytest.mark.parametrize("attrs, match", [
+    ({"a:b": "x"}, "letters, digits and '_'"), ({"": "x"}, "letters, digits"),
+    ({"é": "x"}, "letters, digits"), ({"k": 3}, "str to str"), ({1: "x"}, "str to str"),
+    ({"k": "a\0b"}, "NUL"), ({"k": ""}, "empty"), (["k"], "dict of str"),
+])
+def test_bad_header_attributes_are_value_errors(tmp_path, attrs, match):
+    with pytest.raises(ValueError, match=match):
+        core.write_image(tmp_path / "a.exr", np.zeros((2, 2), np.float32), attributes=attrs)
+    assert not (tmp_path / "a.exr").exists()
+
+
+def test_reading_the_header_of_a_missing_or_non_image_file_names_it(tmp_path):
+    with pytest.raises(core.CanopyAOError, match="nope.exr"):
+        core.read_image_attributes(tmp_path / "nope.exr")
+    (tmp_path / "t.exr").write_text("not an image")
+    with pytest.raises(core.CanopyAOError, match="t.exr"):
+        core.read_image_attributes(tmp_path / "t.exr")
+
+
 @pytest.mark.parametrize("kwargs, match", [
     (dict(uvs=np.zeros((6, 2))), "float32"),
     (dict(uvs=np.zeros((5, 2), np.float32)), r"uvs must have shape \(3\*M, 2\)"),

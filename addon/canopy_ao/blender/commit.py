@@ -5,17 +5,7 @@ import os
 import sys
 import traceback
 
-import numpy as np
-
-from . import mesh_io
-
-# foreach_get key, values per element and dtype of each attribute type that can be restored.
-_LAYOUT = {'FLOAT': ("value", 1, np.float32), 'INT': ("value", 1, np.int32),
-           'INT8': ("value", 1, np.int32), 'BOOLEAN': ("value", 1, bool),
-           'FLOAT2': ("vector", 2, np.float32), 'FLOAT_VECTOR': ("vector", 3, np.float32),
-           'FLOAT_COLOR': ("color", 4, np.float32),
-           # the stored bytes / 255, no colour conversion: restored bit for bit
-           'BYTE_COLOR': ("color_srgb", 4, np.float32)}
+from . import ownership
 
 
 class Transaction:
@@ -27,23 +17,22 @@ class Transaction:
         self._undo.append(undo)
 
     def attribute(self, obj, name, last=False):
-        """Record obj's attribute ``name`` (or its absence) and its ownership marks, before a
-        write replaces them. last: nothing that can fail follows this write, and a FLOAT_COLOR
-        POINT attribute is overwritten in place (whole, or not at all), so its old values are
-        never needed again: they are not copied (16 bytes a vertex)."""
+        """Record obj's attribute ``name`` (or its absence) and its mesh's ownership records,
+        before a write replaces them. last: nothing that can fail follows this write, and a
+        FLOAT_COLOR POINT attribute is overwritten in place (whole, or not at all), so its old
+        values are never needed again: they are not copied (16 bytes a vertex)."""
         mesh = obj.data
-        marks = [(idb, idb.get(mesh_io.OWNED_PROP)) for idb in (obj, mesh)]
+        marks = [(key, mesh.get(key))
+                 for key in (ownership.OWNED_PROP, ownership.LEGACY_OWNED_PROP)]
         attr = mesh.attributes.get(name)
         old = None
         in_place = (last and attr is not None and attr.data_type == 'FLOAT_COLOR'
                     and attr.domain == 'POINT')
         if in_place:
             old = "in place"
-        elif attr is not None and attr.data_type in _LAYOUT:
-            key, width, dtype = _LAYOUT[attr.data_type]
-            buf = np.empty(len(attr.data) * width, dtype=dtype)
-            attr.data.foreach_get(key, buf)
-            old = (attr.data_type, attr.domain, key, buf)
+        elif attr is not None and attr.data_type in ownership.LAYOUT:
+            old = (attr.data_type, attr.domain, ownership.LAYOUT[attr.data_type][0],
+                   ownership.read_attribute(attr))
 
         def undo():
             cur = mesh.attributes.get(name)
@@ -59,11 +48,11 @@ class Transaction:
                         mesh.attributes.remove(cur)
                     cur = mesh.attributes.new(name, kind, domain)
                 cur.data.foreach_set(key, buf)
-            for idb, raw in marks:
+            for key, raw in marks:
                 if raw is None:
-                    idb.pop(mesh_io.OWNED_PROP, None)
+                    mesh.pop(key, None)
                 else:
-                    idb[mesh_io.OWNED_PROP] = raw
+                    mesh[key] = raw
             mesh.update_tag()
         self.add(undo)
 

@@ -271,9 +271,10 @@ def write_error_attribute(obj, err, name="CanopyAO_Error", scale=None, overwrite
         attr = None
     if attr is None:
         attr = me.color_attributes.new(name, "FLOAT_COLOR", "POINT")
-    attr.data.foreach_set("color", error_colors(err, scale).ravel())
+    colors = error_colors(err, scale).ravel()
+    attr.data.foreach_set("color", colors)
     me.update()
-    mesh_io._mark_owned(obj, name)
+    mesh_io.mark_owned(obj, name, colors)
     return attr
 
 

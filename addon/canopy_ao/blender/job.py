@@ -9,7 +9,7 @@ import numpy as np
 
 from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io, tiles_io
 from .commit import Transaction
-from .targets import TexelTarget, VertexTarget
+from .targets import TexelTarget, VertexTarget, check_outputs
 from .. import core
 from ..core import maps, metrics, settings
 from ..core.native import CanopyAOError
@@ -73,6 +73,7 @@ class BakeJob:
                         for it in self.items if it.name in target_names]
         if not self.targets:
             raise CanopyAOError("every object to bake has the role Ignore")
+        check_outputs(self.targets, opts)  # image files: none collide, none is the user's
         # (target, first, last receiver) per step; an empty target still gets its one step.
         chunk = CHUNK * (BLOCKING_CHUNKS if blocking else 1)
         self._chunks = [(t, a, min(a + chunk, t.count)) for t in self.targets

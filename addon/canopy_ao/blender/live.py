@@ -101,7 +101,7 @@ class Session:
             if why:
                 raise CanopyAOError(why)
         for obj in objs:
-            mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name])
+            mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
         tm["write"] = time.perf_counter() - t0
         tm["total"] += tm["write"]
         self.timings = tm

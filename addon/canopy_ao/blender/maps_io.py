@@ -42,7 +42,7 @@ def write_attribute_channel(obj, name, values, channel):
     """Write values (float (V,), one per vertex) into channel 'R', 'G', 'B' or 'A' of obj's
     color attribute ``name``; every other channel keeps its bits. A CORNER attribute gets each
     corner its vertex's value. A missing attribute is made (FLOAT_COLOR on vertices, other
-    channels 1) and marked as Canopy AO's."""
+    channels 1) and recorded as Canopy AO's; one Canopy AO made keeps its record."""
     why = check_channel_attribute(obj, name)
     if why:
         raise MeshIOError(why)
@@ -53,6 +53,7 @@ def write_attribute_channel(obj, name, values, channel):
         raise MeshIOError(f"{obj.name}: {len(values)} values for {n} vertices")
     attr = mesh.attributes.get(name)
     made = attr is None
+    ours = made or mesh_io.ownership(mesh, name) == 'ours'
     if made:
         attr = mesh.color_attributes.new(name=name, type='FLOAT_COLOR', domain='POINT')
         attr.data.foreach_set("color", np.ones(n * 4, np.float32))
@@ -66,8 +67,8 @@ def write_attribute_channel(obj, name, values, channel):
     buf[channel_index(channel)::4] = np.clip(values, 0.0, 1.0) if key == "color_srgb" else values
     attr.data.foreach_set(key, buf)
     mesh.update_tag()
-    if made:
-        mesh_io._mark_owned(obj, name)
+    if ours:  # the record follows the new content (an attribute of the user's stays theirs)
+        mesh_io.mark_owned(obj, name, buf if key == "color" else None)
     return attr
 
 
@@ -76,7 +77,7 @@ def pack_image_channel(image, img, channel, txn):
     Blender image of the same size; the other channels keep their values (a byte image's
     unchanged bytes write back as themselves). Recorded in txn: undo puts the old pixels back
     (and the image's file, when it is saved to one)."""
-    from .texel_io import keep_file
+    from .files_io import keep_file
     w, h = image.size
     c = channel_index(channel)
     if (h, w) != img.shape:

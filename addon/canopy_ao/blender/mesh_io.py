@@ -5,7 +5,6 @@ float32 and FLOAT_COLOR because they are the fast paths (docs/DESIGN.md, 'Facts 
 Blender': float64 is ~40× slower to move, BYTE_COLOR ~25×).
 """
 
-import json
 import time
 
 import bpy
@@ -13,11 +12,9 @@ import numpy as np
 
 from ..core import native
 from ..core.native import CanopyAOError
+from .ownership import mark_owned, owned_attributes, ownership, set_record  # noqa: F401
 
-# Object custom property listing the attributes Canopy AO made (a JSON list of names): only
-# those may be replaced without the user's say-so.
-OWNED_PROP = "canopy_ao_attributes"
-
+_mark_owned = mark_owned  # its old name, for writers outside this module
 
 class MeshIOError(CanopyAOError):
     """A mesh that cannot be read or written as asked (a user-facing error)."""
@@ -107,32 +104,6 @@ def _to_world(co, nor, matrix_world):
     return co, nor
 
 
-def _owned(idblock):
-    raw = idblock.get(OWNED_PROP)
-    if not isinstance(raw, str) or not raw:
-        return []
-    try:
-        names = json.loads(raw)
-    except ValueError:
-        return []
-    return [s for s in names if isinstance(s, str)] if isinstance(names, list) else []
-
-
-def owned_attributes(obj):
-    """Names of the attributes Canopy AO made on this object. The mark is kept on the object
-    and on its mesh, so objects sharing one mesh agree on what is ours."""
-    names = _owned(obj)
-    return names + [n for n in _owned(obj.data) if n not in names]
-
-
-def _mark_owned(obj, name):
-    for idblock in (obj, obj.data):
-        names = _owned(idblock)
-        if name not in names:
-            names.append(name)
-        idblock[OWNED_PROP] = json.dumps(names)
-
-
 # Blender keeps layer names in 64-byte buffers (MAX_CUSTOMDATA_LAYER_NAME, with the NUL).
 MAX_ATTRIBUTE_NAME_BYTES = 63
 # Attributes Blender itself owns on a mesh (3.4 to 5.x): never ours to replace, not even with
@@ -153,17 +124,23 @@ def check_attribute(obj, name, overwrite):
     if name.startswith(".") or name in BUILTIN_ATTRIBUTES or name in obj.data.uv_layers:
         return (f"{obj.name}: '{name}' names one of Blender's own layers (a built-in "
                 "attribute or a UV map); choose another attribute name")
-    attr = obj.data.attributes.get(name)
-    if attr is None or overwrite or name in owned_attributes(obj):
+    if overwrite or obj.data.attributes.get(name) is None:
         return None
+    state = ownership(obj.data, name)
+    if state == 'ours':
+        return None
+    if state == 'changed':
+        return (f"{obj.name}: its attribute '{name}' is no longer what Canopy AO wrote (painted "
+                "or edited since, or the mesh changed); choose another name or tick Overwrite")
     return (f"{obj.name}: it already has an attribute '{name}' that Canopy AO did not make; "
             "choose another name or tick Overwrite")
 
 
-def _point_attribute(obj, name, values, data_type, overwrite):
+def _point_attribute(obj, name, values, data_type, overwrite, checked=False):
     """(the POINT attribute ``name`` of type data_type to fill, values float32 (V,)): checked
-    against the ownership rules and the vertex count, an attribute of another type replaced."""
-    why = check_attribute(obj, name, overwrite)
+    against the ownership rules (unless the caller just did: checked) and the vertex count, an
+    attribute of another type replaced."""
+    why = None if checked else check_attribute(obj, name, overwrite)
     if why:
         raise MeshIOError(why)
     mesh = obj.data
@@ -181,18 +158,20 @@ def _point_attribute(obj, name, values, data_type, overwrite):
     return attr, values
 
 
-def write_ao_attribute(obj, name, ao, overwrite=False):
+def write_ao_attribute(obj, name, ao, overwrite=False, checked=False):
     """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
 
-    Replaces an attribute Canopy AO made (or any, with overwrite); refuses otherwise.
+    Replaces an attribute exactly as Canopy AO wrote it (or any, with overwrite); refuses
+    otherwise. checked: the caller ran check_attribute on it just before (Live AO checks every
+    target before it writes any), so its content is not read and fingerprinted twice.
     """
-    attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite)
+    attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite, checked)
     mesh = obj.data
     attr.data.foreach_set("color", native.require().gray_rgba(ao).reshape(-1))
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
     mesh.update_tag()
-    _mark_owned(obj, name)
+    mark_owned(obj, name, rgba)
     return attr
 
 
@@ -203,21 +182,19 @@ def write_float_attribute(obj, name, values, overwrite=False):
     mesh = obj.data
     attr.data.foreach_set("value", values)
     mesh.update_tag()
-    _mark_owned(obj, name)
+    mark_owned(obj, name, values)
     return attr
 
 
 def remove_owned_attribute(obj, name):
-    """Remove an attribute Canopy AO made, and its ownership mark; True if one went."""
-    if name not in owned_attributes(obj):
+    """Remove an attribute that is exactly as Canopy AO wrote it, and its record; True if one
+    went."""
+    if ownership(obj.data, name) != 'ours':
         return False
-    attr = obj.data.attributes.get(name)
-    if attr is not None:
-        obj.data.attributes.remove(attr)
-    for idblock in (obj, obj.data):
-        idblock[OWNED_PROP] = json.dumps([n for n in _owned(idblock) if n != name])
+    obj.data.attributes.remove(obj.data.attributes[name])
+    set_record(obj.data, name, None)
     obj.data.update_tag()
-    return attr is not None
+    return True
 
 
 def read_ao_attribute(obj, name):

@@ -5,6 +5,7 @@ rasteriser finds in its UV layout), the AO evaluated for them, and how that AO i
 import bpy
 import numpy as np
 
+from . import files_io
 from ..core.native import CanopyAOError
 from . import bent_io, maps_io, materials, mesh_io, texel_io, tiles_io
 
@@ -126,25 +127,27 @@ class TexelTarget(Target):
                               packed_into=image.name, channel=opts["channel"])
         elif opts["udim"]:
             image, st = tiles_io.write_tiled(self.obj, [(self.rx, self.ao)],
-                                             opts["image_dir"] or None, txn, tiled=True)
+                                             opts["image_dir"] or None, txn, tiled=True,
+                                             overwrite=opts["overwrite"])
             self.stats = dict(self.rx.stats, path=st["paths"][0], paths=st["paths"],
                               tiles=sorted(st["tiles"]), image_tiles=st["tiles"],
                               notes=self.rx.stats["notes"] + st["notes"])
         else:
             image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
-                                                      opts["image_dir"] or None, txn)
+                                                      opts["image_dir"] or None, txn,
+                                                      overwrite=opts["overwrite"])
         timage = None
         if self.thickness is not None and opts["udim"]:
             timage, tstats = tiles_io.write_tiled(self.obj, [(self.rx, self.thickness)],
                                                   opts["image_dir"] or None, txn,
                                                   suffix=opts["thickness_name"], tiled=True,
-                                                  background=0.0)
+                                                  background=0.0, overwrite=opts["overwrite"])
             self.stats["thickness_path"] = tstats["paths"][0]
         elif self.thickness is not None:
             timage, tstats = texel_io.write_texels(self.obj, self.rx, self.thickness,
                                                    opts["image_dir"] or None, txn,
                                                    suffix=opts["thickness_name"],
-                                                   background=0.0)
+                                                   background=0.0, overwrite=opts["overwrite"])
             self.stats["thickness_path"] = tstats["path"]
         if self.bent is not None:
             _img, path, notes = bent_io.write_image(self.obj, self.rx, self.bent,
@@ -155,6 +158,16 @@ class TexelTarget(Target):
             said = self.stats.setdefault("notes", [])
             said += [n for n in notes if n not in said]  # the AO's image may have said it
         self.wire(txn, opts, image, timage)
+
+    def outputs(self, opts):
+        """files_io.Output of every image file write() makes: the AO's and the thickness's,
+        per UDIM tile (tile None: one file), the atlas's when baking into one."""
+        if opts["channel"] != "RGBA":
+            return []  # packed into the user's chosen image (the ask is choosing it)
+        owner = opts["atlas"] if opts["atlas"] else self.obj.name
+        tiles = [n for n, _a, _b in self.rx.tiles] if opts["udim"] else [None]
+        maps = ["CanopyAO"] + ([opts["thickness_name"]] if opts["thickness"] else [])
+        return [files_io.Output(owner, m, n, bool(opts["atlas"])) for m in maps for n in tiles]
 
     def wire(self, txn, opts, image, timage):
         """Wire the AO image (and the thickness's, timage) into obj's materials when asked."""
@@ -170,3 +183,25 @@ class TexelTarget(Target):
     def report(self):
         """The texel stats as plain data for the JSON report."""
         return {k: v for k, v in self.stats.items() if isinstance(v, (int, float, str, list))}
+
+
+def check_outputs(targets, opts):
+    """Refuse, before anything is written, image files of this bake that would collide or
+    replace a file not Canopy AO's own for that output (files_io.check_outputs), and several
+    objects packing into the one Pack Image (each would replace the last one's channel)."""
+    from types import SimpleNamespace
+    packing = [t.obj.name for t in targets if t.kind == "texel" and opts["channel"] != "RGBA"]
+    if len(packing) > 1:
+        raise CanopyAOError(f"{', '.join(packing)} would each pack into channel "
+                            f"{opts['channel']} of image '{opts['pack_image']}', each replacing "
+                            "the one before; bake them one at a time, into images of their own "
+                            "(nothing was changed)")
+    out = []
+    for t in targets:
+        if t.kind != "texel":
+            continue
+        for o in t.outputs(opts):
+            path = files_io.image_path(SimpleNamespace(name=o.owner), opts["image_dir"] or None,
+                                       [], o.map, make=False)
+            out.append((files_io.tile_path(path, o.tile) if o.tile is not None else path, o))
+    files_io.check_outputs(out, opts["overwrite"])

@@ -9,26 +9,21 @@
 Image conventions (texel_raster.h, Blender): texel (i, j) has its centre at
 uv = ((i + 0.5) / W, (j + 0.5) / H); row 0 is the bottom (v = 0).
 """
-import os
-import tempfile
 from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
 from . import materials, mesh_io
+from .files_io import Output, check_outputs, image_path, write_own_file
+# Kept under their old names for code that writes image files of its own through texel_io.
+from .files_io import keep_file, write_exr  # noqa: F401
 from ..core.native import CanopyAOError, _core
 
 TAG = "canopy_ao"
 OBJ_KEY = "canopy_ao_object"   # on our images: the object they belong to ...
 MAP_KEY = "canopy_ao_map"      # ... and the map they hold (absent: "CanopyAO", the AO)
 MAX_RESOLUTION = 16384
-
-
-def image_name(obj, suffix="CanopyAO"):
-    return f"{obj.name}_{suffix}"
-
-
 # === Mesh → texel receivers
 
 def resolve_uv_map(obj, uv_map):
@@ -183,40 +178,7 @@ def splat(pixels, values, width, height, margin, background=1.0):
             np.asarray(mask, dtype=np.uint8).reshape(height, width))
 
 
-# === Image file and Blender image
-
-def image_path(obj, image_dir, notes, suffix="CanopyAO"):
-    """Where obj's EXR goes (the folder is made); a note says when it is a temporary one."""
-    fname = bpy.path.clean_name(image_name(obj, suffix)) + ".exr"
-    if image_dir:
-        if image_dir.startswith("//") and not bpy.data.filepath:
-            d = os.path.join(tempfile.gettempdir(), "canopy_ao")
-            notes.append(f"'{image_dir}' is relative to the .blend, which is not saved yet; "
-                         f"the image went to {d}")
-        else:
-            d = bpy.path.abspath(image_dir)
-    elif bpy.data.filepath:
-        d = os.path.dirname(bpy.data.filepath)
-    else:
-        d = os.path.join(tempfile.gettempdir(), "canopy_ao")
-        notes.append(f"the .blend is not saved yet; the image went to {d}")
-    try:
-        os.makedirs(d, exist_ok=True)
-    except OSError as exc:
-        raise CanopyAOError(f"Cannot create the image folder '{d}': {exc}; choose another "
-                            "Image Folder") from exc
-    return os.path.join(d, fname)
-
-
-def write_exr(path, ao):
-    """Write a grey float image (H, W), row 0 = bottom: the writer flips rows so the file
-    shows v = 1 on top."""
-    try:
-        _core.write_image(path, np.ascontiguousarray(ao, dtype=np.float32), dtype="float",
-                          bottom_up=True)
-    except (OSError, RuntimeError) as exc:
-        raise CanopyAOError(f"Could not write '{path}': {exc}") from exc
-
+# === Blender image
 
 def find_image(key, value, suffix="CanopyAO"):
     """Our image whose property key is value (OBJ_KEY: the object's name) holding map suffix."""
@@ -268,18 +230,20 @@ def load_image(obj, path, suffix="CanopyAO", key=OBJ_KEY, name=None, numbers=Non
 
 
 def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, image_dir=None,
-               wire=True, aov_name="BakedAO"):
+               wire=True, aov_name="BakedAO", overwrite=False):
     """Bake AO per texel of obj's UV layout into an EXR and a Blender image, wired into obj's
     materials (wire_texel_ao) unless wire=False: the bake's texel path with any AO function.
 
     ao_fn(positions float32 (T, 3), normals float32 (T, 3)) -> float32 (T,) AO in [0, 1].
     Returns (image, stats); stats holds the raster counts, "path", "texels", "warnings"
     (e.g. overlapping UVs) and "notes". Raises CanopyAOError (a ValueError) before changing
-    anything when obj is not a mesh, has no (such) UV map, or the resolution is out of range.
+    anything when obj is not a mesh, has no (such) UV map, or the resolution is out of range,
+    or when the EXR would replace a file that is not its own (check_file) without overwrite.
     """
     if wire:
         materials.check_aov_name(aov_name)
     rx = receivers(obj, context.evaluated_depsgraph_get(), uv_map, resolution, margin)
+    check_outputs([(image_path(obj, image_dir, [], make=False), Output(obj.name))], overwrite)
     ao = np.asarray(ao_fn(rx.positions, rx.normals), dtype=np.float32)
     if ao.shape != (len(rx.pixels),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"Object '{obj.name}': the AO model returned {ao.shape} values "
@@ -287,7 +251,8 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
     from .commit import Transaction
     txn = Transaction()
     try:
-        image, stats = write_texels(obj, rx, np.clip(ao, 0.0, 1.0), image_dir, txn)
+        image, stats = write_texels(obj, rx, np.clip(ao, 0.0, 1.0), image_dir, txn,
+                                    overwrite=overwrite)
         if wire:
             stats["nodes_added"] = materials.wire_texel_ao(obj, image, rx.uv_map, aov_name)
     except BaseException:
@@ -297,7 +262,8 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
     return image, stats
 
 
-def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0):
+def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0,
+                 overwrite=False):
     """Splat AO (or another map: suffix names it) per texel into the image, write its EXR and
     (re)load it as obj's image, each write recorded in txn (commit.Transaction; a replaced file
     is kept until txn.done()). Returns (image, stats)."""
@@ -306,26 +272,10 @@ def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0)
     stats = dict(rx.stats, margin_texels=int(np.count_nonzero(mask == 2)),
                  notes=list(rx.stats["notes"]))
     path = image_path(obj, image_dir, stats["notes"], suffix)
-    txn.add(keep_file(path))
-    write_exr(path, img_arr)
+    write_own_file(path, img_arr, txn, Output(obj.name, suffix), overwrite)
     image, undo_image = load_image(obj, path, suffix)
     txn.add(undo_image)
     stats.update(path=path, writer="native", image=img_arr, mask=mask)
     return image, stats
 
 
-def keep_file(path):
-    """Move an existing file at path aside; returns undo() that puts it back (or removes what
-    was written there). undo.keep is the moved-aside copy's path, or None."""
-    backup = None
-    if os.path.exists(path):
-        backup = path + ".canopy_ao-previous"
-        os.replace(path, backup)
-
-    def undo():
-        if backup is not None:
-            os.replace(backup, path)
-        elif os.path.exists(path):
-            os.remove(path)
-    undo.keep = backup
-    return undo

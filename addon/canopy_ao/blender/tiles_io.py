@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import cycles_check, texel_io
+from . import cycles_check, files_io, texel_io
 from ..core import metrics
 from ..core.native import CanopyAOError
 
@@ -37,7 +37,7 @@ def split_tiles(uvs):
 
 
 def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, atlas=False,
-                background=1.0):
+                background=1.0, overwrite=False):
     """Splat every part's values per tile, write one EXR per tile and load them as one image.
 
     owner: the object (or, atlas=True, the atlas's name) the image belongs to; parts:
@@ -48,15 +48,19 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
     rx0 = parts[0][0]
     res, margin = rx0.resolution, rx0.margin
     notes = []
-    who = SimpleNamespace(name=owner) if atlas else owner
-    base = texel_io.image_path(who, image_dir, notes, suffix)[:-len(".exr")]
+    name = owner if atlas else owner.name
+
+    def out(tile):
+        return files_io.Output(name, suffix, tile, atlas)
+    path0 = files_io.image_path(SimpleNamespace(name=name), image_dir, notes, suffix)
     numbers = sorted({n for rx, _v in parts for n, _a, _b in rx.tiles})
-    if tiled:  # our tiles of an earlier bake that this one does not write go too
-        d, stem = os.path.split(base)
+    if tiled:  # our tiles of an earlier bake that this one does not write go too (ours only)
+        d, stem = os.path.split(path0[:-len(".exr")])
         for f in os.listdir(d):
             rest = f[len(stem) + 1:-len(".exr")] if f.startswith(stem + ".") else ""
-            if f.endswith(".exr") and rest.isdigit() and int(rest) not in numbers:
-                txn.add(texel_io.keep_file(os.path.join(d, f)))
+            if (f.endswith(".exr") and rest.isdigit() and int(rest) not in numbers
+                    and files_io.check_file(os.path.join(d, f), out(int(rest))) is None):
+                txn.add(files_io.keep_file(os.path.join(d, f)))
     stats = {"tiles": {}, "paths": [], "claimed": {}, "notes": notes}
     # The image's undo is recorded before the files' so that a rollback runs it after theirs,
     # when the old tile files are back for it to find.
@@ -68,9 +72,8 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
         claims = np.bincount(np.concatenate(pix), minlength=res * res).reshape(res, res)
         img, mask = texel_io.splat(np.concatenate(pix), np.concatenate(val), res, res, margin,
                                    background)
-        path = f"{base}.{n}.exr" if tiled else base + ".exr"
-        txn.add(texel_io.keep_file(path))
-        texel_io.write_exr(path, img)
+        path = files_io.tile_path(path0, n) if tiled else path0
+        files_io.write_own_file(path, img, txn, out(n if tiled else None), overwrite)
         stats["tiles"][n], stats["claimed"][n] = (img, mask), claims
         stats["paths"].append(path)
     stats["shared_texels"] = int(sum(np.count_nonzero(c > 1) for c in stats["claimed"].values()))
@@ -95,12 +98,13 @@ def write_atlas(targets, txn, opts):
     each object wired to it; a note names the objects whose texels overlap."""
     name, tiled = opts["atlas"], opts["udim"]
     image, st = write_tiled(name, [(t.rx, t.ao) for t in targets], opts["image_dir"] or None,
-                            txn, tiled=tiled, atlas=True)
+                            txn, tiled=tiled, atlas=True, overwrite=opts["overwrite"])
     timage = None
     if targets[0].thickness is not None:
         timage, _ts = write_tiled(name, [(t.rx, t.thickness) for t in targets],
                                   opts["image_dir"] or None, txn, suffix=opts["thickness_name"],
-                                  tiled=tiled, atlas=True, background=0.0)
+                                  tiled=tiled, atlas=True, background=0.0,
+                                  overwrite=opts["overwrite"])
     overlaps = []
     for i, t in enumerate(targets):
         shared = 0

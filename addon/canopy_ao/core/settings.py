@@ -175,7 +175,8 @@ OPTIONS = (
     Option("attribute", "str", "CanopyAO", "Attribute",
            "Color attribute (POINT, FLOAT_COLOR) to write", group="output"),
     Option("overwrite", "bool", False, "Overwrite",
-           "Replace an attribute of this name that Canopy AO did not make", group="output"),
+           "Replace an attribute or image file of this name that Canopy AO did not make (or "
+           "that was changed since it wrote it)", group="output"),
     Option("channel", "enum", "RGBA", "Channel",
            "Write the AO as grey (R, G, B, alpha 1) into an attribute or image of its own, or "
            "into one channel of an existing color attribute (Attribute) or image (Pack Image), "

@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace canopy_ao {
@@ -42,6 +43,11 @@ struct ImageWriteOptions {
   PixelType type = PixelType::Auto;
   /// true: pixels[0] is the bottom row (Blender's order) and rows are flipped on write.
   bool bottom_up = true;
+  /// (name, value) string attributes stored in the file's header (an EXR header attribute, a
+  /// PNG text chunk): what read_image_attributes returns. Names are plain identifiers (letters,
+  /// digits, '_'), so no format treats them as its own ("oiio:", "openexr:", ...); values are
+  /// non-empty and hold no NUL (std::invalid_argument otherwise).
+  std::vector<std::pair<std::string, std::string>> attributes;
 };
 
 // === Functions
@@ -60,6 +66,11 @@ void write_image(const std::string& path, const Image& image,
 /// channels. bottom_up = true returns row 0 = bottom (the file's last row).
 /// Throws canopy_ao::Error naming the path and OpenImageIO's message on failure.
 Image read_image(const std::string& path, bool bottom_up = true);
+
+/// Every string attribute of the first subimage's header, (name, value), in the file's order
+/// (the ones write_image stored, and any the format or another program put there). Reads the
+/// header only. Throws canopy_ao::Error naming the path and OpenImageIO's message on failure.
+std::vector<std::pair<std::string, std::string>> read_image_attributes(const std::string& path);
 
 /// Which pixel type `Auto` resolves to for `path` (by extension, case-insensitive).
 PixelType default_pixel_type(const std::string& path);
