@@ -94,6 +94,19 @@ def test_texel_image_holds_the_encoded_bent_normals(tree):
     rim = (r > 0.8) & (r < 2.0)
     assert np.mean(np.einsum("ij,ij->i", b[rim, :2], xy[rim] / r[rim, None]) > 0.05) > 0.9
 
+    # The file is ours now: a re-bake replaces it; a file Canopy AO did not write is refused
+    # before anything is written (the bent normals' image follows the AO's ownership rules).
+    run_bake(bpy.context, ["Ground"], opts(
+        mode='TEXEL', resolution=32, bent_normals="TANGENT", image_dir=tree["image_dir"]))
+    _core.write_image(path, np.full((8, 8), 0.5, np.float32))  # the user's own EXR
+    with open(path, "rb") as f:
+        user = f.read()
+    with pytest.raises(CanopyAOError, match="did not write it"):
+        run_bake(bpy.context, ["Ground"], opts(
+            mode='TEXEL', resolution=32, bent_normals="TANGENT", image_dir=tree["image_dir"]))
+    with open(path, "rb") as f:
+        assert f.read() == user
+
 
 def test_refusals_before_anything_is_written(tree):
     ground = tree["ground"]

@@ -13,7 +13,7 @@ tangents at the texel's centre, each made orthogonal to the receiver's normal (c
 
 import numpy as np
 
-from . import mesh_io, texel_io
+from . import files_io, mesh_io, texel_io
 from ..core import maps
 from ..core.native import CanopyAOError
 
@@ -117,22 +117,22 @@ def write_attribute(obj, name, bent, overwrite=False):
     rgba[:, :3] = rgb
     attr.data.foreach_set("color", rgba.reshape(-1))
     obj.data.update_tag()
-    mesh_io._mark_owned(obj, name)
+    mesh_io.mark_owned(obj, name, rgba.reshape(-1))
     return attr
 
 
-def write_image(obj, rx, bent, space, image_dir, txn, suffix):
+def write_image(obj, rx, bent, space, image_dir, txn, suffix, overwrite=False):
     """Splat the encoded bent normals per texel (each channel with rx's margin; empty texels
-    BACKGROUND[space]) into an RGB EXR, loaded as obj's image of map ``suffix`` (Non-Color).
-    Returns (image, path)."""
+    BACKGROUND[space]) into an RGB EXR, loaded as obj's image of map ``suffix`` (Non-Color),
+    under the files' ownership rules (files_io.write_own_file). Returns (image, path)."""
     rgb = maps.encode(bent)
     res = rx.resolution
     planes = [texel_io.splat(rx.pixels, rgb[:, k], res, res, rx.margin, BACKGROUND[space][k])[0]
               for k in range(3)]
     notes = []
     path = texel_io.image_path(obj, image_dir, notes, suffix)
-    txn.add(texel_io.keep_file(path))
-    texel_io.write_exr(path, np.stack(planes, axis=2))
+    files_io.write_own_file(path, np.stack(planes, axis=2), txn,
+                            files_io.Output(obj.name, suffix), overwrite)
     image, undo = texel_io.load_image(obj, path, suffix)
     txn.add(undo)
     return image, path, notes

@@ -167,7 +167,8 @@ def write_ao_attribute(obj, name, ao, overwrite=False, checked=False):
     """
     attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite, checked)
     mesh = obj.data
-    attr.data.foreach_set("color", native.require().gray_rgba(ao).reshape(-1))
+    rgba = native.require().gray_rgba(ao).reshape(-1)
+    attr.data.foreach_set("color", rgba)
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
     mesh.update_tag()

@@ -153,20 +153,22 @@ class TexelTarget(Target):
             _img, path, notes = bent_io.write_image(self.obj, self.rx, self.bent,
                                                     opts["bent_normals"],
                                                     opts["image_dir"] or None, txn,
-                                                    opts["bent_normals_name"])
+                                                    opts["bent_normals_name"],
+                                                    opts["overwrite"])
             self.stats["bent_normals_path"] = path
             said = self.stats.setdefault("notes", [])
             said += [n for n in notes if n not in said]  # the AO's image may have said it
         self.wire(txn, opts, image, timage)
 
     def outputs(self, opts):
-        """files_io.Output of every image file write() makes: the AO's and the thickness's,
-        per UDIM tile (tile None: one file), the atlas's when baking into one."""
+        """files_io.Output of every image file write() makes: the AO's, the thickness's and the
+        bent normals', per UDIM tile (tile None: one file), the atlas's when baking into one."""
         if opts["channel"] != "RGBA":
             return []  # packed into the user's chosen image (the ask is choosing it)
         owner = opts["atlas"] if opts["atlas"] else self.obj.name
         tiles = [n for n, _a, _b in self.rx.tiles] if opts["udim"] else [None]
-        maps = ["CanopyAO"] + ([opts["thickness_name"]] if opts["thickness"] else [])
+        maps = (["CanopyAO"] + ([opts["thickness_name"]] if opts["thickness"] else [])
+                + ([opts["bent_normals_name"]] if opts["bent_normals"] != "OFF" else []))
         return [files_io.Output(owner, m, n, bool(opts["atlas"])) for m in maps for n in tiles]
 
     def wire(self, txn, opts, image, timage):
