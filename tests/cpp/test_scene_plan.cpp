@@ -124,6 +124,45 @@ TEST(ScenePlan, CompositionIsInShellTimesOtherCrownsTimesOtherTrunks) {
   EXPECT_GT(inside[2], 100);
 }
 
+// One tree's own leaves, all inside its crown: the in-shell kernel alone (its own trunk is
+// skipped); a second tree's bare trunk or a receiver outside the crown brings the occluders
+// back (the plan's shortcut for the one-crown case must not drop them).
+TEST(ScenePlan, OneCrownHoldingEveryReceiverIsTheInShellModelAlone) {
+  const TreeProxies tree = tree_at(0.0f);
+  TreeProxies bare = tree_at(2.5f);  // a trunk, no crown
+  bare.has_crown = false;
+  bare.shells.clear();
+  std::vector<float> p, n;
+  for (int i = 0; i < 200; ++i) {
+    const float a = 0.1f * i;
+    test::add(p, 0.6f * std::cos(a), 0.4f * std::sin(a), 3.0f + 0.3f * std::sin(3 * a));
+    test::add(n, std::cos(a), std::sin(a), 0.2f);
+  }
+  const std::size_t count = p.size() / 3;
+  PlanReceivers own;
+  own.role = ReceiverRole::Canopy;
+  own.tree = 0;
+  std::vector<float> want(count), alone(count), beside(count);
+  ao_canopy_sphere(view(p), view(n), tree.sphere, CanopyOptions{1.5f, 0.1f}, want.data());
+  ScenePlan({tree}, ScenePlanOptions{})
+      .evaluate(view(p), view(n), own, PlanMethod::Sphere, {1.5f}, alone.data());
+  ScenePlan({tree, bare}, ScenePlanOptions{})
+      .evaluate(view(p), view(n), own, PlanMethod::Sphere, {1.5f, 1.0f}, beside.data());
+  int darker = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    ASSERT_EQ(alone[i], want[i]) << "point " << i;
+    ASSERT_LE(beside[i], want[i] + 1e-7f) << "point " << i;
+    darker += beside[i] < want[i] - 1e-4f;
+  }
+  EXPECT_GT(darker, 10);  // the other tree's trunk occludes some of them
+  // A receiver outside the crown sees it as an occluder.
+  const float out_p[3] = {0.0f, 0.0f, 6.0f}, out_n[3] = {0.0f, 0.0f, -1.0f};
+  float v = 1.0f;
+  ScenePlan({tree}, ScenePlanOptions{})
+      .evaluate({out_p, 1}, {out_n, 1}, own, PlanMethod::Sphere, {1.5f}, &v);
+  EXPECT_LT(v, 0.9f);
+}
+
 TEST(ScenePlan, GroundSeesEveryTrunkAndGrassGetsTheGrassLaw) {
   const ScenePlan plan({tree_at(-3.0f), tree_at(3.0f)}, ScenePlanOptions{});
   std::vector<float> p, n;
