@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <string>
+#include <utility>
 
 #include "canopy_ao/canopy_model.h"
 #include "canopy_ao/medium_table.h"
@@ -103,9 +104,11 @@ int ScenePlan::set_of(PlanMethod m) {
   }
 }
 
-ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options)
+ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options,
+                     std::vector<GrassCover> covers)
     : trees_(checked(trees)),
-      trunks_(grouped_field(trunks_of(trees), /*solid=*/true, options)) {
+      trunks_(grouped_field(trunks_of(trees), /*solid=*/true, options)),
+      covers_(std::move(covers)) {
   for (const TreeProxies& t : trees_) {
     sets_[0].push_back(t.has_crown ? std::vector<Ellipsoid>{Ellipsoid::from_sphere(t.sphere)}
                                    : std::vector<Ellipsoid>{});
@@ -117,6 +120,16 @@ ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& opt
     crowns_.push_back(grouped_field(sets_[k], /*solid=*/false, options));
     for (const std::vector<Ellipsoid>& shells : sets_[k]) bounds_[k].push_back(bound(shells));
   }
+}
+
+void ScenePlan::set_forest(std::shared_ptr<const ForestOccluders> forest) {
+  std::lock_guard<std::mutex> lock(forest_mutex_);
+  forest_ = std::move(forest);
+}
+
+std::shared_ptr<const ForestOccluders> ScenePlan::forest() const {
+  std::lock_guard<std::mutex> lock(forest_mutex_);
+  return forest_;
 }
 
 std::shared_ptr<const OccluderMaterial> ScenePlan::material(float tau) const {
@@ -233,8 +246,12 @@ void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanRec
     for (std::size_t j = 0; j < m; ++j) out[idx[j]] = vbuf[j];
   }
 
-  // Every other crown as occluders, then the trunks (solid), the grass law, the clip.
+  // Every other crown as occluders, then the trunks (solid), the grass law, the clip; then the
+  // grass covers over a ground point and the forest, each clipped (the order the add-on's
+  // Python multiplied them in, so the round-off is the same).
   const bool own_trunks_skipped = r.role == ReceiverRole::Canopy || r.role == ReceiverRole::Trunk;
+  const bool covered = r.role == ReceiverRole::Ground && !covers_.empty();
+  const std::shared_ptr<const ForestOccluders> forest = this->forest();  // held for the call
   const OccluderField& crowns = crowns_[set];
   parallel_for_blocks(n, 4096, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
@@ -243,7 +260,13 @@ void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanRec
       const std::int32_t own = r.trees != nullptr ? r.trees[i] : r.tree;
       v *= trunks_.visibility(x, nv, solid.data(), own_trunks_skipped ? own : -1);
       if (!grass.empty()) v *= grass[i];
-      out[i] = std::clamp(v, 0.0f, 1.0f);
+      v = std::clamp(v, 0.0f, 1.0f);
+      if (covered) {
+        for (const GrassCover& c : covers_) v *= c.visibility(x);
+        v = std::clamp(v, 0.0f, 1.0f);
+      }
+      if (forest) v = std::clamp(v * forest->visibility(x, nv), 0.0f, 1.0f);
+      out[i] = v;
     }
   });
 }
