@@ -129,7 +129,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         return _grass(plan, role, grass_key, p, n,
                       _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own)))
     # The analytic rungs: the whole per-receiver composition, grass layers and forest
-    # included, in one native call (docs/DESIGN.md, 'The scene plan').
+    # included, in one native call (docs/DESIGN.md, 'How each role is lit').
     lit = lights(plan)
     grass = _blades(plan, grass_key, p) if role == "GRASS" else None
     return lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
