@@ -27,12 +27,15 @@ void check(const GrassCoverData& d) {
   if (!std::isfinite(d.origin_x) || !std::isfinite(d.origin_y)) {
     throw std::invalid_argument("origin must be finite");
   }
-  if (d.width < 1) {
-    throw std::invalid_argument("width must be >= 1, got " + std::to_string(d.width));
+  // Keys and widths below 2^52: every cell index and bound below is exact in double, and
+  // no sum of them overflows.
+  constexpr std::int64_t kMaxKey = std::int64_t{1} << 52;
+  if (d.width < 1 || d.width >= kMaxKey) {
+    throw std::invalid_argument("width must be in [1, 2^52), got " + std::to_string(d.width));
   }
   for (std::size_t k = 0; k < d.keys.size(); ++k) {
-    if (d.keys[k] < 0 || (k > 0 && d.keys[k] <= d.keys[k - 1])) {
-      throw std::invalid_argument("keys must be >= 0 and strictly increasing (keys[" +
+    if (d.keys[k] < 0 || d.keys[k] >= kMaxKey || (k > 0 && d.keys[k] <= d.keys[k - 1])) {
+      throw std::invalid_argument("keys must be in [0, 2^52) and strictly increasing (keys[" +
                                   std::to_string(k) + "] = " + std::to_string(d.keys[k]) + ")");
     }
   }

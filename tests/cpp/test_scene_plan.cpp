@@ -343,6 +343,8 @@ TEST(GrassCover, BadDataThrows) {
                std::invalid_argument);
   EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.keys[0] = -1; })},
                std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.keys.back() = std::int64_t{1} << 60; })},
+               std::invalid_argument);
   EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.blade = 1e7 * d.cell; })},
                std::invalid_argument);  // a disc of more than 2^20 cells across
 }

@@ -32,7 +32,7 @@ struct GrassCoverData {
   double origin_x = 0.0;    ///< the cells' origin (cell (0, 0) starts there), finite
   double origin_y = 0.0;
   std::int64_t width = 1;   ///< cells per row (key = i · width + j, 0 ≤ j < width), ≥ 1
-  std::vector<std::int64_t> keys;  ///< the footprint's cells, strictly increasing, ≥ 0
+  std::vector<std::int64_t> keys;  ///< the footprint's cells, strictly increasing, in [0, 2^52)
 };
 
 class GrassCover {
@@ -40,7 +40,8 @@ class GrassCover {
   // === Constructor
   /// Largest m = ⌈blade / h⌉ accepted (the disc's radius in cells).
   static constexpr std::int64_t kMaxDiscCells = 1 << 20;
-  /// PRE: the data as documented above, m ≤ kMaxDiscCells. Throws std::invalid_argument.
+  /// PRE: the data as documented above (width < 2^52), m ≤ kMaxDiscCells. Throws
+  /// std::invalid_argument.
   explicit GrassCover(GrassCoverData data);
 
   // === Methods
