@@ -133,13 +133,13 @@ std::vector<GrassCover> covers_arg(const py::list& covers) {
 }
 
 void bind_parts(py::module_& m) {
-  py::class_<GrassCover>(
-      m, "GrassCover",
+  const char* cover_doc =
       "A grass field as an occluder of the ground under it: the layer's visibility V of an "
       "upward-facing ground point and the field's footprint cells (docs/DESIGN.md, 'How each "
       "role is lit'). A point within one blade height of the ground level sees 1 - f (1 - V), "
       "f the share of the disc of cells of radius max(1, ceil(blade / cell)) around its cell "
-      "that the footprint holds; any other point sees 1.")
+      "that the footprint holds; any other point sees 1.";
+  py::class_<GrassCover>(m, "GrassCover", cover_doc)
       .def(py::init([](double ground, double blade, double visibility, double cell,
                        const py::object& origin, const py::object& width, const py::array& keys) {
              GrassCoverData d;
