@@ -154,8 +154,9 @@ std::size_t ScenePlan::max_candidates(PlanMethod method) const {
   return crowns_[set_of(method)].max_candidates() + trunks_.max_candidates();
 }
 
-void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanReceivers& r,
-                         PlanMethod method, const std::vector<float>& tau, float* out) const {
+void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const PlanReceivers& r,
+                               PlanMethod method, const std::vector<float>& tau,
+                               float* out) const {
   check_receivers(positions, normals);
   const std::size_t n_trees = trees_.size();
   if (tau.size() != n_trees) {
@@ -246,12 +247,8 @@ void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanRec
     for (std::size_t j = 0; j < m; ++j) out[idx[j]] = vbuf[j];
   }
 
-  // Every other crown as occluders, then the trunks (solid), the grass law, the clip; then the
-  // grass covers over a ground point and the forest, each clipped (the order the add-on's
-  // Python multiplied them in, so the round-off is the same).
+  // Every other crown as occluders, then the trunks (solid), the grass law, the clip.
   const bool own_trunks_skipped = r.role == ReceiverRole::Canopy || r.role == ReceiverRole::Trunk;
-  const bool covered = r.role == ReceiverRole::Ground && !covers_.empty();
-  const std::shared_ptr<const ForestOccluders> forest = this->forest();  // held for the call
   const OccluderField& crowns = crowns_[set];
   parallel_for_blocks(n, 4096, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
@@ -260,12 +257,29 @@ void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanRec
       const std::int32_t own = r.trees != nullptr ? r.trees[i] : r.tree;
       v *= trunks_.visibility(x, nv, solid.data(), own_trunks_skipped ? own : -1);
       if (!grass.empty()) v *= grass[i];
-      v = std::clamp(v, 0.0f, 1.0f);
+      out[i] = std::clamp(v, 0.0f, 1.0f);
+    }
+  });
+}
+
+void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanReceivers& r,
+                         PlanMethod method, const std::vector<float>& tau, float* out) const {
+  evaluate_trees(positions, normals, r, method, tau, out);
+  // Then the grass covers over a ground point and the forest, each clipped (the order the
+  // add-on's Python multiplied them in, so the round-off is the same). A pass of its own: any
+  // receiver the trees' part finishes early still gets them.
+  const bool covered = r.role == ReceiverRole::Ground && !covers_.empty();
+  const std::shared_ptr<const ForestOccluders> forest = this->forest();  // held for the call
+  if (!covered && !forest) return;
+  parallel_for_blocks(positions.size, 4096, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const Vec3 x = positions[i];
+      float v = out[i];
       if (covered) {
         for (const GrassCover& c : covers_) v *= c.visibility(x);
         v = std::clamp(v, 0.0f, 1.0f);
       }
-      if (forest) v = std::clamp(v * forest->visibility(x, nv), 0.0f, 1.0f);
+      if (forest) v = std::clamp(v * forest->visibility(x, normals[i]), 0.0f, 1.0f);
       out[i] = v;
     }
   });

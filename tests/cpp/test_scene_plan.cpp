@@ -431,3 +431,54 @@ TEST(ScenePlan, GroundTimesItsGrassCoversAndEveryRoleTimesTheAttachedForest) {
   plan.evaluate(view(p), view(n), ground, PlanMethod::Medium, tau, with_forest.data());
   EXPECT_EQ(with_forest, covered);
 }
+
+// Receivers the trees' part lights with one kernel alone (one crown holding all of them, or no
+// tree at all) still get the grass covers and the forest.
+TEST(ScenePlan, CoversAndForestReachReceiversOfOneCrownOrOfNoTree) {
+  std::vector<float> p, n;
+  for (int i = 0; i < 300; ++i) {
+    const float a = 0.07f * i;
+    test::add(p, 0.5f * std::cos(a), 0.5f * std::sin(a), 2.8f + 0.4f * std::sin(2 * a));
+    test::add(n, std::cos(a), std::sin(a), 0.3f);
+  }
+  const std::size_t count = p.size() / 3;
+  auto forest = std::make_shared<const ForestOccluders>(
+      std::vector<ForestCrowns>{{{ball(2.2f, 0, 3, 1.0f)}, 2.0f}},
+      std::vector<Ellipsoid>{ball(-2.0f, 0, 1.5f, 0.4f)});
+  std::vector<float> shade(count), bare(count), got(count);
+  forest->ao(view(p), view(n), shade.data());
+  PlanReceivers own;
+  own.role = ReceiverRole::Canopy;
+  own.tree = 0;
+  ScenePlan one({tree_at(0.0f)}, ScenePlanOptions{});
+  one.evaluate(view(p), view(n), own, PlanMethod::Shells, {1.2f}, bare.data());
+  one.set_forest(forest);
+  one.evaluate(view(p), view(n), own, PlanMethod::Shells, {1.2f}, got.data());
+  int shaded = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    ASSERT_EQ(got[i], std::clamp(bare[i] * shade[i], 0.0f, 1.0f)) << "point " << i;
+    shaded += shade[i] < 0.99f;
+  }
+  EXPECT_GT(shaded, 100);
+
+  // No tree: a ground point sees its grass covers and the forest alone.
+  GrassCoverData d;
+  d.ground = 2.8;
+  d.blade = 0.5;
+  d.visibility = 0.25;
+  d.cell = 0.25;
+  d.origin_x = d.origin_y = -1.0;
+  d.width = 8;
+  for (std::int64_t k = 0; k < 64; ++k) d.keys.push_back(k);  // the square [-1, 1]²
+  const GrassCover cover(d);
+  ScenePlan none({}, ScenePlanOptions{}, {cover});
+  none.set_forest(forest);
+  none.evaluate(view(p), view(n), PlanReceivers{}, PlanMethod::Medium, {}, got.data());
+  int covered = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const float c = cover.visibility(view(p)[i]);
+    ASSERT_EQ(got[i], std::clamp(c * shade[i], 0.0f, 1.0f)) << "point " << i;
+    covered += c < 1.0f;
+  }
+  EXPECT_GT(covered, 100);
+}

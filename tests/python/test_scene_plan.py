@@ -391,3 +391,18 @@ def test_forest_and_cover_bad_input_is_a_value_error():
 def test_plan_methods_are_the_tau_rungs():
     from canopy_ao.core import ladder
     assert set(lighting.PLAN_METHODS) == set(ladder.TAU_METHODS)
+
+
+def test_one_tree_under_a_forest_gets_the_instances_on_its_own_leaves():
+    """A single tree (its leaves all inside its own crown: the trees' part is its in-shell
+    kernel alone) beside instanced trees: its leaves and the ground still get the forest."""
+    one = [it for it in forest_items() if it.name in ("LeavesC", "Ground")]
+    plan = core.prepare(one, core.BakeSettings(method="ellipsoid", tau=1.5, distance=0.0),
+                        prototypes=prototypes())
+    for it in one:
+        got = core.evaluate_item(plan, it).ao
+        want = lighting_reference.evaluate(plan, it.role, it.tree, it.name, it.positions,
+                                           it.normals, "ellipsoid", plan.taus())
+        np.testing.assert_allclose(got, want, atol=2e-6)
+        alone = lighting_reference.forest_ao(plan.forest, it.positions, it.normals)
+        assert float(alone.min()) < 0.95, it.name  # the instances do reach this item

@@ -106,6 +106,9 @@ class ScenePlan {
 
  private:
   static int set_of(PlanMethod m);  // 0 sphere, 1 ellipsoid, 2 shells
+  // evaluate without the grass covers and the forest (evaluate multiplies them after it).
+  void evaluate_trees(PointsView positions, PointsView normals, const PlanReceivers& r,
+                      PlanMethod method, const std::vector<float>& tau, float* out) const;
   std::shared_ptr<const OccluderMaterial> material(float tau) const;
 
   std::vector<TreeProxies> trees_;
