@@ -277,8 +277,43 @@ def c_scene_plan(g, core, tmp):
               epsilon=g.scalar(0, 0.1))
     methods = ["sphere", "ellipsoid", "reeves_blau", "shells", "medium"]
     method = g.pick(methods) if g.chance(0.95) else "grid"
-    return (lambda: core.ScenePlan(crowns, trunks, **kw).evaluate(
-        p, nrm, role, tree, method, tau, grass)), (lambda r: check_ao(r, n))
+    covers = [grass_cover(g, core) for _ in range(int(g.r.integers(1, 3)))] \
+        if g.chance(0.25) else []
+    forest = forest_occluders(g, core) if g.chance(0.25) else None
+
+    def call():
+        plan = core.ScenePlan(crowns, trunks, grass_covers=covers, **kw)
+        plan.set_forest(forest)
+        return plan.evaluate(p, nrm, role, tree, method, tau, grass)
+    return call, (lambda r: check_ao(r, n))
+
+
+def grass_cover(g, core):
+    """A GrassCover over a random footprint (sometimes bad data, refused at construction)."""
+    width = g.integer(1, 40)
+    span = 40 * (int(width) if 1 <= int(width) <= 40 else 40)
+    keys = np.unique(g.r.integers(0, span, int(g.r.integers(0, 30))))
+    if g.chance(0.1):
+        keys = keys[::-1].copy()
+    return core.GrassCover(g.scalar(-1, 1), g.scalar(0.01, 2), g.scalar(0, 1), g.scalar(0.01, 1),
+                           (g.scalar(-3, 0), g.scalar(-3, 0)), width, g.mutate(keys, 0.05))
+
+
+def forest_occluders(g, core):
+    crowns = [(g.shells(core), g.tau()) for _ in range(int(g.r.integers(0, 3)))]
+    solids = g.shells(core) if g.chance(0.5) else []
+    return core.ForestOccluders(crowns, solids, g.scalar(0, 0.1),
+                                g.scalar(0.1, 10) if g.chance(0.3) else float("inf"))
+
+
+def c_grass_cover(g, core, tmp):
+    p, _nrm, n = receivers(g)
+    return (lambda: grass_cover(g, core).ground_visibility(p)), (lambda r: check_ao(r, n))
+
+
+def c_forest_occluders(g, core, tmp):
+    p, nrm, n = receivers(g)
+    return (lambda: forest_occluders(g, core).ao(p, nrm)), (lambda r: check_ao(r, n))
 
 
 c_grass = ao_case(lambda g, core, p, n: lambda: core.ao_grass(

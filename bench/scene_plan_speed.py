@@ -2,9 +2,12 @@
 replaced, on a multi-tree scene, in one run (bench/README.md, "The scene plan").
 
     /usr/bin/python3 bench/scene_plan_speed.py [--trees 5] [--leaves 12000] [--repeat 3]
+                                               [--forest 0]
 
 The scene is examples/canopy_scenes.grove (mixed trees on a ground, trunks). One plan is
-prepared (fits, ray tracer); then, both ways, best of --repeat:
+prepared (fits, ray tracer); --forest K then attaches K instances of the first tree (its
+shells and trunk, rotated and moved over the ground; core/forest.py), which occlude every
+receiver. Then, both ways, best of --repeat:
 
 - calibrate: core/ladder.calibrate over the analytic rungs (sphere, ellipsoid, shells,
   medium), τ searched per rung and per tree (golden section: many evaluations of the same
@@ -12,8 +15,10 @@ prepared (fits, ray tracer); then, both ways, best of --repeat:
 - evaluate: every item's vertices with the chosen rung and τ.
 
 "python" runs lighting's analytic branch as tests/python/lighting_reference.py (the old
-composition: containment, gather/scatter per tree, an OccluderField built per call), "native"
-the one _core.ScenePlan.evaluate call per item. The results of both are compared too.
+composition: containment, gather/scatter per tree, an OccluderField built per call, then the
+grass layers' numpy disc count and the forest's per-prototype fields, built once, as
+multipliers), "native" the one _core.ScenePlan.evaluate call per item, forest included. The
+results of both are compared too.
 """
 
 import argparse
@@ -31,7 +36,7 @@ for sub in ("addon", "examples", os.path.join("tests", "python")):
 import canopy_scenes  # noqa: E402
 import lighting_reference  # noqa: E402
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import ladder, lighting  # noqa: E402
+from canopy_ao.core import forest, ladder, lighting  # noqa: E402
 
 RUNGS = ["sphere", "ellipsoid", "shells", "medium"]
 
@@ -41,6 +46,25 @@ def grove_items(trees, leaves):
     return [core.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
                            canopy_scenes.vertex_normals(p.vertices, p.triangles), p.triangles)
             for p in scene]
+
+
+def instances(plan, count, size=30.0, seed=1):
+    """forest.Prototype of the plan's first tree at ``count`` places over the ground (each
+    turned about its own vertical axis), or [] for count 0."""
+    if count <= 0:
+        return []
+    tree = next(iter(plan.fits))
+    cx, cy = np.asarray(plan.fits[tree][1].center, np.float64)[:2]
+    rng = np.random.default_rng(seed)
+    mats = []
+    for x, y, a in zip(rng.uniform(-size / 2, size / 2, count),
+                       rng.uniform(-size / 2, size / 2, count), rng.uniform(0, 2 * np.pi, count)):
+        m = np.eye(4)
+        c, s = np.cos(a), np.sin(a)
+        m[:2, :2] = [[c, -s], [s, c]]
+        m[:2, 3] = np.array([x, y]) - m[:2, :2] @ (cx, cy)  # turn about the tree, move to x, y
+        mats.append(m)
+    return [forest.prototype_from_plan(plan, tree, np.stack(mats))]
 
 
 def python_composition():
@@ -85,14 +109,21 @@ def main():
     ap.add_argument("--trees", type=int, default=5)
     ap.add_argument("--leaves", type=int, default=12000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--forest", type=int, default=0,
+                    help="instances of the first tree attached as a forest (0: none)")
     a = ap.parse_args()
     items = grove_items(a.trees, a.leaves)
     settings = core.BakeSettings(method="shells", tau=None, distance=0.0)
     plan = core.prepare(items, settings)  # fits, tracer, one calibration (warms the caches)
+    protos = instances(plan, a.forest)
+    if protos:
+        core.attach_forest(plan, protos)
     split = core.scene.split_trees(items)
     receivers = sum(len(it.positions) for it in split if it.role in core.RECEIVER_ROLES)
-    print(f"grove: {len(plan.fits)} crowns, {sum(map(len, plan.trunks.values()))} trunks, "
-          f"{receivers} receivers; calibration of {', '.join(RUNGS)} on "
+    inst = (f", a forest of {plan.forest.instances} instances ({plan.forest.shell_count} "
+            f"shells, {plan.forest.solid_count} trunks)" if protos else "")
+    print(f"grove: {len(plan.fits)} crowns, {sum(map(len, plan.trunks.values()))} trunks"
+          f"{inst}, {receivers} receivers; calibration of {', '.join(RUNGS)} on "
           f"{settings.calibration_points} points; best of {a.repeat}; "
           f"load {os.getloadavg()[0]:.1f}")
     native, old = python_composition()

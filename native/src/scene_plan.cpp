@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <string>
+#include <utility>
 
 #include "canopy_ao/canopy_model.h"
 #include "canopy_ao/medium_table.h"
@@ -103,9 +104,11 @@ int ScenePlan::set_of(PlanMethod m) {
   }
 }
 
-ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options)
+ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options,
+                     std::vector<GrassCover> covers)
     : trees_(checked(trees)),
-      trunks_(grouped_field(trunks_of(trees), /*solid=*/true, options)) {
+      trunks_(grouped_field(trunks_of(trees), /*solid=*/true, options)),
+      covers_(std::move(covers)) {
   for (const TreeProxies& t : trees_) {
     sets_[0].push_back(t.has_crown ? std::vector<Ellipsoid>{Ellipsoid::from_sphere(t.sphere)}
                                    : std::vector<Ellipsoid>{});
@@ -117,6 +120,16 @@ ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& opt
     crowns_.push_back(grouped_field(sets_[k], /*solid=*/false, options));
     for (const std::vector<Ellipsoid>& shells : sets_[k]) bounds_[k].push_back(bound(shells));
   }
+}
+
+void ScenePlan::set_forest(std::shared_ptr<const ForestOccluders> forest) {
+  std::lock_guard<std::mutex> lock(forest_mutex_);
+  forest_ = std::move(forest);
+}
+
+std::shared_ptr<const ForestOccluders> ScenePlan::forest() const {
+  std::lock_guard<std::mutex> lock(forest_mutex_);
+  return forest_;
 }
 
 std::shared_ptr<const OccluderMaterial> ScenePlan::material(float tau) const {
@@ -141,8 +154,9 @@ std::size_t ScenePlan::max_candidates(PlanMethod method) const {
   return crowns_[set_of(method)].max_candidates() + trunks_.max_candidates();
 }
 
-void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanReceivers& r,
-                         PlanMethod method, const std::vector<float>& tau, float* out) const {
+void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const PlanReceivers& r,
+                               PlanMethod method, const std::vector<float>& tau,
+                               float* out) const {
   check_receivers(positions, normals);
   const std::size_t n_trees = trees_.size();
   if (tau.size() != n_trees) {
@@ -257,6 +271,29 @@ void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanRec
       v *= trunks_.visibility(x, nv, solid.data(), own_trunks_skipped ? own : -1);
       if (!grass.empty()) v *= grass[i];
       out[i] = std::clamp(v, 0.0f, 1.0f);
+    }
+  });
+}
+
+void ScenePlan::evaluate(PointsView positions, PointsView normals, const PlanReceivers& r,
+                         PlanMethod method, const std::vector<float>& tau, float* out) const {
+  evaluate_trees(positions, normals, r, method, tau, out);
+  // Then the grass covers over a ground point and the forest, each clipped (the order the
+  // add-on's Python multiplied them in, so the round-off is the same). A pass of its own: any
+  // receiver the trees' part finishes early still gets them.
+  const bool covered = r.role == ReceiverRole::Ground && !covers_.empty();
+  const std::shared_ptr<const ForestOccluders> forest = this->forest();  // held for the call
+  if (!covered && !forest) return;
+  parallel_for_blocks(positions.size, 4096, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      const Vec3 x = positions[i];
+      float v = out[i];
+      if (covered) {
+        for (const GrassCover& c : covers_) v *= c.visibility(x);
+        v = std::clamp(v, 0.0f, 1.0f);
+      }
+      if (forest) v = std::clamp(v * forest->visibility(x, normals[i]), 0.0f, 1.0f);
+      out[i] = v;
     }
   });
 }

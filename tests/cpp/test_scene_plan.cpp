@@ -1,14 +1,22 @@
 // The scene plan (scene_plan.h): its composition equals the kernels it is made of, grouped
-// occluder fields equal the plain ones, bad input throws, empty input is fine.
+// occluder fields equal the plain ones, the grass covers (grass_cover.h) equal the disc counted
+// offset by offset, the forest (forest.h) is its fields' product, bad input throws, empty input
+// is fine.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <memory>
 #include <random>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "canopy_ao/canopy_model.h"
+#include "canopy_ao/forest.h"
 #include "canopy_ao/grass.h"
+#include "canopy_ao/grass_cover.h"
 #include "canopy_ao/occluders.h"
 #include "canopy_ao/scene_plan.h"
 #include "test_points.h"
@@ -280,4 +288,236 @@ TEST(ScenePlan, SmallCrownsFarFromTheOriginClaimTheirPoints) {
     EXPECT_EQ(got[i], want[i]) << "point " << i;
   }
   EXPECT_GT(held, 300);
+}
+
+namespace {
+
+// A footprint: the cells of a ring-shaped field (a hole in the middle) of cell size h.
+GrassCoverData ring_cover(double h, double blade) {
+  GrassCoverData d;
+  d.ground = 0.25;
+  d.blade = blade;
+  d.visibility = 0.3;
+  d.cell = h;
+  d.origin_x = -3.0;
+  d.origin_y = -2.0;
+  d.width = 40;
+  for (std::int64_t i = 1; i < 30; ++i) {
+    for (std::int64_t j = 1; j < 39; ++j) {
+      const double r = std::hypot(double(i) - 15.0, double(j) - 20.0);
+      if (r > 4.0 && r < 12.0) d.keys.push_back(i * d.width + j);
+    }
+  }
+  return d;
+}
+
+// The cover's law the way core/grass_layer.py wrote it: every disc offset looked up.
+float cover_by_offsets(const GrassCoverData& d, Vec3 x) {
+  if (!(std::fabs(double(x.z) - d.ground) <= d.blade)) return 1.0f;
+  const auto m = std::max<std::int64_t>(1, std::int64_t(std::ceil(d.blade / d.cell)));
+  const auto i = std::int64_t(std::floor((double(x.x) - d.origin_x) / d.cell));
+  const auto j = std::int64_t(std::floor((double(x.y) - d.origin_y) / d.cell));
+  double hits = 0;
+  long total = 0;
+  for (std::int64_t di = -m; di <= m; ++di) {
+    for (std::int64_t dj = -m; dj <= m; ++dj) {
+      if (di * di + dj * dj > m * m) continue;
+      ++total;
+      const std::int64_t jj = j + dj;
+      if (i + di < 0 || jj < 0 || jj >= d.width) continue;
+      hits += std::binary_search(d.keys.begin(), d.keys.end(), (i + di) * d.width + jj);
+    }
+  }
+  return static_cast<float>(1.0 - (hits / double(total)) * (1.0 - d.visibility));
+}
+
+}  // namespace
+
+TEST(GrassCover, EqualsTheDiscCountedOffsetByOffset) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0, 1);
+  for (const double blade : {0.05, 0.4, 1.3}) {  // m = 1, 2 and 7 cells
+    const GrassCoverData d = ring_cover(0.2, blade);
+    const GrassCover cover(d);
+    std::vector<float> p, n;
+    for (int k = 0; k < 3000; ++k) {
+      test::add(p, -3.0f + 6.0f * u(rng), -1.0f + 6.0f * u(rng),
+                float(d.ground + d.blade * (2.4 * u(rng) - 1.2)));
+    }
+    std::vector<float> got(p.size() / 3);
+    cover.ground_visibility(view(p), got.data());
+    int inside = 0, edge = 0;
+    for (std::size_t k = 0; k < got.size(); ++k) {
+      const float want = cover_by_offsets(d, view(p)[k]);
+      ASSERT_EQ(got[k], want) << "blade " << blade << " point " << k;
+      inside += got[k] == 0.3f;
+      edge += got[k] > 0.3f && got[k] < 1.0f;
+    }
+    // Every case is reached: inside (a disc narrower than the ring), at the edge, away.
+    if (blade < 1.0) EXPECT_GT(inside, 50) << "blade " << blade;
+    EXPECT_GT(edge, 50) << "blade " << blade;
+  }
+  // Far points (any cell index) see 1.
+  const GrassCover cover(ring_cover(0.2, 0.4));
+  EXPECT_EQ(cover.visibility({1e9f, -1e9f, 0.25f}), 1.0f);
+  EXPECT_EQ(cover.visibility({0.0f, 0.0f, 1e9f}), 1.0f);
+}
+
+TEST(GrassCover, BadDataThrows) {
+  const GrassCoverData good = ring_cover(0.2, 0.4);
+  auto with = [&](auto change) {
+    GrassCoverData d = good;
+    change(d);
+    return d;
+  };
+  EXPECT_NO_THROW(GrassCover{good});
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.blade = 0; })}, std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.cell = NAN; })}, std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.visibility = 1.5; })},
+               std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.ground = INFINITY; })},
+               std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.width = 0; })}, std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { std::swap(d.keys[0], d.keys[1]); })},
+               std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.keys[0] = -1; })},
+               std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.keys.back() = std::int64_t{1} << 60; })},
+               std::invalid_argument);
+  EXPECT_THROW(GrassCover{with([](GrassCoverData& d) { d.blade = 1e7 * d.cell; })},
+               std::invalid_argument);  // a disc of more than 2^20 cells across
+}
+
+TEST(ForestOccluders, IsTheProductOfOneFieldPerPrototypeAndOneForTheTrunks) {
+  const std::vector<Ellipsoid> oaks = {ball(2, 0, 3, 1), ball(-3, 1, 3, 1.2f)};
+  const std::vector<Ellipsoid> pines = {ball(0, 3, 4, 0.8f)};
+  const std::vector<Ellipsoid> trunks = {ball(2, 0, 1, 0.2f), ball(0, 3, 1, 0.2f)};
+  const ForestOccluders forest({{oaks, 0.8f}, {{}, 2.0f}, {pines, 2.5f}}, trunks, 1e-3f, 6.0f);
+  EXPECT_EQ(forest.shells(), 3u);
+  EXPECT_EQ(forest.solids(), 2u);
+  OccluderOptions o;
+  o.distance = 6.0f;
+  o.tau = 0.8f;
+  const OccluderField f_oaks(oaks, o);
+  o.tau = 2.5f;
+  const OccluderField f_pines(pines, o);
+  o.solid = true;
+  const OccluderField f_trunks(trunks, o);
+  EXPECT_EQ(forest.max_candidates(),
+            f_oaks.max_candidates() + f_pines.max_candidates() + f_trunks.max_candidates());
+  std::vector<float> p, n;
+  scatter(p, n, 1000, 9);
+  std::vector<float> got(p.size() / 3);
+  forest.ao(view(p), view(n), got.data());
+  int darker = 0;
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    const Vec3 x = view(p)[i], nv = view(n)[i];
+    float want = 1.0f;
+    want *= f_oaks.visibility(x, nv);
+    want *= f_pines.visibility(x, nv);
+    want *= f_trunks.visibility(x, nv);
+    ASSERT_EQ(got[i], want) << "point " << i;
+    darker += got[i] < 0.99f;
+  }
+  EXPECT_GT(darker, 100);
+  EXPECT_THROW(ForestOccluders({{oaks, -1.0f}}, {}), std::invalid_argument);
+  EXPECT_THROW(ForestOccluders({{oaks, 1.0f}}, {}, 1.0f), std::invalid_argument);
+  EXPECT_THROW(ForestOccluders({}, {}, 1e-3f, 0.0f), std::invalid_argument);
+}
+
+TEST(ScenePlan, GroundTimesItsGrassCoversAndEveryRoleTimesTheAttachedForest) {
+  const std::vector<TreeProxies> trees = {tree_at(-0.8f), tree_at(0.8f)};
+  const GrassCover cover(ring_cover(0.2, 0.4));
+  ScenePlan plan(trees, ScenePlanOptions{}, {cover, GrassCover(ring_cover(0.3, 0.2))});
+  const ScenePlan bare(trees, ScenePlanOptions{});
+  EXPECT_EQ(plan.grass_covers(), 2u);
+  auto forest = std::make_shared<const ForestOccluders>(
+      std::vector<ForestCrowns>{{{ball(3, 0, 3, 1.5f)}, 1.2f}},
+      std::vector<Ellipsoid>{ball(3, 0, 1, 0.3f)});
+  std::vector<float> p, n;
+  scatter(p, n, 2000, 4);
+  for (std::size_t i = 0; i < p.size(); i += 3) p[i + 2] = 0.25f + 0.5f * (p[i + 2] - 2.5f);
+  const std::size_t count = p.size() / 3;
+  const std::vector<float> tau = {0.9f, 1.7f};
+  PlanReceivers ground, canopy;
+  canopy.role = ReceiverRole::Canopy;
+  canopy.tree = 1;
+  std::vector<float> plain(count), covered(count), with_forest(count), alone(count),
+      cover_a(count), cover_b(count), trees_only(count), canopy_forest(count);
+  bare.evaluate(view(p), view(n), ground, PlanMethod::Medium, tau, plain.data());
+  plan.evaluate(view(p), view(n), ground, PlanMethod::Medium, tau, covered.data());
+  cover.ground_visibility(view(p), cover_a.data());
+  GrassCover(ring_cover(0.3, 0.2)).ground_visibility(view(p), cover_b.data());
+  EXPECT_EQ(plan.forest(), nullptr);
+  plan.set_forest(forest);
+  EXPECT_EQ(plan.forest(), forest);
+  plan.evaluate(view(p), view(n), ground, PlanMethod::Medium, tau, with_forest.data());
+  forest->ao(view(p), view(n), alone.data());
+  bare.evaluate(view(p), view(n), canopy, PlanMethod::Medium, tau, trees_only.data());
+  plan.evaluate(view(p), view(n), canopy, PlanMethod::Medium, tau, canopy_forest.data());
+  int shaded = 0, under_grass = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const float c = std::clamp(plain[i] * cover_a[i] * cover_b[i], 0.0f, 1.0f);
+    ASSERT_EQ(covered[i], c) << "point " << i;
+    ASSERT_EQ(with_forest[i], std::clamp(c * alone[i], 0.0f, 1.0f)) << "point " << i;
+    ASSERT_EQ(canopy_forest[i], std::clamp(trees_only[i] * alone[i], 0.0f, 1.0f));
+    shaded += alone[i] < 0.99f;
+    under_grass += cover_a[i] < 1.0f;
+  }
+  EXPECT_GT(shaded, 100);
+  EXPECT_GT(under_grass, 100);
+  plan.set_forest(nullptr);
+  plan.evaluate(view(p), view(n), ground, PlanMethod::Medium, tau, with_forest.data());
+  EXPECT_EQ(with_forest, covered);
+}
+
+// Receivers the trees' part lights with one kernel alone (one crown holding all of them, or no
+// tree at all) still get the grass covers and the forest.
+TEST(ScenePlan, CoversAndForestReachReceiversOfOneCrownOrOfNoTree) {
+  std::vector<float> p, n;
+  for (int i = 0; i < 300; ++i) {
+    const float a = 0.07f * i;
+    test::add(p, 0.5f * std::cos(a), 0.5f * std::sin(a), 2.8f + 0.4f * std::sin(2 * a));
+    test::add(n, std::cos(a), std::sin(a), 0.3f);
+  }
+  const std::size_t count = p.size() / 3;
+  auto forest = std::make_shared<const ForestOccluders>(
+      std::vector<ForestCrowns>{{{ball(2.2f, 0, 3, 1.0f)}, 2.0f}},
+      std::vector<Ellipsoid>{ball(-2.0f, 0, 1.5f, 0.4f)});
+  std::vector<float> shade(count), bare(count), got(count);
+  forest->ao(view(p), view(n), shade.data());
+  PlanReceivers own;
+  own.role = ReceiverRole::Canopy;
+  own.tree = 0;
+  ScenePlan one({tree_at(0.0f)}, ScenePlanOptions{});
+  one.evaluate(view(p), view(n), own, PlanMethod::Shells, {1.2f}, bare.data());
+  one.set_forest(forest);
+  one.evaluate(view(p), view(n), own, PlanMethod::Shells, {1.2f}, got.data());
+  int shaded = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    ASSERT_EQ(got[i], std::clamp(bare[i] * shade[i], 0.0f, 1.0f)) << "point " << i;
+    shaded += shade[i] < 0.99f;
+  }
+  EXPECT_GT(shaded, 100);
+
+  // No tree: a ground point sees its grass covers and the forest alone.
+  GrassCoverData d;
+  d.ground = 2.8;
+  d.blade = 0.5;
+  d.visibility = 0.25;
+  d.cell = 0.25;
+  d.origin_x = d.origin_y = -1.0;
+  d.width = 8;
+  for (std::int64_t k = 0; k < 64; ++k) d.keys.push_back(k);  // the square [-1, 1]²
+  const GrassCover cover(d);
+  ScenePlan none({}, ScenePlanOptions{}, {cover});
+  none.set_forest(forest);
+  none.evaluate(view(p), view(n), PlanReceivers{}, PlanMethod::Medium, {}, got.data());
+  int covered = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const float c = cover.visibility(view(p)[i]);
+    ASSERT_EQ(got[i], std::clamp(c * shade[i], 0.0f, 1.0f)) << "point " << i;
+    covered += c < 1.0f;
+  }
+  EXPECT_GT(covered, 100);
 }

@@ -1,14 +1,70 @@
 """The per-receiver lighting composition as the add-on did it in Python before the native scene
 plan (_core.ScenePlan) took it over: kept here, unchanged in substance, as the reference the
 native plan is tested against (tests/python/test_scene_plan.py). Analytic rungs only (sphere,
-ellipsoid, reeves_blau, shells, medium); the forest and the grass layers over the ground stay
-Python multipliers in core/lighting.py and are not part of it."""
+ellipsoid, reeves_blau, shells, medium), with the two multipliers that were applied after it:
+the grass layers over a ground point (the numpy disc count core/grass_layer.py had) and the
+instanced forest (one OccluderField per prototype and one for the solids, as core/forest.py
+had)."""
+
+import math
 
 import numpy as np
 
+from canopy_ao.core import forest as _forest
 from canopy_ao.core.lighting import tau_of
 from canopy_ao.core.native import _core
 from canopy_ao.core.proxies import own_shells
+
+
+def ground_visibility(layer, p):
+    """float32 (N,): a GrassLayer's V for ground points p (N, 3) under its footprint, else 1."""
+    p = np.asarray(p, np.float64).reshape(-1, 3)
+    v = np.ones(len(p), np.float32)
+    if not len(p):
+        return v
+    near = np.flatnonzero(np.abs(p[:, 2] - layer.ground) <= layer.blade)
+    if not len(near):
+        return v
+    c = layer.cells
+    m = max(1, int(math.ceil(layer.blade / c.h)))
+    ij = c._ij(p[near, :2])
+    hits = np.zeros(len(near))
+    total = 0
+    for di in range(-m, m + 1):
+        for dj in range(-m, m + 1):
+            if di * di + dj * dj > m * m:
+                continue
+            total += 1
+            jj = ij[:, 1] + dj
+            ok = (ij[:, 0] + di >= 0) & (jj >= 0) & (jj < c.width)
+            hit, _pos = c._find((ij[:, 0] + di) * c.width + jj)
+            hits += ok & hit
+    v[near] = 1.0 - (hits / total) * (1.0 - layer.visibility)
+    return v
+
+
+_FIELDS = {}  # id(forest.Forest) -> (the forest, its OccluderFields)
+
+
+def forest_ao(forest, p, n):
+    """Visibility float32 (N,) of receivers under every instance of a forest.Forest."""
+    if id(forest) not in _FIELDS or _FIELDS[id(forest)][0] is not forest:
+        kw = {"distance": forest.distance} if forest.distance > 0 else {}
+        fields, solids = [], []
+        for pr in forest.prototypes:
+            world = _forest.instance_shells(pr.shells, pr.matrices)
+            if world:
+                fields.append(_core.OccluderField(world, float(pr.tau), epsilon=forest.epsilon,
+                                                  **kw))
+            solids += _forest.instance_shells(pr.solids, pr.matrices)
+        if solids:
+            fields.append(_core.OccluderField(solids, 1.0, epsilon=forest.epsilon, solid=True,
+                                              **kw))
+        _FIELDS[id(forest)] = (forest, fields)
+    out = np.ones(len(p), np.float32)
+    for f in _FIELDS[id(forest)][1]:
+        out *= np.asarray(f.ao(p, n), np.float32)
+    return out
 
 
 def _occluders(p, n, shells, tau, distance, solid=False):
@@ -86,7 +142,11 @@ def evaluate(plan, role, tree, grass_key, p, n, method, tau):
     if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
         ao *= _core.ao_grass(p, n, float(ground), float(blade))
-    elif role == "GROUND":
+    ao = np.clip(ao, 0.0, 1.0, out=ao)
+    if role == "GROUND" and plan.grass_layers:
         for layer in plan.grass_layers:
-            ao *= layer.ground_visibility(p)
-    return np.clip(ao, 0.0, 1.0, out=ao)
+            ao *= ground_visibility(layer, p)
+        np.clip(ao, 0.0, 1.0, out=ao)
+    if plan.forest is not None:
+        ao = np.clip(ao * forest_ao(plan.forest, p, n), 0.0, 1.0).astype(np.float32)
+    return ao

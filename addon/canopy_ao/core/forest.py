@@ -5,9 +5,10 @@ A forest is a few unique tree prototypes, each with its fitted shells in the pro
 space, and many instances, each a 4×4 world matrix (rotation, translation, any scale, even
 non-uniform or mirrored). The prototype's self-AO is baked once and shared by its instances
 (they share the mesh data); the ground sees every instance's shells as occluders, evaluated by
-the core's :class:`OccluderField`, which cuts each occluder off where its effect drops below ε
-(Shanmugam–Arikan Eq. 5) and indexes them in a uniform grid, so a receiver's cost is bounded by
-the number of shells within reach of it, not by the tree count (bench/forest.py measures it).
+the core's ``ForestOccluders`` (forest.h, occluders.h), which cuts each occluder off where its
+effect drops below ε (Shanmugam–Arikan Eq. 5) and indexes them in a uniform grid, so a
+receiver's cost is bounded by the number of shells within reach of it, not by the tree count
+(bench/forest.py measures it).
 
 Transforming a shell is exact: the image of the ellipsoid {c + Q diag(r) u : |u| ≤ 1} under
 x ↦ A x + t is {A c + t + B u : |u| ≤ 1} with B = A Q diag(r); with the SVD B = U S Vᵀ (V only
@@ -17,6 +18,7 @@ non-uniform scale and shear need no refit and no approximation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -119,9 +121,11 @@ class Prototype:
 
 
 class Forest:
-    """Every instance of every prototype as occluders, built once (one OccluderField per
-    prototype for its crowns, each with its own τ, and one for every solid trunk), evaluated
-    for any number of receivers. V = Π (1 − occ), so the fields multiply."""
+    """Every instance of every prototype as occluders, built once: the native
+    ``_core.ForestOccluders`` (forest.h: one occluder field per prototype's world-space
+    crowns, each with its own τ, and one for every solid trunk; V = Π (1 − occ), so the fields
+    multiply). The scene plan multiplies it into every receiver it lights (lighting.lights
+    attaches it); the other rungs call :meth:`ao`."""
 
     def __init__(self, prototypes, epsilon=DEFAULT_EPSILON, distance=0.0):
         require()
@@ -130,43 +134,39 @@ class Forest:
         if not (distance >= 0.0):
             raise ValueError(f"distance must be >= 0 (0 = unlimited), got {distance}")
         self.epsilon = float(epsilon)
-        # The AO distance (0 = unlimited): no instance beyond it along a ray occludes.
-        kw = {"distance": float(distance)} if distance > 0 else {}
+        self.distance = float(distance)  # the AO distance (0 = unlimited)
         self.prototypes = list(prototypes)
-        self.fields = []
-        solids = []
-        self.shell_count = 0
+        crowns, solids = [], []
         for p in self.prototypes:
-            world = instance_shells(p.shells, p.matrices)
-            self.shell_count += len(world)
-            if world:
-                self.fields.append(_core.OccluderField(world, float(p.tau), epsilon=self.epsilon,
-                                                       **kw))
+            crowns.append((instance_shells(p.shells, p.matrices), float(p.tau)))
             solids += instance_shells(p.solids, p.matrices)
-        self.solid_count = len(solids)
-        if solids:
-            self.fields.append(_core.OccluderField(solids, 1.0, epsilon=self.epsilon, solid=True,
-                                                   **kw))
+        # No instance beyond the AO distance along a ray occludes.
+        self.native = _core.ForestOccluders(crowns, solids, epsilon=self.epsilon,
+                                            distance=float(distance) if distance > 0
+                                            else math.inf)
 
     @property
     def instances(self) -> int:
         return sum(p.count for p in self.prototypes)
 
     @property
+    def shell_count(self) -> int:
+        return int(self.native.shells)
+
+    @property
+    def solid_count(self) -> int:
+        return int(self.native.solids)
+
+    @property
     def max_candidates(self) -> int:
         """Largest number of occluders one receiver can test (summed over the fields)."""
-        return sum(int(f.max_candidates) for f in self.fields)
+        return int(self.native.max_candidates)
 
     def ao(self, positions, normals):
         """Visibility float32 (N,) of receivers (float32 (N, 3) each) under every instance."""
         p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
         n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
-        out = np.ones(len(p), np.float32)
-        if not len(p):
-            return out
-        for f in self.fields:
-            out *= np.asarray(f.ao(p, n), np.float32)
-        return out
+        return self.native.ao(p, n)
 
 
 def prototype_mesh(items):

@@ -13,15 +13,18 @@ L and G are measured from the mesh, nothing is tuned: denser or flatter grass da
 Ground points within a blade height of the field's ground level get 1 − f (1 − V), f the share
 of the disc of radius one blade height around them that the field's footprint covers (the xy
 cells its blades stand in, cells as in trees.py): V inside, about half-way at its edge, 1 away.
+That per-point part is the core's (grass_cover.h), so the scene plan lights a ground point in
+one call; L, G and V are measured here once per field.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from .native import _core
 from .roles import connected_components
 from .trees import _Cells
 
@@ -34,34 +37,24 @@ class GrassLayer:
     lai: float            # one-sided blade area per unit footprint area
     visibility: float     # V of an upward-facing ground point under the layer
     cells: object         # _Cells of the blade roots (the footprint)
+    _native: object = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def native(self):
+        """The layer as the core's data (_core.GrassCover, grass_cover.h): what the scene plan
+        multiplies a ground point by, with the disc share of the module docstring."""
+        if self._native is None:
+            c = self.cells
+            self._native = _core.GrassCover(
+                self.ground, self.blade, self.visibility, float(c.h),
+                (float(c.origin[0]), float(c.origin[1])), int(c.width),
+                np.ascontiguousarray(c.keys, np.int64))
+        return self._native
 
     def ground_visibility(self, p: np.ndarray) -> np.ndarray:
         """float32 (N,): V for ground points p (N, 3) under the footprint, else 1."""
-        p = np.asarray(p, np.float64).reshape(-1, 3)
-        v = np.ones(len(p), np.float32)
-        if not len(p):
-            return v
-        near = np.flatnonzero(np.abs(p[:, 2] - self.ground) <= self.blade)
-        if not len(near):
-            return v
-        # Share of the disc of radius one blade height (where a ray leaving the ground at 45°
-        # is still inside the layer) that the field covers: a point at its edge sees half.
-        c = self.cells
-        m = max(1, int(math.ceil(self.blade / c.h)))
-        ij = c._ij(p[near, :2])
-        hits = np.zeros(len(near))
-        total = 0
-        for di in range(-m, m + 1):
-            for dj in range(-m, m + 1):
-                if di * di + dj * dj > m * m:
-                    continue
-                total += 1
-                jj = ij[:, 1] + dj
-                ok = (ij[:, 0] + di >= 0) & (jj >= 0) & (jj < c.width)
-                hit, _pos = c._find((ij[:, 0] + di) * c.width + jj)
-                hits += ok & hit
-        v[near] = 1.0 - (hits / total) * (1.0 - self.visibility)
-        return v
+        return self.native.ground_visibility(
+            np.ascontiguousarray(p, dtype=np.float32).reshape(-1, 3))
 
 
 def projection_mean(normals_area: np.ndarray, mu: np.ndarray, azimuths: int = 16):

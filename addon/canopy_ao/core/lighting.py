@@ -11,7 +11,8 @@ ray tracer or density grid (docs/DESIGN.md, 'How each role is lit').
 - method "raytrace": Embree rays against every non-ignored triangle of the scene.
 
 The analytic rungs' composition is the native scene plan's (_core.ScenePlan, scene_plan.h),
-built once per bake from the fitted proxies (Lights); this module only chooses the call.
+built once per bake from the fitted proxies and the grass layers, with the instanced forest
+attached to it (Lights): one call per set of receivers; this module only chooses the call.
 """
 
 from __future__ import annotations
@@ -24,6 +25,10 @@ from .native import CanopyAOError, _core
 from .scene import Plan
 
 
+# The rungs the scene plan lights (scene_plan.h's PlanMethod; ladder.TAU_METHODS).
+PLAN_METHODS = ("sphere", "ellipsoid", "reeves_blau", "shells", "medium")
+
+
 def tau_of(tau, tree):
     """τ of one tree: ``tau`` is one number for every tree or {tree: τ} (calibrated per tree;
     a tree missing from it takes the value under None)."""
@@ -34,8 +39,9 @@ def tau_of(tau, tree):
 
 class Lights:
     """The scene's lighting as data: the native ScenePlan (every tree's crown proxies and solid
-    trunks with their occluder grids, built once per bake) and the tree names its indices
-    stand for. Calibration's τ search and every item's evaluation reuse it."""
+    trunks with their occluder grids, and the grass layers over the ground, built once per
+    bake; the instanced forest attached to it) and the tree names its indices stand for.
+    Calibration's τ search and every item's evaluation reuse it."""
 
     def __init__(self, plan: Plan):
         # Crowns first, in plan.fits order (a receiver inside two crowns takes the first's
@@ -45,7 +51,9 @@ class Lights:
         d = plan.settings.distance
         self.native = _core.ScenePlan([plan.fits.get(t) for t in self.trees],
                                       [list(plan.trunks.get(t, ())) for t in self.trees],
-                                      distance=float(d) if d > 0 else math.inf)
+                                      distance=float(d) if d > 0 else math.inf,
+                                      grass_covers=[g.native for g in plan.grass_layers])
+        self.forest = None  # the forest.Forest attached to self.native (lights)
         self.key = _lights_key(plan)
 
     def taus(self, tau) -> list:
@@ -63,18 +71,24 @@ class Lights:
 
 
 def _lights_key(plan: Plan):
-    """What Lights is built from: the proxies' identities and the AO distance."""
+    """What Lights is built from: the proxies' and grass layers' identities, the AO distance."""
     return (tuple((t, id(f)) for t, f in plan.fits.items()),
             tuple((t, tuple(map(id, es))) for t, es in plan.trunks.items()),
-            plan.settings.distance)
+            tuple(map(id, plan.grass_layers)), plan.settings.distance)
 
 
 def lights(plan: Plan) -> Lights:
     """plan.lights, built on first use after the proxies are fitted (bake.prepare builds it
-    there) and again only if the proxies or the AO distance changed since."""
+    there) and again only if the proxies, the grass layers or the AO distance changed since.
+    plan.forest (attach_forest may come after the plan was built) is attached to it as it is
+    now, without rebuilding the trees' occluder grids."""
     if plan.lights is None or plan.lights.key != _lights_key(plan):
         plan.lights = Lights(plan)
-    return plan.lights
+    lit = plan.lights
+    if lit.forest is not plan.forest:
+        lit.native.set_forest(plan.forest.native if plan.forest is not None else None)
+        lit.forest = plan.forest
+    return lit
 
 
 def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
@@ -86,9 +100,10 @@ def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
     own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
     in its item (-1 = none), so the exact rung's rays skip only what they start on."""
     ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
-    # The exact rung's rays already hit the instanced trees when its tracer holds them.
-    if plan.forest is not None and len(p) and not (method == "raytrace"
-                                                   and traces_instances(plan)):
+    # The analytic rungs' scene plan multiplies the forest in its own call; the exact rung's
+    # rays already hit the instanced trees when its tracer holds them.
+    if (plan.forest is not None and len(p) and method not in PLAN_METHODS
+            and not (method == "raytrace" and traces_instances(plan))):
         ao = np.clip(ao * plan.forest.ao(p, n), 0.0, 1.0).astype(np.float32, copy=False)
     return ao
 
@@ -113,13 +128,12 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "hybrid":
         return _grass(plan, role, grass_key, p, n,
                       _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own)))
-    # The analytic rungs: the whole per-receiver composition in one native call
-    # (docs/DESIGN.md, 'How each role is lit').
+    # The analytic rungs: the whole per-receiver composition, grass layers and forest
+    # included, in one native call (docs/DESIGN.md, 'How each role is lit').
     lit = lights(plan)
     grass = _blades(plan, grass_key, p) if role == "GRASS" else None
-    ao = lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
-                             grass=grass)
-    return _ground_layers(plan, role, p, ao)
+    return lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
+                               grass=grass)
 
 
 def _blades(plan: Plan, grass_key, p):
@@ -131,7 +145,8 @@ def _blades(plan: Plan, grass_key, p):
 
 def _ground_layers(plan: Plan, role, p, ao):
     """ao (a fresh float32 array, changed in place) times every grass layer over the ground
-    (grass_layer.py) for a ground point, clipped to [0, 1]."""
+    (grass_layer.py, the core's GrassCover) for a ground point, clipped to [0, 1]: the rungs
+    the scene plan does not light."""
     if role == "GROUND" and plan.grass_layers:
         for layer in plan.grass_layers:
             ao *= layer.ground_visibility(p)

@@ -40,7 +40,7 @@ _REQUIRED = ("Ellipsoid", "fit_sphere", "fit_ellipsoid", "fit_shells", "ao_occlu
              "ao_reeves_blau", "ao_grass", "RayTracer", "DensityGrid", "OccluderField",
              "rasterize_uv", "splat_texels", "write_image", "ao_near_far", "OcclusionFeatures",
              "expand_features", "predict_features",
-             "to_world", "gray_rgba")
+             "to_world", "gray_rgba", "ScenePlan", "ForestOccluders", "GrassCover")
 
 
 def missing_functions(module) -> list[str]:

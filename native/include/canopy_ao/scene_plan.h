@@ -16,6 +16,11 @@
 //  - GRASS receivers: times Hegeman's Eq. 9 (grass.h) with the given ground and blade height.
 //  - The product, clipped to [0, 1]. V = Π (1 − occ) over independent occluders, so the order
 //    of the factors only changes round-off.
+//  - GROUND receivers: times each grass field's cover over the ground (grass_cover.h), in the
+//    plan's order, clipped again.
+//  - Every receiver: times the instanced forest (forest.h), if one is attached, clipped again.
+//    It is attached (or replaced) after construction, without rebuilding the trees' grids: the
+//    forest may come after the plan (core/bake.py, attach_forest).
 // Which shells a method lights with: sphere → each crown's sphere; ellipsoid, reeves_blau →
 // its ellipsoid; shells, medium → its k shells. The occluder grids (one per shell set, one for
 // the trunks) depend on the shells, ε and the AO distance only, so they are built once here and
@@ -31,8 +36,10 @@
 #include <utility>
 #include <vector>
 
+#include "canopy_ao/forest.h"
 #include "canopy_ao/geometry.h"
 #include "canopy_ao/grass.h"
+#include "canopy_ao/grass_cover.h"
 #include "canopy_ao/occluders.h"
 
 namespace canopy_ao {
@@ -72,8 +79,9 @@ class ScenePlan {
   // === Constructor
   /// PRE: every crown's sphere, ellipsoid and shells valid (shells non-empty), trunks valid,
   /// options valid. Throws std::invalid_argument otherwise. No trees is allowed (AO 1, times
-  /// the grass law).
-  ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options);
+  /// the grass law, the grass covers and the forest). covers: the grass fields over the ground.
+  ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options,
+            std::vector<GrassCover> covers = {});
 
   // === Methods
   /// AO of N receivers (positions, normals N×3; zero normals as the kernels treat them) lit by
@@ -83,8 +91,14 @@ class ScenePlan {
   void evaluate(PointsView positions, PointsView normals, const PlanReceivers& receivers,
                 PlanMethod method, const std::vector<float>& tau, float* out) const;
 
+  /// Attaches the instanced forest every receiver is then multiplied by (nullptr: none).
+  /// Safe while another thread evaluates: that call keeps the forest it started with.
+  void set_forest(std::shared_ptr<const ForestOccluders> forest);
+
   // === Introspection
   std::size_t trees() const { return trees_.size(); }
+  std::size_t grass_covers() const { return covers_.size(); }
+  std::shared_ptr<const ForestOccluders> forest() const;
   /// The shells `method` lights tree t with (and that occlude for it); empty without a crown.
   const std::vector<Ellipsoid>& shells(std::size_t t, PlanMethod method) const;
   /// Largest number of candidate occluders one receiver tests for `method` (crowns + trunks).
@@ -92,6 +106,9 @@ class ScenePlan {
 
  private:
   static int set_of(PlanMethod m);  // 0 sphere, 1 ellipsoid, 2 shells
+  // evaluate without the grass covers and the forest (evaluate multiplies them after it).
+  void evaluate_trees(PointsView positions, PointsView normals, const PlanReceivers& r,
+                      PlanMethod method, const std::vector<float>& tau, float* out) const;
   std::shared_ptr<const OccluderMaterial> material(float tau) const;
 
   std::vector<TreeProxies> trees_;
@@ -101,6 +118,9 @@ class ScenePlan {
   std::vector<std::pair<Vec3, float>> bounds_[3];
   std::vector<OccluderField> crowns_;            // per shell set: every crown, grouped by tree
   OccluderField trunks_;                         // every trunk (solid), grouped by tree
+  std::vector<GrassCover> covers_;               // over the ground, in order
+  mutable std::mutex forest_mutex_;              // guards forest_
+  std::shared_ptr<const ForestOccluders> forest_;
   mutable std::mutex cache_mutex_;               // guards materials_ (evaluate is const)
   mutable std::vector<std::pair<float, std::shared_ptr<const OccluderMaterial>>> materials_;
 };
