@@ -201,20 +201,49 @@ void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const P
   }
 
   // Which crown claims each receiver: the first tree (plan order) with a shell holding it.
-  std::vector<std::int32_t> claim(n, -1);
+  // Ellipsoid::contains with each axis divided by its radius once, not per receiver (the
+  // same test up to the last bit of a double, far inside its 1e-5 slack).
+  struct Inside {
+    double c[3], a[3][3];
+    bool operator()(Vec3 p) const {
+      const double d[3] = {double(p.x) - c[0], double(p.y) - c[1], double(p.z) - c[2]};
+      double u2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double u = a[k][0] * d[0] + a[k][1] * d[1] + a[k][2] * d[2];
+        u2 += u * u;
+      }
+      return u2 <= 1 + 1e-5;
+    }
+  };
+  std::vector<std::vector<Inside>> inside(n_trees);
+  for (std::size_t t = 0; t < n_trees; ++t) {
+    for (const Ellipsoid& e : shells[t]) {
+      Inside in{{double(e.center.x), double(e.center.y), double(e.center.z)}, {}};
+      for (int k = 0; k < 3; ++k) {
+        const double r = double(e.radii[k]);
+        in.a[k][0] = e.axes[k].x / r;
+        in.a[k][1] = e.axes[k].y / r;
+        in.a[k][2] = e.axes[k].z / r;
+      }
+      inside[t].push_back(in);
+    }
+  }
+  std::vector<std::int32_t> claim(n);
   parallel_for_blocks(n, 4096, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Vec3 x = positions[i];
-      for (std::size_t t = 0; t < n_trees && claim[i] < 0; ++t) {
+      std::int32_t c = -1;
+      for (std::size_t t = 0; t < n_trees && c < 0; ++t) {
         const Vec3 d = x - bounds_[set][t].first;
         if (!(dot(d, d) <= bounds_[set][t].second)) continue;  // also no shells (−1)
-        for (const Ellipsoid& s : shells[t]) {
-          if (s.contains(x)) {
-            claim[i] = static_cast<std::int32_t>(t);
+        for (const Inside& in : inside[t]) {
+          if (in(x)) {
+            c = static_cast<std::int32_t>(t);
             break;
           }
         }
       }
+      claim[i] = c;
     }
   });
 
