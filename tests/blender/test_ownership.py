@@ -99,6 +99,24 @@ def test_a_painted_attribute_is_the_users_until_overwritten(tree):
     run_bake(bpy.context, ["Ground"], opts(tau=3.0))  # ours again: no Overwrite needed
 
 
+def test_a_modal_bake_checks_again_what_was_painted_while_it_ran(tree):
+    """A modal bake yields to the UI between its steps, so an attribute painted after the bake
+    read it is checked again at the commit (a blocking bake, where nothing runs in between,
+    checks once)."""
+    from canopy_ao.blender.job import BakeJob
+    g = tree["ground"]
+    run_bake(bpy.context, ["Ground"], opts())
+    job = BakeJob(bpy.context, ["Ground"], opts(tau=3.0))  # modal: not blocking
+    c = _colors(g.data)
+    c[5] = (1.0, 0.0, 0.0, 1.0)  # painted while the bake runs
+    g.data.attributes[ATTR].data.foreach_set("color", c.ravel())
+    job.run()
+    with pytest.raises(CanopyAOError, match="no longer what Canopy AO wrote"):
+        job.commit(bpy.context)
+    np.testing.assert_array_equal(_colors(g.data), c)
+
+
+
 def test_a_file_from_before_fingerprints_migrates_when_its_content_is_ours(tree):
     """A pre-fingerprint record (a name list on object and mesh) is honoured for the mesh's
     grey AO only, and replaced by a fingerprint record on the next bake."""

@@ -80,7 +80,7 @@ def test_a_failure_during_commit_writes_nothing(plane_under_disk, monkeypatch):
     marks = mesh_io.owned_attributes(g)
     real = mesh_io.write_ao_attribute
 
-    def second_fails(obj, name, ao, overwrite=False):
+    def second_fails(obj, name, ao, overwrite=False, checked=False):
         if obj.name == "Leaves":
             raise RuntimeError("disk full, say")
         return real(obj, name, ao, overwrite)
@@ -123,7 +123,7 @@ def test_the_last_write_copies_nothing_and_a_failure_in_it_still_changes_nothing
     run_bake(bpy.context, ["Ground"], opts(tau=3.0, check_cycles=True, cycles_samples=4))
     assert copies == [("CanopyAO", False, True)]  # the check follows: old values kept
 
-    def fails(obj, name, ao, overwrite=False):
+    def fails(obj, name, ao, overwrite=False, checked=False):
         raise RuntimeError("disk full, say")
     monkeypatch.setattr(mesh_io, "write_ao_attribute", fails)
     with pytest.raises(RuntimeError, match="disk full"):

@@ -75,6 +75,7 @@ class BakeJob:
             raise CanopyAOError("every object to bake has the role Ignore")
         check_outputs(self.targets, opts)  # image files: none collide, none is the user's
         # (target, first, last receiver) per step; an empty target still gets its one step.
+        self.blocking = blocking
         chunk = CHUNK * (BLOCKING_CHUNKS if blocking else 1)
         self._chunks = [(t, a, min(a + chunk, t.count)) for t in self.targets
                         for a in range(0, max(t.count, 1), chunk)]
@@ -196,10 +197,11 @@ class BakeJob:
             else:
                 rep_atlas = None
                 for i, t in enumerate(self.targets):
-                    if vertex_only and i == len(self.targets) - 1:
-                        t.write(txn, o, last=True)
-                    else:
+                    if t.kind != "vertex":
                         t.write(txn, o)
+                    else:  # a modal bake yields to the UI: the user may have painted since
+                        t.write(txn, o, last=vertex_only and i == len(self.targets) - 1,
+                                checked=self.blocking)
             self.prototypes.commit(txn, o)
             if o["add_aov"]:
                 if not any(a.name == o["aov_name"] for vl in self.scene.view_layers

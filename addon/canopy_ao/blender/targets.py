@@ -60,9 +60,11 @@ class VertexTarget(Target):
             self.frames = bent_io.vertex_frames(obj, depsgraph, opts["uv_map"] or None,
                                                 self.count)
 
-    def write(self, txn, opts, last=False):
+    def write(self, txn, opts, last=False, checked=False):
         """last: nothing that can fail follows this write in the commit; the AO attribute is
-        then written last here too, and its old values need no copy (commit.Transaction)."""
+        then written last here too, and its old values need no copy (commit.Transaction).
+        checked: nothing ran between the check made when this target was read and this write
+        (a blocking bake), so the AO attribute is not read back and fingerprinted again."""
         if self.thickness is not None:
             txn.attribute(self.obj, opts["thickness_name"])
             mesh_io.write_ao_attribute(self.obj, opts["thickness_name"], self.thickness,
@@ -85,7 +87,7 @@ class VertexTarget(Target):
         else:
             txn.attribute(self.obj, opts["attribute"], last=last)
             mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
-                                       overwrite=opts["overwrite"])
+                                       overwrite=opts["overwrite"], checked=checked)
 
 
 class TexelTarget(Target):
