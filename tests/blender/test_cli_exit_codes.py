@@ -53,3 +53,6 @@ def test_the_documented_command_fails_with_a_message_without_the_addon(source, t
         out = r.stdout + r.stderr
         assert "No module named 'canopy_ao'" in out or "No module named 'bl_ext" in out, \
             out[-1000:]
+        # It stopped at the failure: Blender went on to nothing else (a command that renders
+        # with -a after the bake must not render when the bake could not even start).
+        assert "Fra:" not in out, f"{source}: Blender went on after the failure: {command}"
