@@ -95,12 +95,7 @@ def test_bent_normals_of_a_baked_tree_whatever_the_rung():
     the bent normals are the same as under the ray-traced rung (the same rays); unit, in the
     normal's hemisphere; the ground under the crown leans off its normal more than the open
     ground far from it."""
-    items = []
-    for name, (p, t) in tree_scene.scene(False).items():
-        role = {"Leaves": "CANOPY", "Trunk": "TRUNK", "Ground": "GROUND"}[name]
-        q = np.asarray(p, np.float32)
-        items.append(core.SceneItem(name, role, "" if role == "GROUND" else "T", q,
-                                    tree_scene.vertex_normals(q, t), t))
+    items = _tree_items()
     got = {}
     for method in ("ellipsoid", "raytrace"):
         plan = core.prepare(items, core.BakeSettings(method=method, tau=2.0, samples=64))
@@ -117,6 +112,35 @@ def test_bent_normals_of_a_baked_tree_whatever_the_rung():
     r = np.linalg.norm(ground.positions[:, :2], axis=1)
     tilt = _degrees(g, ground.normals)
     assert tilt[r > 0.8 * r.max()].mean() < tilt[r < 0.2 * r.max()].mean()
+
+
+
+def _tree_items():
+    """The small tree scene (leaves, trunk, ground) as scene items."""
+    items = []
+    for name, (p, t) in tree_scene.scene(False).items():
+        role = {"Leaves": "CANOPY", "Trunk": "TRUNK", "Ground": "GROUND"}[name]
+        q = np.asarray(p, np.float32)
+        items.append(core.SceneItem(name, role, "" if role == "GROUND" else "T", q,
+                                    tree_scene.vertex_normals(q, t), t))
+    return items
+
+
+def test_under_the_exact_rung_one_trace_gives_the_ao_and_the_bent_normals():
+    """The bake takes the exact rung's AO from the bent normals' trace (rung_is_the_trace):
+    it is the AO evaluate_receivers gives, bit for bit, for whole items and for a chunk."""
+    tree_items = _tree_items()
+    plan = core.prepare(tree_items, core.BakeSettings(method="raytrace", samples=16))
+    for it in tree_items:
+        assert maps.rung_is_the_trace(plan, it)
+        for sel in (slice(None), slice(3, 40)):
+            ao, _bent = maps.bent_normals(plan, it, it.positions[sel], it.normals[sel],
+                                          vertices=sel, with_ao=True)
+            want = core.evaluate_receivers(plan, it, it.positions[sel], it.normals[sel],
+                                           vertices=sel)
+            assert np.array_equal(ao, want)
+    plan = core.prepare(tree_items, core.BakeSettings(method="ellipsoid", tau=2.0))
+    assert not any(maps.rung_is_the_trace(plan, it) for it in tree_items)
 
 
 def test_command_line_takes_the_bent_normals():

@@ -132,11 +132,17 @@ class BakeJob:
         t, a, b = self._chunks[self._next]
         self._next += 1
         t0 = time.perf_counter()
+        bent = self.opts["bent_normals"] != "OFF"
         try:
-            t.ao[a:b] = core.evaluate_receivers(
-                self.plan, t.item, t.positions[a:b], t.normals[a:b],
-                vertices=slice(a, b) if t.kind == "vertex" else None,
-                triangles=t.triangles[a:b] if t.triangles is not None else None)
+            if bent and maps.rung_is_the_trace(self.plan, t.item):  # one trace gives both
+                t.ao[a:b] = self._bent_step(t, a, b)
+            else:
+                t.ao[a:b] = core.evaluate_receivers(
+                    self.plan, t.item, t.positions[a:b], t.normals[a:b],
+                    vertices=slice(a, b) if t.kind == "vertex" else None,
+                    triangles=t.triangles[a:b] if t.triangles is not None else None)
+                if bent:
+                    self._bent_step(t, a, b)
         except CanopyAOError as exc:
             raise CanopyAOError(f"{t.item.name}: {exc}") from exc
         if self.opts["thickness"]:
@@ -144,8 +150,6 @@ class BakeJob:
                 t.thickness = np.zeros(t.count, np.float32)
             t.thickness[a:b] = maps.thickness(self.plan, t.item, t.positions[a:b],
                                               slice(a, b) if t.kind == "vertex" else None)
-        if self.opts["bent_normals"] != "OFF":
-            self._bent_step(t, a, b)
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
@@ -158,16 +162,18 @@ class BakeJob:
                 f"{r.seconds:.3f} s")
 
     def _bent_step(self, t, a, b):
-        """Bent normals of receivers a..b of target t, in the space asked for."""
+        """Bent normals of receivers a..b of target t, in the space asked for. Returns the
+        AO of the same trace (maps.bent_normals)."""
         if t.bent is None:
             t.bent = np.zeros((t.count, 3), np.float32)
-        world = maps.bent_normals(self.plan, t.item, t.positions[a:b], t.normals[a:b],
-                                  vertices=slice(a, b) if t.kind == "vertex" else None,
-                                  triangles=t.triangles[a:b] if t.triangles is not None
-                                  else None)
+        ao, world = maps.bent_normals(self.plan, t.item, t.positions[a:b], t.normals[a:b],
+                                      vertices=slice(a, b) if t.kind == "vertex" else None,
+                                      triangles=t.triangles[a:b] if t.triangles is not None
+                                      else None, with_ao=True)
         frames = (t.frames[0][a:b], t.frames[1][a:b]) if t.frames is not None else None
         t.bent[a:b] = bent_io.in_space(world, t.normals[a:b], self.opts["bent_normals"],
                                        frames)
+        return ao
 
     def run(self):
         """prepare() and every step(), blocking."""

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from . import lighting
-from .native import CanopyAOError, _core
+from .native import CanopyAOError
 from .scene import Plan, SceneItem, own_primitives
 
 
@@ -71,11 +71,7 @@ def thickness(plan: Plan, item: SceneItem, positions, vertices=None) -> np.ndarr
 def ensure_tracer(plan: Plan, items) -> None:
     """Build the plan's ray tracer over items (the bake's whole items, as prepare() does) when
     the chosen rung did not need one: bent normals are ray-traced whichever rung lit the AO.
-    Raises CanopyAOError when the scene has no triangles or the native module predates bent
-    normals."""
-    if "bent_normals" not in (_core.RayTracer.ao.__doc__ or ""):
-        raise CanopyAOError("the native module was built before bent normals; rebuild it "
-                            "(scripts/build.sh)")
+    Raises CanopyAOError when the scene has no triangles."""
     protos = plan.forest.prototypes if plan.forest is not None else None
     if plan.tracer is None:
         plan.tracer = lighting.build_tracer(items, plan.tracer_bases, protos)
@@ -86,24 +82,35 @@ def ensure_tracer(plan: Plan, items) -> None:
                           "has only the scene's own triangles)")
 
 
+def rung_is_the_trace(plan: Plan, item: SceneItem) -> bool:
+    """Whether item's AO under the plan's rung is the very trace bent_normals makes (the exact
+    rung, one call for the whole item, no analytic forest multiplied in), so one trace gives
+    both (bent_normals(..., with_ao=True))."""
+    return (plan.method == "raytrace" and item.role != "IGNORE"
+            and (item.tree_labels is None or len(item.tree_names) <= 1)
+            and (plan.forest is None or lighting.traces_instances(plan)))
+
+
 def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
-                 triangles=None) -> np.ndarray:
+                 triangles=None, with_ao=False):
     """World-space bent normals float32 (N, 3) of receivers on item (as
     bake.evaluate_receivers: its vertices, a chunk of them, or texels with their triangles):
     the cosine-weighted mean unoccluded direction of settings.samples rays per receiver,
     normalised, against the plan's tracer (ensure_tracer). Every ray blocked: the unit normal;
-    a zero normal: (0, 0, 0) (raytrace.h, "Bent normals")."""
+    a zero normal: (0, 0, 0) (raytrace.h, "Bent normals"). with_ao: (the trace's AO float32
+    (N,), bent normals); the AO is the exact rung's where rung_is_the_trace."""
     if plan.tracer is None:
         raise CanopyAOError("bent normals need the ray tracer (maps.ensure_tracer)")
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     own = own_primitives(item, vertices, triangles)
     d = plan.settings.distance
-    _ao, bent = plan.tracer.ao(p, n, samples=int(plan.settings.samples),
-                               distance=float(d) if d > 0 else math.inf,
-                               seed=int(plan.settings.seed), bent_normals=True,
-                               **(lighting.own_ids(plan, item.name, own) or {}))
-    return np.asarray(bent, np.float32)
+    ao, bent = plan.tracer.ao(p, n, samples=int(plan.settings.samples),
+                              distance=float(d) if d > 0 else math.inf,
+                              seed=int(plan.settings.seed), bent_normals=True,
+                              **(lighting.own_ids(plan, item.name, own) or {}))
+    bent = np.asarray(bent, np.float32)
+    return (np.asarray(ao, np.float32), bent) if with_ao else bent
 
 
 def to_tangent(bent, normals, tangents, signs) -> np.ndarray:
