@@ -19,7 +19,8 @@ import bpy
 import numpy as np
 
 addon_utils.enable("canopy_ao")
-from canopy_ao import _core, cycles_check  # noqa: E402
+from canopy_ao import _core  # noqa: E402
+from canopy_ao.blender import cycles_check  # noqa: E402
 
 
 def mesh(name, verts, faces):
@@ -81,14 +82,19 @@ def main():
         count += len(v)
     tracer = _core.RayTracer(np.ascontiguousarray(np.concatenate(verts)),
                              np.ascontiguousarray(np.concatenate(tris), np.int32))
+    bake = _core.RayTracer(np.ascontiguousarray(np.concatenate(verts)),
+                           np.ascontiguousarray(np.concatenate(tris), np.int32),
+                           normals=np.ascontiguousarray(np.concatenate(
+                               [n for _v, n, _t in data.values()]), np.float32))
     print(f"Cycles {samples} samples vs RayTracer {samples} rays, AO distance 20")
-    print(f"{'vertices':28s} {'Cycles':>8s} {'own skipped':>12s} {'old offset':>11s} "
-          f"{'closed form':>12s}")
+    print(f"{'vertices':28s} {'Cycles':>8s} {'bake point':>11s} {'own skipped':>12s} "
+          f"{'old offset':>11s} {'closed form':>12s}")
     for name, (v, nrm, _t) in data.items():
         if name == "Ground":
             continue
         ids = np.ascontiguousarray(base[name] + np.arange(len(v), dtype=np.int32))
         new = tracer.ao(v, nrm, samples=samples, distance=20.0, vertex_ids=ids)
+        bp = bake.ao(v, nrm, samples=samples, distance=20.0, vertex_ids=ids)
         old = tracer.ao(v, nrm, samples=samples, distance=20.0)
         cyc = np.asarray(cycles[name], np.float32)
         low = v[:, 2] < 1e-6
@@ -97,7 +103,8 @@ def main():
         for label, sel in groups:
             form = (f"{(1 + float(nrm[sel][:, 2].mean())) / 2:12.3f}"
                     if name.startswith("Blade") and label == "roots" else f"{'':12s}")
-            print(f"{name + ' ' + label:28s} {cyc[sel].mean():8.3f} {new[sel].mean():12.3f} "
+            print(f"{name + ' ' + label:28s} {cyc[sel].mean():8.3f} {bp[sel].mean():11.3f} "
+                  f"{new[sel].mean():12.3f} "
                   f"{old[sel].mean():11.3f} {form}")
 
 

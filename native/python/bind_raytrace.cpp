@@ -38,10 +38,37 @@ RayTraceOptions options_arg(const py::object& samples, double distance, const py
 std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::array& triangles,
                                        const py::object& prototypes = py::none(),
                                        const py::object& instance_prototypes = py::none(),
-                                       const py::object& instance_matrices = py::none()) {
+                                       const py::object& instance_matrices = py::none(),
+                                       const py::object& normals = py::none(),
+                                       const py::object& polygons = py::none()) {
   const PointsView v = points_arg(vertices, "vertices", /*allow_empty=*/true);
   std::size_t m = 0;
   const std::int32_t* t = triangles_arg(triangles, "triangles", v.size, &m);
+  PointsView vn{nullptr, 0};
+  py::array normals_keep;
+  if (!normals.is_none()) {
+    normals_keep = normals.cast<py::array>();
+    vn = points_arg(normals_keep, "normals", /*allow_empty=*/true);
+    if (vn.size != v.size) {
+      std::ostringstream s;
+      s << "normals must have one row per vertex like vertices (" << v.size << ", 3), got "
+        << shape_str(normals_keep);
+      throw py::value_error(s.str());
+    }
+  }
+  BakeShading shading;
+  shading.vertex_normals = vn;
+  py::array polygons_keep;
+  if (!polygons.is_none()) {
+    if (normals.is_none()) throw py::value_error("polygons need normals (they only group corners)");
+    polygons_keep = polygons.cast<py::array>();
+    require_dtype(polygons_keep, "polygons", py::dtype::of<std::int32_t>(), "int32");
+    if (polygons_keep.ndim() != 1 || static_cast<std::size_t>(polygons_keep.shape(0)) != m) {
+      throw py::value_error("polygons must be int32 (M,) like triangles' rows, got " +
+                            shape_str(polygons_keep));
+    }
+    shading.polygons = static_cast<const std::int32_t*>(polygons_keep.data());
+  }
   // Instanced meshes; `keep` holds their arrays until the build has copied them.
   std::vector<Prototype> protos;
   std::vector<py::array> keep;
@@ -88,7 +115,7 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
     }
   }
   py::gil_scoped_release release;
-  return std::make_unique<RayTracer>(v, t, m, protos, placed);
+  return std::make_unique<RayTracer>(v, t, m, shading, protos, placed);
 }
 
 /// An optional int32 (N,) array of own-primitive ids (None → nullptr). Values are range-checked
@@ -151,16 +178,22 @@ void bind_raytrace(py::module_& m) {
                         "(expensive: reuse it for many queries).")
       .def(py::init(&make_tracer), py::arg("vertices"), py::arg("triangles"),
            py::arg("prototypes") = py::none(), py::arg("instance_prototypes") = py::none(),
-           py::arg("instance_matrices") = py::none(),
+           py::arg("instance_matrices") = py::none(), py::arg("normals") = py::none(),
+           py::arg("polygons") = py::none(),
            "RayTracer(vertices, triangles, prototypes=None, instance_prototypes=None, "
-           "instance_matrices=None)\n\n"
+           "instance_matrices=None, normals=None, polygons=None)\n\n"
            "vertices: float32 (V, 3); triangles: int32 (M, 3), indices in [0, V). M may be 0 "
            "(nothing occludes: AO = 1). Instanced meshes (Embree instances: each prototype's "
            "BVH built once): prototypes, a sequence of (vertices float32 (P, 3), triangles "
            "int32 (Q, 3)); instance_prototypes int32 (K,), the prototype of each instance; "
            "instance_matrices float32 (K, 4, 4), row-major world-from-prototype, affine. "
            "Instances occlude like the own mesh but carry no receivers (vertex_ids and "
-           "triangle_ids refer to the own mesh). The data are copied. Releases the GIL while "
+           "triangle_ids refer to the own mesh). normals: float32 (V, 3), the mesh's vertex "
+           "normals; with them a vertex receiver (vertex_ids) starts where Cycles' own vertex "
+           "bake starts it (each corner's bake point, raytrace.h 'Origins'), without them on "
+           "the surface a hair from the vertex. polygons: int32 (M,), each triangle's face "
+           "(a quad's two triangles share one), so a vertex has one corner per face as in "
+           "Blender's bake (needs normals). The data are copied. Releases the GIL while "
            "the BVH builds. ValueError on bad input, CanopyAOError if Embree fails.")
       .def(
           "ao",
@@ -203,6 +236,8 @@ void bind_raytrace(py::module_& m) {
       .def_property_readonly("vertex_count", &RayTracer::vertex_count)
       .def_property_readonly("triangle_count", &RayTracer::triangle_count)
       .def_property_readonly("instance_count", &RayTracer::instance_count)
+      .def_property_readonly("has_vertex_normals", &RayTracer::has_vertex_normals,
+                             "Whether vertex receivers start at Cycles' bake point.")
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,
                              "The origin offset used when offset < 0, in scene units.")
       .def("__repr__", [](const RayTracer& self) {

@@ -201,6 +201,9 @@ struct TraceContext {
   const std::int32_t* own_vertex = nullptr;    // per query point (ray id), −1 = none
   const std::int32_t* own_triangle = nullptr;  // per query point (ray id), −1 = none
   const std::uint32_t* indices = nullptr;      // 3M: the tracer's triangles
+  // When set, ray ids are slots of the current batch instead of query points, and ray_skip[slot]
+  // is the one triangle that ray skips (−1 = none): Cycles' bake point (raytrace.h, "Origins").
+  const std::int32_t* ray_skip = nullptr;
 };
 static_assert(std::is_standard_layout<TraceContext>::value, "cast from the Embree context");
 
@@ -209,6 +212,15 @@ static_assert(std::is_standard_layout<TraceContext>::value, "cast from the Embre
 /// a vertex's own when one of its three indices is that vertex.
 void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
   const auto* c = reinterpret_cast<const TraceContext*>(args->context);
+  if (c->ray_skip) {
+    for (unsigned k = 0; k < args->N; ++k) {
+      if (args->valid[k] == 0) continue;
+      const unsigned slot = RTCRayN_id(args->ray, args->N, k);
+      const unsigned prim = RTCHitN_primID(args->hit, args->N, k);
+      if (c->ray_skip[slot] == static_cast<std::int32_t>(prim)) args->valid[k] = 0;
+    }
+    return;
+  }
   if (c->own_vertex == nullptr && c->own_triangle == nullptr) return;
   for (unsigned k = 0; k < args->N; ++k) {
     if (args->valid[k] == 0) continue;
@@ -235,6 +247,51 @@ inline Vec3 own_surface_origin(Vec3 x, Vec3 target, float precision) {
   if (!(len > 0.0f)) return x;
   const float step = std::min(0.5f * len, std::max(1e-3f * len, precision));
   return x + d * (step / len);
+}
+
+/// Cycles' default shadow-terminator geometry offset (Object > Shading): rays within this
+/// cosine of grazing their face start lifted onto the smooth surface (raytrace.h, "Origins").
+constexpr float kTerminatorCutoff = 0.1f;
+
+/// One corner of a vertex receiver started at Cycles' bake point (raytrace.h, "Origins").
+struct Corner {
+  Vec3 start;         // the vertex moved towards the triangle's centroid (bake_offset_towards_center)
+  Vec3 t, b, n;       // frame around the smooth normal interpolated at `start`
+  Vec3 ng;            // the face normal, on n's side
+  Vec3 lift;          // Cycles' shadow_ray_smooth_surface_offset at `start` (full amount)
+  std::int32_t tri;   // the corner's triangle, the one its rays skip
+};
+
+/// Cycles' shadow_ray_smooth_surface_offset: the point lifted by h along the interpolated
+/// (unnormalised) normal onto a parabolic patch through the vertex normals, bounded by the
+/// local linear envelope. V, N: the triangle's vertices and unit vertex normals; w: the
+/// barycentric weights of the point (of V[0], V[1], V[2]); ng: the face normal as shaded.
+Vec3 smooth_surface_offset(const Vec3 V[3], const Vec3 N[3], const float w[3], Vec3 ng) {
+  const float u = w[0], v = w[1], ww = w[2];
+  const Vec3 P = V[0] * u + V[1] * v + V[2] * ww;
+  const Vec3 n = N[0] * u + N[1] * v + N[2] * ww;
+  const float a = dot(N[2] - N[0], V[0] - V[2]);
+  const float b = dot(N[2] - N[1], V[1] - V[2]);
+  const float c = dot(N[1] - N[0], V[1] - V[0]);
+  float h = a * u * (u - 1) + (a + b + c) * u * v + b * v * (v - 1);
+  if (dot(n, ng) > 0) {
+    float h0 = std::max(std::max(dot(V[1] - V[0], N[0]), dot(V[2] - V[0], N[0])), 0.0f);
+    float h1 = std::max(std::max(dot(V[0] - V[1], N[1]), dot(V[2] - V[1], N[1])), 0.0f);
+    float h2 = std::max(std::max(dot(V[0] - V[2], N[2]), dot(V[1] - V[2], N[2])), 0.0f);
+    h0 = std::max(dot(V[0] - P, N[0]) + h0, 0.0f);
+    h1 = std::max(dot(V[1] - P, N[1]) + h1, 0.0f);
+    h2 = std::max(dot(V[2] - P, N[2]) + h2, 0.0f);
+    h = std::max(std::min(std::min(h0, h1), h2), h * 0.5f);
+  } else {
+    float h0 = std::max(std::max(dot(V[0] - V[1], N[0]), dot(V[0] - V[2], N[0])), 0.0f);
+    float h1 = std::max(std::max(dot(V[1] - V[0], N[1]), dot(V[1] - V[2], N[1])), 0.0f);
+    float h2 = std::max(std::max(dot(V[2] - V[0], N[2]), dot(V[2] - V[1], N[2])), 0.0f);
+    h0 = std::max(dot(P - V[0], N[0]) + h0, 0.0f);
+    h1 = std::max(dot(P - V[1], N[1]) + h1, 0.0f);
+    h2 = std::max(dot(P - V[2], N[2]) + h2, 0.0f);
+    h = std::min(-std::min(std::min(h0, h1), h2), h * 0.5f);
+  }
+  return n * h;
 }
 
 void check_ids(const std::int32_t* ids, std::size_t n, std::size_t limit, const char* name,
@@ -378,6 +435,8 @@ struct RayTracer::Impl {
   // The triangles using each vertex (CSR): vertex v's are tris_of[first_tri[v] .. first_tri[v+1]).
   std::vector<std::uint32_t> first_tri, tris_of;
   std::size_t vertex_count = 0;
+  std::vector<float> vertex_normals;  // 3V unit (or zero) normals, or empty: no bake point
+  std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
   float auto_offset = 0;
   float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
@@ -414,6 +473,101 @@ struct RayTracer::Impl {
     return best >= 0.0f ? centroid(pick) : vertex(v);
   }
 
+  /// Vertex v's corners at Cycles' bake point (raytrace.h, "Origins"), one per triangle with
+  /// area using v, in triangle order; none when no such triangle exists.
+  void corners(std::uint32_t v, std::vector<Corner>* out) const {
+    out->clear();
+    const Vec3 P = vertex(v);
+    const float reach = 1e-4f * std::max(1.0f, std::max(std::fabs(P.x),
+                                                        std::max(std::fabs(P.y), std::fabs(P.z))));
+    for (std::uint32_t k = first_tri[v]; k < first_tri[v + 1]; ++k) {
+      const std::uint32_t tri = tris_of[k];
+      if (!polygons.empty()) {  // one corner per polygon: its first triangle (Blender's rule)
+        bool seen = false;
+        for (const Corner& c : *out) seen = seen || polygons[c.tri] == polygons[tri];
+        if (seen) continue;
+      }
+      const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+      Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
+      const Vec3 e1 = V[1] - V[0], e2 = V[2] - V[0];
+      const Vec3 c = cross(e1, e2);
+      const float area2 = length(c);
+      if (!(area2 > 0.0f)) continue;
+      Vec3 ng = c / area2;
+      // bake_offset_towards_center: move towards the centroid, then clamp the barycentrics.
+      const Vec3 to = (V[0] + V[1] + V[2]) / 3.0f - P;
+      const float len = length(to);
+      const Vec3 moved = len > 0.0f ? P + to * (std::min(len, reach) / len) : P;
+      const Vec3 vp = moved - V[0];
+      const float d11 = dot(e1, e1), d12 = dot(e1, e2), d22 = dot(e2, e2);
+      const float dp1 = dot(vp, e1), dp2 = dot(vp, e2);
+      const float denom = d11 * d22 - d12 * d12;
+      float w[3] = {1.0f, 0.0f, 0.0f};
+      if (denom > 0.0f) {
+        w[1] = std::clamp((d22 * dp1 - d12 * dp2) / denom, 1e-5f, 1.0f - 1e-5f);
+        w[2] = std::clamp((d11 * dp2 - d12 * dp1) / denom, 1e-5f, 1.0f - 1e-5f);
+        w[0] = std::clamp(1.0f - w[1] - w[2], 1e-5f, 1.0f - 1e-5f);
+      } else {  // a sliver: stay at the vertex
+        for (int j = 0; j < 3; ++j) w[j] = t[j] == v ? 1.0f : 0.0f;
+      }
+      out->push_back(corner_at(tri, V, ng, w, nullptr));
+    }
+  }
+
+  /// The Corner of a bake point with barycentric weights w on triangle tri (vertices V, unit
+  /// face normal ng): the smooth normal interpolated there (or `normal` when given: a texel's
+  /// own), the face normal on its side, and the terminator lift.
+  Corner corner_at(std::uint32_t tri, const Vec3 V[3], Vec3 ng, const float w[3],
+                   const Vec3* normal) const {
+    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+    Vec3 N[3];
+    for (int j = 0; j < 3; ++j) {
+      const float* q = vertex_normals.data() + 3 * static_cast<std::size_t>(t[j]);
+      N[j] = Vec3{q[0], q[1], q[2]};
+      if (!(length(N[j]) > 0.0f)) N[j] = ng;  // a zero vertex normal: the face's
+    }
+    Vec3 n = normal ? *normal : N[0] * w[0] + N[1] * w[1] + N[2] * w[2];
+    const float nl = length(n);
+    n = nl > 0.0f ? n / nl : ng;
+    if (dot(ng, n) < 0.0f) {
+      if (normal) {
+        ng = -ng;  // a texel: its own normal decides the side, the face normal follows
+      } else {     // a back-facing bake point: Cycles flips both
+        ng = -ng;
+        n = -n;
+      }
+    }
+    Corner cn;
+    cn.start = V[0] * w[0] + V[1] * w[1] + V[2] * w[2];
+    cn.n = n;
+    onb(n, &cn.t, &cn.b);
+    cn.ng = ng;
+    cn.lift = smooth_surface_offset(V, N, w, ng);
+    cn.tri = static_cast<std::int32_t>(tri);
+    return cn;
+  }
+
+  /// A texel's single corner: the point x on triangle tri with the texel's unit normal n.
+  bool texel_corner(Vec3 x, std::uint32_t tri, Vec3 n, Corner* out) const {
+    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+    const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
+    const Vec3 e1 = V[1] - V[0], e2 = V[2] - V[0];
+    const Vec3 c = cross(e1, e2);
+    const float area2 = length(c);
+    const float d11 = dot(e1, e1), d12 = dot(e1, e2), d22 = dot(e2, e2);
+    const float denom = d11 * d22 - d12 * d12;
+    if (!(area2 > 0.0f) || !(denom > 0.0f)) return false;
+    const Vec3 vp = x - V[0];
+    const float dp1 = dot(vp, e1), dp2 = dot(vp, e2);
+    float w[3];
+    w[1] = std::clamp((d22 * dp1 - d12 * dp2) / denom, 0.0f, 1.0f);
+    w[2] = std::clamp((d11 * dp2 - d12 * dp1) / denom, 0.0f, 1.0f - w[1]);
+    w[0] = 1.0f - w[1] - w[2];
+    *out = corner_at(tri, V, c / area2, w, &n);
+    out->start = x;  // the texel itself (the weights only shape the lift)
+    return true;
+  }
+
   /// Throws canopy_ao::Error if Embree reported anything since the last check.
   void check(const char* what) const {
     RTCError code = device ? rtcGetDeviceError(device.get()) : rtcGetDeviceError(nullptr);
@@ -444,9 +598,41 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
 RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
                      std::size_t triangle_count, const std::vector<Prototype>& prototypes,
                      const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
+    : RayTracer(vertices, triangles, triangle_count, BakeShading{}, prototypes, instances,
+                build) {}
+
+RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
+                     std::size_t triangle_count, const BakeShading& shading,
+                     const std::vector<Prototype>& prototypes,
+                     const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   check_mesh(vertices, triangles, triangle_count, "");
+  const PointsView vertex_normals = shading.vertex_normals;
+  if (shading.polygons != nullptr) {
+    if (vertex_normals.size == 0) {
+      throw std::invalid_argument("polygons need vertex_normals (they only group corners)");
+    }
+    m.polygons.assign(shading.polygons, shading.polygons + triangle_count);
+  }
+  if (vertex_normals.size != 0) {
+    if (vertex_normals.size != vertices.size) {
+      std::ostringstream s;
+      s << "vertex_normals must have one row per vertex (" << vertices.size << "), got "
+        << vertex_normals.size;
+      throw std::invalid_argument(s.str());
+    }
+    check_points(vertex_normals, "vertex_normals");
+    m.vertex_normals.resize(3 * vertex_normals.size);
+    for (std::size_t i = 0; i < vertex_normals.size; ++i) {
+      const Vec3 q = vertex_normals[i];
+      const float big = std::max(std::fabs(q.x), std::max(std::fabs(q.y), std::fabs(q.z)));
+      const Vec3 u = big > 0.0f ? normalize(q / big) : Vec3{0.0f, 0.0f, 0.0f};
+      m.vertex_normals[3 * i] = u.x;
+      m.vertex_normals[3 * i + 1] = u.y;
+      m.vertex_normals[3 * i + 2] = u.z;
+    }
+  }
   for (std::size_t k = 0; k < prototypes.size(); ++k) {
     const Prototype& p = prototypes[k];
     check_mesh(p.vertices, p.triangles, p.triangle_count,
@@ -496,10 +682,15 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   }
   rtcSetDeviceErrorFunction(m.device.get(), record_error, m.errors.get());
 
-  // 2. The scene: default flags (ROBUST costs a third of the speed, docs/DESIGN.md, 'Facts measured in Blender').
+  // 2. The scene: default flags (ROBUST costs a third of the speed, docs/DESIGN.md, 'Facts
+  // measured in Blender'), except where vertex receivers start at Cycles' bake point: Cycles
+  // builds ROBUST, whose hit test also counts a face through the ray's start (t = 0), and
+  // without it a start lying in another face's plane would not see that face (a trunk's cap
+  // in the ground: 0.44 against Cycles' 0.13, bench/cycles_contact.py).
+  const bool robust = build.robust || !m.vertex_normals.empty();
   m.scene.reset(rtcNewScene(m.device.get()));
   m.check("rtcNewScene");
-  rtcSetSceneFlags(m.scene.get(), build.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+  rtcSetSceneFlags(m.scene.get(), robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
   rtcSetSceneBuildQuality(m.scene.get(),
                           build.high_quality ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM);
   m.check("scene setup");
@@ -545,8 +736,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     two_sided_indices(p.triangles, p.triangle_count, culls, &pm->indices);
     pm->scene.reset(rtcNewScene(m.device.get()));
     m.check("rtcNewScene (prototype)");
-    rtcSetSceneFlags(pm->scene.get(),
-                     build.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+    rtcSetSceneFlags(pm->scene.get(), robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
     rtcSetSceneBuildQuality(pm->scene.get(), build.high_quality ? RTC_BUILD_QUALITY_HIGH
                                                                 : RTC_BUILD_QUALITY_MEDIUM);
     for (int w = 0; w < (culls && p.triangle_count ? 2 : 1) && p.triangle_count; ++w) {
@@ -583,6 +773,7 @@ float RayTracer::auto_offset() const { return impl_->auto_offset; }
 std::size_t RayTracer::vertex_count() const { return impl_->vertex_count; }
 std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
 std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
+bool RayTracer::has_vertex_normals() const { return !impl_->vertex_normals.empty(); }
 
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
@@ -634,6 +825,9 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   const int samples = options.samples;
   const bool automatic = options.offset < 0;
   const float offset = automatic ? m.auto_offset : options.offset;
+  // Vertex receivers start at Cycles' bake point (raytrace.h, "Origins").
+  const bool bake_point = automatic && (own.vertex_ids != nullptr || own.triangle_ids != nullptr) &&
+                          !m.vertex_normals.empty();
   const float tfar = options.distance;  // +inf is fine for Embree
   const SampleSet set(samples);
   const float inv_samples = 1.0f / static_cast<float>(samples);
@@ -649,10 +843,16 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     std::vector<float> open_sum(bent ? 3 * (end - begin) : 0, 0.0f);  // Σ unblocked ω
     std::vector<float> xs(samples), ys(samples), zs(samples);
     std::size_t filled = 0;
+    std::int32_t skip[kStream];  // bake-point mode: the triangle each batched ray skips
+    std::vector<Corner> corners;
     TraceContext context;
     embree::init_context(&context.base);  // incoherent: AO rays go every way
-    context.own_vertex = own.vertex_ids;
-    context.own_triangle = own.triangle_ids;
+    if (bake_point) {
+      context.ray_skip = skip;
+    } else {
+      context.own_vertex = own.vertex_ids;
+      context.own_triangle = own.triangle_ids;
+    }
     context.indices = m.indices.data();
 
     auto flush = [&] {
@@ -676,38 +876,72 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const Vec3 nn = normalize(raw / big);
       Vec3 t, b;
       onb(nn, &t, &b);
-      // The start (see raytrace.h, "Origins"): on the receiver's own surface, else offset
-      // along the normal.
+      // The start (see raytrace.h, "Origins"): Cycles' bake point for a vertex when the tracer
+      // has vertex normals, else on the receiver's own surface, else offset along the normal.
       const std::int32_t ov = own.vertex_ids ? own.vertex_ids[i] : -1;
       const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
+      corners.clear();
+      if (bake_point && ov >= 0) {
+        m.corners(static_cast<std::uint32_t>(ov), &corners);
+      } else if (bake_point && ot >= 0) {
+        Corner c;
+        if (m.texel_corner(points[i], static_cast<std::uint32_t>(ot), nn, &c)) corners.push_back(c);
+      }
       Vec3 o;
-      if (automatic && ov >= 0) {
+      std::int32_t own_skip = -1;
+      if (automatic && ov >= 0 && !bake_point) {
         o = own_surface_origin(points[i], m.vertex_target(static_cast<std::uint32_t>(ov), nn),
                                m.precision);
+      } else if (bake_point && ov >= 0) {
+        o = points[i];  // used only when the vertex has no triangle with area
       } else if (automatic && ot >= 0) {
         o = own_surface_origin(points[i], m.centroid(static_cast<std::uint32_t>(ot)),
                                m.precision);
+        own_skip = ot;
       } else {
         o = points[i] + nn * offset;
+        own_skip = ot;
       }
       point_directions(options.sampling, set, i, options.seed, samples, xs.data(), ys.data(),
                        zs.data());
       const std::uint32_t local = static_cast<std::uint32_t>(i - begin);
+      const std::size_t k = corners.size();
       for (int s = 0; s < samples; ++s) {
         const float x = xs[s], y = ys[s], z = zs[s];
         RTCRay& ray = rays[filled];
-        ray.dir_x = t.x * x + b.x * y + nn.x * z;
-        ray.dir_y = t.y * x + b.y * y + nn.y * z;
-        ray.dir_z = t.z * x + b.z * y + nn.z * z;
-        ray.org_x = o.x;
-        ray.org_y = o.y;
-        ray.org_z = o.z;
+        Vec3 d, org = o;
+        std::int32_t sk = own_skip;
+        if (k) {  // Cycles' bake point: this ray's corner, and its terminator lift
+          const Corner& c = corners[static_cast<std::size_t>(s) % k];
+          d = c.t * x + c.b * y + c.n * z;
+          const float ngl = dot(c.ng, d), nl = z;
+          const float amount =
+              nl < kTerminatorCutoff
+                  ? std::clamp(2.0f - (ngl + nl) / kTerminatorCutoff, 0.0f, 1.0f)
+                  : std::clamp(1.0f - ngl / kTerminatorCutoff, 0.0f, 1.0f);
+          org = c.start;
+          sk = c.tri;
+          if (amount > 0.0f) {
+            org = c.start + c.lift * amount;
+            if (!(ngl > 0.0f)) sk = -1;  // diving below its face: the face may stop it
+          }
+        } else {
+          d = t * x + b * y + nn * z;
+        }
+        ray.dir_x = d.x;
+        ray.dir_y = d.y;
+        ray.dir_z = d.z;
+        ray.org_x = org.x;
+        ray.org_y = org.y;
+        ray.org_z = org.z;
         ray.tnear = 0.0f;
         ray.time = 0.0f;
         ray.tfar = tfar;
         ray.mask = 0xffffffffu;
-        ray.id = static_cast<unsigned>(i);  // the filter's key to the receiver's own primitives
+        // The filter's key: the receiver (its own primitives), or in bake-point mode the slot.
+        ray.id = bake_point ? static_cast<unsigned>(filled) : static_cast<unsigned>(i);
         ray.flags = 0;
+        skip[filled] = sk;
         owner[filled] = local;
         if (++filled == kStream) flush();
       }

@@ -42,7 +42,22 @@ struct Mesh {
     }
   }
   RayTracer tracer() const { return RayTracer(view(), t.data(), triangles()); }
+  // The tracer with vertex normals: vertex receivers start at Cycles' bake point.
+  RayTracer baking(const std::vector<float>& normals,
+                   const std::vector<std::int32_t>* polygons = nullptr) const {
+    BakeShading shading;
+    shading.vertex_normals = {normals.data(), normals.size() / 3};
+    shading.polygons = polygons ? polygons->data() : nullptr;
+    return RayTracer(view(), t.data(), triangles(), shading, {}, {});
+  }
 };
+
+// The same normal for every vertex of m, packed xyz.
+std::vector<float> same_normals(const Mesh& m, Vec3 n) {
+  std::vector<float> out;
+  for (std::size_t i = 0; i < m.v.size() / 3; ++i) out.insert(out.end(), {n.x, n.y, n.z});
+  return out;
+}
 
 // Horizontal rectangle [x0, x1] × [y0, y1] at height z.
 Mesh horizontal(float x0, float x1, float y0, float y1, float z, bool flip = false) {
@@ -669,5 +684,160 @@ TEST(RayTracer, BadInputThrowsInvalidArgument) {
   EXPECT_THROW(nan_vertex.tracer(), std::invalid_argument);
   EXPECT_THROW(ao_raytrace(box.view(), box.t.data(), box.triangles(), r.points(), r.normals(),
                            opts(0)),
+               std::invalid_argument);
+}
+
+// === Cycles' bake point (raytrace.h, "Origins"): expected values are Cycles' own vertex bakes
+// (Blender 3.4, 1024 samples; bench/cycles_contact_probe.py and bench/cycles_contact.py).
+
+namespace {
+
+// AO at vertex `v` of m, as the add-on asks: the vertex its own receiver, 1024 rays.
+float vertex_ao(const RayTracer& tracer, const Mesh& m, std::int32_t v, Vec3 n,
+                float distance = kInf) {
+  const Receivers r(m.view()[static_cast<std::size_t>(v)], n, 1);
+  const std::vector<std::int32_t> vid(1, v);
+  OwnPrimitives own;
+  own.vertex_ids = vid.data();
+  float out = -1;
+  tracer.ao(r.points(), r.normals(), own, opts(1024, distance), &out);
+  return out;
+}
+
+// A right triangle of legs L from `o` (normal +z) under a roof quad h above it, covering the
+// triangle's square from (o + s, o + s) on: whether vertex 0 is under the roof depends on where
+// its bake point lies.
+Mesh triangle_under_roof(Vec3 o, float L, float s, float h) {
+  Mesh m;
+  const std::int32_t a = m.add(o), b = m.add(o + Vec3{L, 0, 0}), c = m.add(o + Vec3{0, L, 0});
+  m.tri(a, b, c);
+  m.quad(o + Vec3{s, s, h}, o + Vec3{L, s, h}, o + Vec3{L, L, h}, o + Vec3{s, L, h});
+  return m;
+}
+
+}  // namespace
+
+TEST(BakePoint, StartsWhereCyclesBakesAVertexNotAtIt) {
+  // Cycles moves a vertex's bake point 1e-4 × max(1, |x|max) towards the triangle's centroid:
+  // 1.8 mm at x = 18, so a 1 cm triangle's corner bakes under a roof 10 µm up that starts 1 mm
+  // inside (Cycles 0.001), and not under one that starts 3 mm inside (x = 21: 2.1 mm; Cycles
+  // 1.000). The own-surface rule starts a hair from the vertex: open in both.
+  const float L = 0.01f, h = 1e-5f;
+  const Mesh near_roof = triangle_under_roof({18, 0, 0}, L, 0.1f * L, h);
+  const Mesh far_roof = triangle_under_roof({21, 0, 0}, L, 0.3f * L, h);
+  const Vec3 up{0, 0, 1};
+  EXPECT_LT(vertex_ao(near_roof.baking(same_normals(near_roof, up)), near_roof, 0, up), 0.05f);
+  EXPECT_GT(vertex_ao(far_roof.baking(same_normals(far_roof, up)), far_roof, 0, up), 0.95f);
+  EXPECT_GT(vertex_ao(near_roof.tracer(), near_roof, 0, up), 0.9f);
+}
+
+TEST(BakePoint, ASmoothLowPolyTubeIsOpenAsInCycles) {
+  // An isolated square tube, smooth-shaded (vertex normals 45° off every face), 12 m from the
+  // origin: Cycles bakes 1.000 at every vertex. From a start inside a face about a seventh of
+  // the hemisphere dives into the tube; Cycles' terminator lift takes those rays off the face.
+  Mesh m;
+  std::vector<float> normals;
+  const float w = 0.0022f, len = 0.05f;
+  const Vec3 base{3, 3, 11};
+  for (int r = 0; r < 5; ++r) {
+    for (int k = 0; k < 4; ++k) {
+      const float x = (k == 1 || k == 2) ? w / 2 : -w / 2, y = k >= 2 ? w / 2 : -w / 2;
+      m.add(base + Vec3{x, y, len * r / 4});
+      const Vec3 n = normalize(Vec3{x, y, 0});
+      normals.insert(normals.end(), {n.x, n.y, n.z});
+    }
+  }
+  for (int r = 0; r < 4; ++r) {
+    for (int k = 0; k < 4; ++k) {
+      const std::int32_t a = 4 * r + k, b = 4 * r + (k + 1) % 4;
+      m.tri(a, b, b + 4);
+      m.tri(a, b + 4, a + 4);
+    }
+  }
+  const RayTracer tracer = m.baking(normals);
+  for (std::int32_t v = 8; v < 12; ++v) {
+    const Vec3 n{normals[3 * v], normals[3 * v + 1], normals[3 * v + 2]};
+    EXPECT_GT(vertex_ao(tracer, m, v, n), 0.99f) << "mid-ring vertex " << v;
+  }
+}
+
+TEST(BakePoint, AStartInAnotherFacesPlaneSeesThatFace) {
+  // A 2 mm quad lying in a larger quad's plane (gap 0): Cycles bakes its vertices 0 (its ROBUST
+  // hit test counts the face through the start), near the origin and 10 m away alike.
+  for (const Vec3 o : {Vec3{0, 0, 0.001f}, Vec3{3, 3, 10}}) {
+    Mesh m = horizontal(o.x - 0.1f, o.x + 0.1f, o.y - 0.1f, o.y + 0.1f, o.z);
+    m.quad(o, o + Vec3{0.002f, 0, 0}, o + Vec3{0.002f, 0.002f, 0}, o + Vec3{0, 0.002f, 0});
+    const Vec3 up{0, 0, 1};
+    const RayTracer tracer = m.baking(same_normals(m, up));
+    for (std::int32_t v = 4; v < 8; ++v) EXPECT_LT(vertex_ao(tracer, m, v, up, 0.5f), 0.01f);
+  }
+}
+
+TEST(BakePoint, BladeRootsOnTheGroundAgreeWithCyclesAndTheClosedForm) {
+  // bench/cycles_contact.py's blades standing on a 100 m ground, upright or leaning 25° either
+  // way: roots (1 + n·up)/2, Cycles 0.500, 0.710, 0.289. (Its capped trunk, whose bottom cap
+  // lies in the ground, needs Blender's own mesh and normals: bench/cycles_contact.py prints
+  // 0.120 against Cycles' 0.129.)
+  Mesh m = horizontal(-50, 50, -50, 50, 0);
+  std::vector<float> normals = same_normals(m, {0, 0, 1});
+  std::vector<std::int32_t> roots;
+  std::vector<Vec3> root_normals;
+  for (int k = 0; k < 3; ++k) {
+    const float beta = (k == 0 ? 0.0f : (k == 1 ? 25.0f : -25.0f)) * kPi / 180;
+    const float x = 0.37f + 3 * k, y = 0.23f;
+    const Vec3 up{0, std::sin(beta), std::cos(beta)};
+    const Vec3 n{0, -std::cos(beta), std::sin(beta)};  // Blender's normal for this winding
+    const std::int32_t a = m.add({x - 0.01f, y, 0}), b = m.add({x + 0.01f, y, 0});
+    const std::int32_t c = m.add(Vec3{x + 0.01f, y, 0} + 0.3f * up);
+    const std::int32_t d = m.add(Vec3{x - 0.01f, y, 0} + 0.3f * up);
+    m.tri(a, b, c);
+    m.tri(a, c, d);
+    for (int i = 0; i < 4; ++i) normals.insert(normals.end(), {n.x, n.y, n.z});
+    roots.insert(roots.end(), {a, b});
+    root_normals.insert(root_normals.end(), {n, n});
+  }
+  const RayTracer tracer = m.baking(normals);
+  const float want_roots[3] = {0.500f, 0.710f, 0.289f};
+  for (int k = 0; k < 3; ++k) {
+    for (int j = 0; j < 2; ++j) {
+      const Vec3 n = root_normals[2 * k + j];
+      EXPECT_NEAR(vertex_ao(tracer, m, roots[2 * k + j], n, 20), want_roots[k], 0.01)
+          << "blade " << k;
+    }
+  }
+}
+
+TEST(BakePoint, OnePolygonIsOneCorner) {
+  // A quad whose two triangles both use vertex 0 (its diagonal): Blender bakes that corner
+  // once, on the first triangle.
+  Mesh m;
+  const Vec3 o{0, 0, 0};
+  const float L = 0.01f;
+  const std::int32_t a = m.add(o), b = m.add({L, 0, 0}), c = m.add({L, L, 0}), d = m.add({0, L, 0});
+  m.tri(a, b, c);  // centroid below the diagonal (y < x)
+  m.tri(a, c, d);  // centroid above it
+  // A 40 µm roof 1 µm over the second triangle's bake point (0.1 mm from the vertex towards
+  // that triangle's centroid): it shades that bake point almost whole, the first one hardly.
+  const Vec3 p2 = 1e-4f * normalize(Vec3{1, 2, 0});
+  const float r = 2e-5f, z = 1e-6f;
+  m.quad(p2 + Vec3{-r, -r, z}, p2 + Vec3{r, -r, z}, p2 + Vec3{r, r, z}, p2 + Vec3{-r, r, z});
+  const std::vector<float> up = same_normals(m, {0, 0, 1});
+  const std::vector<std::int32_t> one_quad = {0, 0, 1, 1};
+  const float per_triangle = vertex_ao(m.baking(up), m, a, {0, 0, 1});
+  const float per_polygon = vertex_ao(m.baking(up, &one_quad), m, a, {0, 0, 1});
+  EXPECT_GT(per_polygon, 0.95f);  // only the first triangle's bake point: open
+  EXPECT_NEAR(per_triangle, 0.5f, 0.05f);  // half its rays from the roofed bake point
+}
+
+TEST(BakePoint, BadShadingThrowsInvalidArgument) {
+  const Mesh m = horizontal(-1, 1, -1, 1, 0);
+  std::vector<float> short_normals(3 * 3, 0.0f), nan_normals = same_normals(m, {0, 0, 1});
+  nan_normals[4] = std::numeric_limits<float>::quiet_NaN();
+  const std::vector<std::int32_t> polys = {0, 0};
+  EXPECT_THROW(m.baking(short_normals), std::invalid_argument);
+  EXPECT_THROW(m.baking(nan_normals), std::invalid_argument);
+  BakeShading no_normals;
+  no_normals.polygons = polys.data();
+  EXPECT_THROW(RayTracer(m.view(), m.t.data(), m.triangles(), no_normals, {}, {}),
                std::invalid_argument);
 }

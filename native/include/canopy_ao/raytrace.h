@@ -19,25 +19,41 @@
 // estimate is unbiased, stratified, and depends only on (its row index, seed, its own data):
 // never on the thread count, the block split or other points. No rand(), no global state.
 //
-// Origins (docs/DESIGN.md, 'Baselines and references': skip only the receiver's own triangles,
-// as Cycles does). A receiver may name the triangles it lies on (OwnPrimitives): a vertex of
-// the tracer's mesh (every triangle using that vertex is its own) or a triangle (a texel's). Its
-// rays then ignore those triangles (an Embree filter on the primitive id) and start on the
-// surface itself: nothing else is skipped, so a blade root standing on the ground sees the
-// ground below its horizon. The start moves a hair (1e-3 of the way, at least the float
-// spacing of the coordinates, at most half) towards the centroid of one own triangle: a
-// texel's, or of a vertex's triangles the one facing its normal most squarely (so the start
-// stays on the surface, not inside the solid a convex corner bounds). That puts it strictly on
-// its own side of any surface it touches (the ground under a root, the branch under a leaf)
-// without crossing anything farther away. Rays go from t = 0: a face lying exactly in the plane
-// of another (a trunk's bottom cap in the ground) does not see it. A back-off that made such faces block darkened Sapling Tree Gen's
-// overlapping branch pieces by 0.16 on average, unverified against Cycles, so it was left out.
-// Checked against Cycles' own vertex bake (Blender 3.4, 1024 samples): blade roots on the ground
-// leaning either way and the top ring of a capped trunk agree within 0.004; the base ring of a
-// trunk whose bottom cap lies in the ground plane reads 0.167 where Cycles gives 0.128 (not
-// settled why: Cycles averages a vertex's corners, and its cap corner, in the ground plane,
-// seems to see nothing; tracing per corner got that ring to 0.11 but the top ring to 0.78).
-// The old normal offset gave 1.0, 0.71 and 0.83 there.
+// Origins (docs/DESIGN.md, 'Baselines and references' and 'Rays against Cycles' samples'):
+// skip only what the receiver starts on, as Cycles does. A receiver may name the triangles it
+// lies on (OwnPrimitives): a vertex of the tracer's mesh or a triangle (a texel's).
+//
+// A vertex, when the tracer was built with vertex normals, is started where Cycles' own vertex
+// bake starts it ("Cycles' bake point"; Blender 3.x–5.x, kernel integrator_init_from_bake and
+// shadow_ray_offset). Every triangle using the vertex is one of its corners; its rays are dealt
+// to the corners in turn (ray s to corner s mod k; one corner per polygon when the polygons
+// are known, BakeShading), and for each corner:
+//  - the start is the vertex moved towards the corner triangle's centroid by
+//    min(distance to the centroid, 1e-4 × max(1, largest |coordinate| of the vertex)) — Cycles'
+//    bake_offset_towards_center; it depends on the distance from the world origin, as Cycles'
+//    does (1.2 mm for a vertex 12 m from it);
+//  - the hemisphere is around the smooth normal interpolated there from the triangle's three
+//    vertex normals (both it and the face normal flipped when they disagree, as Cycles flips a
+//    back-facing bake point);
+//  - only the corner's triangle is skipped; a ray within cos⁻¹(0.1) of grazing the face (Cycles'
+//    default shadow-terminator geometry offset, 0.1) starts lifted onto the smooth surface the
+//    vertex normals describe (Cycles' shadow_ray_smooth_surface_offset), and one that dives below
+//    the face keeps its own triangle as an occluder.
+// Checked against Cycles (bench/cycles_contact_probe.py, 1024 samples): a vertex of a branch
+// piece lying 25–90 µm from another piece's face, an isolated square tube (1.0 where a start
+// inside a face without the lift gives 0.85–0.89).
+//
+// A vertex without the tracer's vertex normals, or a triangle, skips all its own triangles
+// (every triangle using that vertex, or that triangle: an Embree filter on the primitive id) and
+// starts on the surface itself, moved a hair (1e-3 of the way, at least the float spacing of the
+// coordinates, at most half) towards the centroid of one own triangle: a texel's, or of a
+// vertex's triangles the one facing its normal most squarely (so the start stays on the surface,
+// not inside the solid a convex corner bounds). That puts it strictly on its own side of any
+// surface it touches (the ground under a root, the branch under a leaf) without crossing
+// anything farther away. Rays go from t = 0. Checked against Cycles' own vertex bake (Blender
+// 3.4, 1024 samples): blade roots on the ground leaning either way and the top ring of a capped
+// trunk agree within 0.004; the base ring of a trunk whose bottom cap lies in the ground plane
+// reads 0.167 where Cycles gives 0.128. The old normal offset gave 1.0, 0.71 and 0.83 there.
 //
 // A receiver without own primitives (an arbitrary point, or offset ≥ 0 given explicitly)
 // starts at x + offset · n̂ instead. offset < 0 (the default) means automatic: 1e-5 × the
@@ -153,6 +169,17 @@ struct Instance {
   float matrix[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
 };
 
+/// What vertex receivers need to start at Cycles' bake point (see "Origins" above).
+struct BakeShading {
+  /// The mesh's #V by 3 vertex normals (need not be unit length; a zero normal stands for its
+  /// triangles' face normal), or size 0: vertex receivers keep the other rule.
+  PointsView vertex_normals;
+  /// #M polygon ids, or null: triangles with the same id are one polygon (a quad's two), and a
+  /// vertex has one corner per polygon, on the polygon's first triangle using it (Blender bakes
+  /// each face corner once); null makes every triangle a corner.
+  const std::int32_t* polygons = nullptr;
+};
+
 // === Ray tracer
 /// An Embree scene of two-sided triangles, built once (expensive: reuse it for many queries).
 class RayTracer {
@@ -173,6 +200,12 @@ class RayTracer {
   RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
             const std::vector<Prototype>& prototypes, const std::vector<Instance>& instances,
             const RayTracerBuildOptions& build = {});
+  /// Same, with what vertex receivers need to start at Cycles' bake point (BakeShading; above,
+  /// "Origins"). Throws std::invalid_argument for normals of another size than #V or not
+  /// finite, or polygons without normals.
+  RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+            const BakeShading& shading, const std::vector<Prototype>& prototypes,
+            const std::vector<Instance>& instances, const RayTracerBuildOptions& build = {});
   ~RayTracer();
   RayTracer(RayTracer&&) noexcept;
   RayTracer& operator=(RayTracer&&) noexcept;
@@ -203,6 +236,8 @@ class RayTracer {
   std::size_t vertex_count() const;
   std::size_t triangle_count() const;
   std::size_t instance_count() const;
+  /// Whether vertex receivers start at Cycles' bake point (built with vertex normals).
+  bool has_vertex_normals() const;
 
  private:
   struct Impl;
