@@ -49,7 +49,7 @@ def study(name, voxels, quick=True):
     keep = ~rs.buried(sc)
     D = sc.distance
     ids = np.arange(sc.n_vertices, dtype=np.int32)
-    tracer, t_bvh = timed(lambda: _core.RayTracer(sc.V, sc.T))
+    tracer, t_bvh = timed(lambda: rs.scene_tracer(sc))
     ao64, t64 = timed(lambda: rs.trace_vertices(tracer, sc, 64, D, 0))
     t64 += t_bvh
     m64 = compare(ao64, ref, keep)["mae"]

@@ -104,7 +104,7 @@ def methods(sc):
             yield m, np.concatenate([r.ao for r in res]), dt, f"tau {rep.get('tau', '')}"
         except Exception as exc:  # a rung that refuses the scene says why
             yield m, None, 0.0, f"failed: {exc}"
-    tracer, t_bvh = timed(lambda: _core.RayTracer(sc.V, sc.T))
+    tracer, t_bvh = timed(lambda: rs.scene_tracer(sc))
     for n in RAYS:
         ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0))
         yield f"rays {n}", ao, dt + t_bvh, ""

@@ -5,8 +5,9 @@
 
 Scenes: every Sapling Tree Gen export in bench/out/real (examples/sapling_scenes.py, read through
 bench/real_scenes.py) that has a Cycles bake at the reference count (--reference, default
-1024 samples: `<scene>_quick_cycles_<N>.npz`). Receivers are every vertex, each skipping only
-its own triangles (as the add-on bakes); errors are MAE against Cycles at the reference count,
+1024 samples: `<scene>_quick_cycles_<N>.npz`). Receivers are every vertex, each started at
+Cycles' bake point (real_scenes.scene_tracer, as the add-on bakes: native raytrace.h,
+'Origins'); errors are MAE against Cycles at the reference count,
 over all vertices and with buried ones (real_scenes.buried) left out.
 
 Per scene and sample count S: Cycles at S samples (when baked), our rays at S rays (the
@@ -128,7 +129,7 @@ def main():
             print(f"\n{name}: no Cycles bake at {args.reference} samples, skipped")
             continue
         t0 = time.perf_counter()
-        tracer = _core.RayTracer(sc.V, sc.T)
+        tracer = rs.scene_tracer(sc)
         keep = ~rs.buried(sc, tracer)
         contact = rs.trace_vertices(tracer, sc, 64, CONTACT * sc.distance, 7) < 1.0
         roles = np.asarray(sc.role, dtype=str)

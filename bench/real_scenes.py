@@ -86,8 +86,15 @@ def load(scene, quick=True, out_dir=REAL):
 
 
 def tracer_tag():
-    """Which ray tracer made a reference: receivers skip only their own triangles (as Cycles)."""
-    return "own-vertex"
+    """Which ray tracer made a reference: each vertex starts at Cycles' bake point (native
+    raytrace.h, 'Origins'), as the add-on's tracer does."""
+    return "bake-point"
+
+
+def scene_tracer(sc: RealScene):
+    """The scene's ray tracer as the add-on builds it: with the vertex normals, so every vertex
+    starts at Cycles' bake point."""
+    return _core.RayTracer(sc.V, sc.T, normals=sc.N)
 
 
 def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None)):
@@ -106,7 +113,7 @@ def reference(sc: RealScene, samples=1024, tracer=None):
             if str(z["geometry"]) == sc.geometry and str(z["tracer"]) == tag:
                 return z["ao"].astype(np.float32), float(z["seconds"])
     t0 = time.perf_counter()
-    tracer = tracer or _core.RayTracer(sc.V, sc.T)
+    tracer = tracer or scene_tracer(sc)
     ao = trace_vertices(tracer, sc, samples, sc.distance, REF_SEED)
     dt = time.perf_counter() - t0
     np.savez_compressed(path, ao=ao, seconds=dt, samples=samples, geometry=sc.geometry,
@@ -117,7 +124,7 @@ def reference(sc: RealScene, samples=1024, tracer=None):
 def buried(sc: RealScene, tracer=None):
     """bool (N,): leaf and branch (canopy, trunk) vertices whose rays all stop within
     BURIED_FRACTION of their object's bounding-box diagonal (AO traced to that distance is 0)."""
-    tracer = tracer or _core.RayTracer(sc.V, sc.T)
+    tracer = tracer or scene_tracer(sc)
     out = np.zeros(sc.n_vertices, bool)
     for k, n in enumerate(sc.names):
         p = sc.parts[n]

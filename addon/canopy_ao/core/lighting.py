@@ -218,11 +218,12 @@ def _hybrid_ao(plan, p, n, own=None):
     return ao * np.asarray(tail, dtype=np.float32)
 
 
-def _scene_triangles(items, bases=None):
+def _scene_triangles(items, bases=None, normals=None):
     """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32).
     bases: a dict to fill with item name -> (its first vertex, its first triangle) there (None
-    for a name seen twice: it cannot say which mesh it means)."""
-    verts, tris, base, tri_base = [], [], 0, 0
+    for a name seen twice: it cannot say which mesh it means). normals: a list to fill with the
+    mesh's vertex normals (float32 (V, 3)), for the tracer's bake points."""
+    verts, tris, nrms, base, tri_base = [], [], [], 0, 0
     for it in items:
         if it.role == "IGNORE" or not len(it.triangles):
             continue
@@ -230,10 +231,13 @@ def _scene_triangles(items, bases=None):
             bases[it.name] = None if it.name in bases else (base, tri_base)
         verts.append(it.positions)
         tris.append(it.triangles + base)
+        nrms.append(it.normals)
         base += len(it.positions)
         tri_base += len(it.triangles)
     if not verts:
         raise CanopyAOError("the scene has no triangles")
+    if normals is not None:
+        normals.append(np.ascontiguousarray(np.concatenate(nrms), dtype=np.float32))
     return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
 
@@ -244,16 +248,19 @@ def build_tracer(items, bases=None, prototypes=None):
     instance matrix (Embree instances: each prototype's BVH built once), so the exact rung and
     calibration see instanced trees as the real triangles they are (docs/DESIGN.md, 'How each
     role is lit'). A scene of instances alone (a ground is a receiver with triangles, so this
-    is rare) still gets a tracer."""
+    is rare) still gets a tracer. Vertex receivers start where Cycles' vertex bake starts them
+    (its bake point, from the items' vertex normals: native raytrace.h, 'Origins')."""
     from .forest import tracer_instances
     inst = tracer_instances(prototypes)
+    normals = []
     try:
-        mesh = _scene_triangles(items, bases)
+        mesh = _scene_triangles(items, bases, normals)
     except CanopyAOError:
         if not inst:
             raise
         mesh = (np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
-    return _core.RayTracer(*mesh, **inst)
+        normals = [np.zeros((0, 3), np.float32)]
+    return _core.RayTracer(*mesh, normals=normals[0], **inst)
 
 
 def traces_instances(plan: Plan) -> bool:
