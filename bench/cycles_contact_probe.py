@@ -8,12 +8,14 @@ Needs the scene's export and its 1024-sample Cycles bake in bench/out/real (benc
 'Rays against Cycles' samples', says what it found.
 
 It takes the contact vertices (a ray blocked within 1e-4 of the AO distance) where our rays
-(256, the add-on's rule: own triangles skipped) and Cycles' 1024-sample bake disagree most, the
+(256, the rule before the bake point: own triangles skipped, a hair from the vertex) and
+Cycles' 1024-sample bake disagree most, the
 --vertices most positive and most negative. For each it cuts the smallest scene that still
 disagrees: the vertex's own piece (the connected part of its mesh within 1e-3 of the AO distance)
 and the one nearest triangle of any other piece whose plane it lies close to. Cycles bakes that
 little mesh (1024 samples, AO distance 3e-3 of the scene's, smooth shading as exported), our
-tracer traces it, and then the other triangle is moved along its normal so that its plane
+tracer traces it with the rule before and at Cycles' bake point (given the vertex normals, as
+the add-on builds it), and then the other triangle is moved along its normal so that its plane
 passes at the printed signed gaps from the vertex (positive: the vertex is on the side the
 triangle's normal points to), to show where Cycles' answer turns over and where ours does.
 """
@@ -99,7 +101,8 @@ def nearest_other(v, t, k, own_mask):
 
 
 def bake_little(v, tris, k_local, distance):
-    """(Cycles, ours) AO at local vertex k_local of the mesh (v, tris), 1024 samples/rays."""
+    """(Cycles, ours before, ours at the bake point) AO at local vertex k_local of the mesh
+    (v, tris), 1024 samples/rays: the tracer without and with vertex normals."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     me = bpy.data.meshes.new("probe")
     me.from_pydata(v.tolist(), [], tris.tolist())
@@ -112,10 +115,13 @@ def bake_little(v, tris, k_local, distance):
     cyc = float(np.asarray(res["probe"])[k_local])
     vv = np.array([x.co[:] for x in me.vertices], np.float32)
     nn = np.array([x.normal[:] for x in me.vertices], np.float32)
-    tracer = _core.RayTracer(vv, np.ascontiguousarray(tris, np.int32))
-    ours = float(tracer.ao(vv[k_local:k_local + 1], nn[k_local:k_local + 1], samples=1024,
-                           distance=distance, vertex_ids=np.array([k_local], np.int32))[0])
-    return cyc, ours
+    tri32 = np.ascontiguousarray(tris, np.int32)
+    one = dict(samples=1024, distance=distance, vertex_ids=np.array([k_local], np.int32))
+    before = float(_core.RayTracer(vv, tri32).ao(vv[k_local:k_local + 1],
+                                                 nn[k_local:k_local + 1], **one)[0])
+    bake = float(_core.RayTracer(vv, tri32, normals=nn).ao(vv[k_local:k_local + 1],
+                                                           nn[k_local:k_local + 1], **one)[0])
+    return cyc, before, bake
 
 
 def main():
@@ -128,6 +134,7 @@ def main():
     tracer = _core.RayTracer(v, np.ascontiguousarray(t, np.int32))
     ids = np.arange(len(v), dtype=np.int32)
     ours = np.asarray(tracer.ao(v, n, samples=256, distance=distance, seed=1, vertex_ids=ids))
+    # (the tracer without normals: the rule before the bake point, where they disagreed)
     contact = np.asarray(tracer.ao(v, n, samples=64, distance=CONTACT * distance, seed=7,
                                    vertex_ids=ids)) < 1.0
     idx = np.flatnonzero(contact)
@@ -159,10 +166,11 @@ def main():
                 for vid in t[other]:
                     if vid != k:
                         lv[np.searchsorted(used, vid)] += shift * ng
-            cyc, ou = bake_little(lv, inv.reshape(-1, 3), int(np.searchsorted(used, k)),
-                                  3e-3 * distance)
+            cyc, before, bake = bake_little(lv, inv.reshape(-1, 3),
+                                            int(np.searchsorted(used, k)), 3e-3 * distance)
             what = "as found" if g_um is None else f"gap {g_um:+5d} um"
-            print(f"     {what:14s} Cycles {cyc:.3f}  ours {ou:.3f}", flush=True)
+            print(f"     {what:14s} Cycles {cyc:.3f}  rule before {before:.3f}  "
+                  f"bake point {bake:.3f}", flush=True)
 
 
 main()

@@ -60,7 +60,9 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
   shading.vertex_normals = vn;
   py::array polygons_keep;
   if (!polygons.is_none()) {
-    if (normals.is_none()) throw py::value_error("polygons need normals (they only group corners)");
+    if (normals.is_none()) {
+      throw py::value_error("polygons need normals (they only group corners)");
+    }
     polygons_keep = polygons.cast<py::array>();
     require_dtype(polygons_keep, "polygons", py::dtype::of<std::int32_t>(), "int32");
     if (polygons_keep.ndim() != 1 || static_cast<std::size_t>(polygons_keep.shape(0)) != m) {

@@ -529,14 +529,10 @@ struct RayTracer::Impl {
     Vec3 n = normal ? *normal : N[0] * w[0] + N[1] * w[1] + N[2] * w[2];
     const float nl = length(n);
     n = nl > 0.0f ? n / nl : ng;
-    if (dot(ng, n) < 0.0f) {
-      if (normal) {
-        ng = -ng;  // a texel: its own normal decides the side, the face normal follows
-      } else {     // a back-facing bake point: Cycles flips both
-        ng = -ng;
-        n = -n;
-      }
-    }
+    // The face normal on the shading normal's side. (Where a vertex normal opposes its face,
+    // which Blender's own normals never do, Cycles would bake the other hemisphere; the
+    // receiver's normal is kept instead.)
+    if (dot(ng, n) < 0.0f) ng = -ng;
     Corner cn;
     cn.start = V[0] * w[0] + V[1] * w[1] + V[2] * w[2];
     cn.n = n;
@@ -609,7 +605,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   Impl& m = *impl_;
   check_mesh(vertices, triangles, triangle_count, "");
   const PointsView vertex_normals = shading.vertex_normals;
-  if (shading.polygons != nullptr) {
+  if (shading.polygons != nullptr && triangle_count > 0) {
     if (vertex_normals.size == 0) {
       throw std::invalid_argument("polygons need vertex_normals (they only group corners)");
     }

@@ -387,3 +387,42 @@ def test_tracing_releases_the_gil():
     inside = sum(lo < s < hi for s in stamps)
     assert inside > 0, f"no Python ran during the {t1 - t0:.2f} s call: the GIL was held"
     assert span["ao"].shape == (2000,)
+
+
+def test_bake_point_shading_is_checked():
+    """normals=/polygons= (the bake point, native raytrace.h 'Origins'): shapes and the pairing
+    are checked, a tracer without them keeps the rule before."""
+    v = np.float32([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    t = np.int32([[0, 1, 2], [0, 2, 3]])
+    up = np.tile(np.float32([0, 0, 1]), (4, 1))
+    assert not _core.RayTracer(v, t).has_vertex_normals
+    assert _core.RayTracer(v, t, normals=up).has_vertex_normals
+    assert _core.RayTracer(v, t, normals=up, polygons=np.int32([0, 0])).has_vertex_normals
+    with pytest.raises(ValueError, match="one row per vertex"):
+        _core.RayTracer(v, t, normals=up[:3])
+    with pytest.raises(ValueError, match="polygons need normals"):
+        _core.RayTracer(v, t, polygons=np.int32([0, 0]))
+    with pytest.raises(ValueError, match="polygons must be int32"):
+        _core.RayTracer(v, t, normals=up, polygons=np.int32([0, 0, 1]))
+    bad = up.copy()
+    bad[2, 1] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        _core.RayTracer(v, t, normals=bad)
+
+
+def test_engine_tracer_carries_normals_and_faces():
+    """The add-on's tracer is built with every item's normals and faces, numbered apart per item
+    (lighting.bake_shading), and a SceneItem refuses face ids that do not match its triangles."""
+    from canopy_ao import core as engine
+    from canopy_ao.core import lighting
+
+    v = np.float32([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    t = np.int32([[0, 1, 2], [0, 2, 3]])
+    up = np.tile(np.float32([0, 0, 1]), (4, 1))
+    a = engine.SceneItem("A", "GROUND", "", v, up, t, polygons=np.int32([0, 0]))
+    b = engine.SceneItem("B", "GROUND", "", v + 2, up, t)
+    sh = lighting.bake_shading([a, b])
+    assert sh["normals"].shape == (8, 3) and list(sh["polygons"]) == [0, 0, 1, 2]
+    assert lighting.build_tracer([a, b]).has_vertex_normals
+    with pytest.raises(engine.CanopyAOError, match="polygon ids"):
+        engine.SceneItem("C", "GROUND", "", v, up, t, polygons=np.int32([0]))

@@ -154,9 +154,10 @@ def scene_items(context, depsgraph, targets, opts, timings):
             opts["method"], opts["tau"], declared[0])
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
+        faces = []
         pos, nor, tris = mesh_io.evaluated_arrays(
             obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
-            triangles=tris_needed, timings=timings)
+            triangles=tris_needed, timings=timings, polygons=faces)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
         if declared is None and not bent and not ladder.triangles_needed(opts["method"],
@@ -166,7 +167,9 @@ def scene_items(context, depsgraph, targets, opts, timings):
         if role == "IGNORE":
             continue
         tree, source = tree_and_source(obj)
-        items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source))
+        polys = faces[0] if faces and len(faces[0]) == len(tris) else None
+        items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source,
+                               polygons=polys))
         objects[name] = obj
         how[name] = why
     return items, objects, how

@@ -48,7 +48,8 @@ def _lap(timings, key, t0):
     return t1
 
 
-def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=None):
+def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=None,
+                     polygons=None):
     """World-space arrays of an object's evaluated mesh (modifiers applied).
 
     Returns (positions float32 (V, 3), normals float32 (V, 3) unit, triangles int32 (F, 3)).
@@ -58,6 +59,8 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     from the original (a per-vertex result could not be stored on the original mesh).
     timings: a dict to which the seconds of each stage are added ("fetch", "positions",
     "normals", "triangles", "transform").
+    polygons: a list to which each triangle's face index, int32 (F,), is appended (with
+    triangles; the ray tracer's bake points count one corner per face).
     """
     t = time.perf_counter()
     ob_eval = None
@@ -83,6 +86,10 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
             mesh.calc_loop_triangles()
             tris = np.empty((len(mesh.loop_triangles), 3), dtype=np.int32)
             mesh.loop_triangles.foreach_get("vertices", tris.reshape(-1))
+            if polygons is not None:
+                faces = np.empty(len(mesh.loop_triangles), dtype=np.int32)
+                mesh.loop_triangles.foreach_get("polygon_index", faces)
+                polygons.append(faces)
         else:
             tris = np.zeros((0, 3), dtype=np.int32)
         t = _lap(timings, "triangles", t)

@@ -218,12 +218,28 @@ def _hybrid_ao(plan, p, n, own=None):
     return ao * np.asarray(tail, dtype=np.float32)
 
 
-def _scene_triangles(items, bases=None, normals=None):
+def bake_shading(items):
+    """The tracer's bake-point data for items merged in order (native raytrace.h, 'Origins'):
+    {"normals": float32 (V, 3), "polygons": int32 (M,)}, each item's faces numbered apart (an
+    item without face ids counts every triangle a face)."""
+    nrms, polys, first = [], [], 0
+    for it in items:
+        nrms.append(it.normals)
+        faces = it.polygons if it.polygons is not None else np.arange(len(it.triangles))
+        polys.append(np.asarray(faces, np.int64) + first)
+        first += int(faces.max()) + 1 if len(faces) else 0
+    if not nrms:
+        return {"normals": np.zeros((0, 3), np.float32), "polygons": np.zeros(0, np.int32)}
+    return {"normals": np.ascontiguousarray(np.concatenate(nrms), dtype=np.float32),
+            "polygons": np.ascontiguousarray(np.concatenate(polys), dtype=np.int32)}
+
+
+def _scene_triangles(items, bases=None, shading=None):
     """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32).
     bases: a dict to fill with item name -> (its first vertex, its first triangle) there (None
-    for a name seen twice: it cannot say which mesh it means). normals: a list to fill with the
-    mesh's vertex normals (float32 (V, 3)), for the tracer's bake points."""
-    verts, tris, nrms, base, tri_base = [], [], [], 0, 0
+    for a name seen twice: it cannot say which mesh it means). shading: a dict to fill with
+    bake_shading of the same items, for the tracer's bake points."""
+    verts, tris, kept, base, tri_base = [], [], [], 0, 0
     for it in items:
         if it.role == "IGNORE" or not len(it.triangles):
             continue
@@ -231,13 +247,13 @@ def _scene_triangles(items, bases=None, normals=None):
             bases[it.name] = None if it.name in bases else (base, tri_base)
         verts.append(it.positions)
         tris.append(it.triangles + base)
-        nrms.append(it.normals)
+        kept.append(it)
         base += len(it.positions)
         tri_base += len(it.triangles)
     if not verts:
         raise CanopyAOError("the scene has no triangles")
-    if normals is not None:
-        normals.append(np.ascontiguousarray(np.concatenate(nrms), dtype=np.float32))
+    if shading is not None:
+        shading.update(bake_shading(kept))
     return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
 
@@ -249,18 +265,18 @@ def build_tracer(items, bases=None, prototypes=None):
     calibration see instanced trees as the real triangles they are (docs/DESIGN.md, 'How each
     role is lit'). A scene of instances alone (a ground is a receiver with triangles, so this
     is rare) still gets a tracer. Vertex receivers start where Cycles' vertex bake starts them
-    (its bake point, from the items' vertex normals: native raytrace.h, 'Origins')."""
+    (its bake point, from the items' vertex normals and faces: native raytrace.h, 'Origins')."""
     from .forest import tracer_instances
     inst = tracer_instances(prototypes)
-    normals = []
+    shading = {}
     try:
-        mesh = _scene_triangles(items, bases, normals)
+        mesh = _scene_triangles(items, bases, shading)
     except CanopyAOError:
         if not inst:
             raise
         mesh = (np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
-        normals = [np.zeros((0, 3), np.float32)]
-    return _core.RayTracer(*mesh, normals=normals[0], **inst)
+        shading = bake_shading([])
+    return _core.RayTracer(*mesh, **shading, **inst)
 
 
 def traces_instances(plan: Plan) -> bool:

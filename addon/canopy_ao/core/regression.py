@@ -169,9 +169,8 @@ class RegressionRung:
             for it in traced:
                 bases[id(it)] = base
                 base += len(it.positions)
-            normals = (np.ascontiguousarray(np.concatenate([it.normals for it in traced]),
-                                            np.float32) if traced else np.zeros((0, 3), np.float32))
-            tracer = _core.RayTracer(*_merged(traced), normals=normals)  # Cycles' bake points
+            from .lighting import bake_shading
+            tracer = _core.RayTracer(*_merged(traced), **bake_shading(traced))  # bake points
             ids = _own_ids_from(bases)
         t_tracer = time.perf_counter()
         groups = {}

@@ -33,6 +33,10 @@ class SceneItem:
     # A part of an item (scene.parts): its vertices' indices in the item it was cut from, so a
     # ray can still name its receiver's vertex in the tracer's mesh (built from whole items).
     vertex_map: np.ndarray | None = None
+    # Each triangle's face (polygon) in the mesh, int32 (M,), or None: a vertex of a quad's
+    # diagonal or an n-gon's fan is one face corner, as Cycles bakes it (native raytrace.h,
+    # 'Origins'); None counts every triangle a corner.
+    polygons: np.ndarray | None = None
 
     def __post_init__(self):
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)
@@ -43,6 +47,11 @@ class SceneItem:
         if self.tree_labels is not None and len(self.tree_labels) != len(self.positions):
             raise CanopyAOError(f"{self.name}: {len(self.tree_labels)} tree labels for "
                                 f"{len(self.positions)} vertices")
+        if self.polygons is not None:
+            self.polygons = np.ascontiguousarray(self.polygons, dtype=np.int32).reshape(-1)
+            if len(self.polygons) != len(self.triangles):
+                raise CanopyAOError(f"{self.name}: {len(self.polygons)} polygon ids for "
+                                    f"{len(self.triangles)} triangles")
         if len(self.positions) != len(self.normals):
             raise CanopyAOError(f"{self.name}: {len(self.positions)} positions but "
                                 f"{len(self.normals)} normals")
@@ -107,16 +116,17 @@ def parts(item: SceneItem):
     tri_tree = item.tree_labels[item.triangles[:, 0]] if len(item.triangles) else None
     for k, tree in enumerate(item.tree_names):
         idx = np.flatnonzero(item.tree_labels == k)
-        tris = np.zeros((0, 3), np.int32)
+        tris, polys = np.zeros((0, 3), np.int32), None
         if tri_tree is not None:
             keep = (tri_tree == k) & (item.tree_labels[item.triangles[:, 1]] == k) \
                 & (item.tree_labels[item.triangles[:, 2]] == k)
             remap = np.full(len(item.positions), -1, np.int64)
             remap[idx] = np.arange(len(idx))
             tris = remap[item.triangles[keep]]
+            polys = item.polygons[keep] if item.polygons is not None else None
         out.append((SceneItem(item.name, item.role, tree, item.positions[idx],
                               item.normals[idx], tris, tree_source=item.tree_source,
-                              tree_why=item.tree_why, vertex_map=idx), idx))
+                              tree_why=item.tree_why, vertex_map=idx, polygons=polys), idx))
     return out
 
 

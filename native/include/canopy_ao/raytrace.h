@@ -33,8 +33,8 @@
 //    bake_offset_towards_center; it depends on the distance from the world origin, as Cycles'
 //    does (1.2 mm for a vertex 12 m from it);
 //  - the hemisphere is around the smooth normal interpolated there from the triangle's three
-//    vertex normals (both it and the face normal flipped when they disagree, as Cycles flips a
-//    back-facing bake point);
+//    vertex normals, the face normal taken on its side (where a vertex normal opposes its face,
+//    which Blender's own normals never do, Cycles would bake the other hemisphere);
 //  - only the corner's triangle is skipped; a ray within cos⁻¹(0.1) of grazing the face (Cycles'
 //    default shadow-terminator geometry offset, 0.1) starts lifted onto the smooth surface the
 //    vertex normals describe (Cycles' shadow_ray_smooth_surface_offset), and one that dives below
