@@ -191,6 +191,45 @@ void BM_RayTracer_ao(benchmark::State& state) {
          sum / kReceivers, cpu1 - cpu0);
 }
 
+// The leaves' own vertices as receivers (the add-on's vertex path), each naming itself:
+// second argument 0 = the own-surface rule (a tracer without vertex normals), 1 = Cycles' bake
+// point (the tracer the add-on builds: vertex normals given, per-corner starts, terminator
+// lift, a ROBUST scene). Same rays, same counts: the ratio is what the bake point costs.
+void BM_RayTracer_vertices(benchmark::State& state) {
+  const Canopy& c = canopy();
+  const std::size_t nv = 3 * static_cast<std::size_t>(kReceivers);
+  std::vector<float> vn(c.v.size());
+  for (std::size_t k = 0; k < c.t.size() / 3; ++k) {
+    const Vec3 a = c.vertices()[3 * k], b = c.vertices()[3 * k + 1], d = c.vertices()[3 * k + 2];
+    const Vec3 f = normalize(cross(b - a, d - a));
+    for (int j = 0; j < 3; ++j) std::copy(&f.x, &f.x + 3, vn.begin() + 9 * k + 3 * j);
+  }
+  static const RayTracer plain(c.vertices(), c.t.data(), c.t.size() / 3);
+  static const RayTracer baking(c.vertices(), c.t.data(), c.t.size() / 3,
+                                BakeShading{{vn.data(), vn.size() / 3}, nullptr}, {}, {});
+  const RayTracer& rt = state.range(1) ? baking : plain;
+  const int prev = set_max_threads(static_cast<int>(state.range(0)));
+  RayTraceOptions o;
+  o.samples = kSamples;
+  std::vector<float> out(nv);
+  std::vector<std::int32_t> self(nv);
+  for (std::size_t k = 0; k < nv; ++k) self[k] = static_cast<std::int32_t>(k);
+  OwnPrimitives own;
+  own.vertex_ids = self.data();
+  const PointsView pts{c.v.data(), nv}, nrm{vn.data(), nv};
+  const double cpu0 = process_cpu_seconds();
+  for (auto _ : state) {
+    rt.ao(pts, nrm, own, o, out.data());
+    benchmark::ClobberMemory();
+  }
+  const double cpu1 = process_cpu_seconds();
+  double sum = 0;
+  for (float x : out) sum += x;
+  set_max_threads(prev);
+  report(state, static_cast<double>(state.iterations()) * static_cast<double>(nv) * kSamples,
+         sum / static_cast<double>(nv), cpu1 - cpu0);
+}
+
 // Runs a bare loop over all receivers under the benchmark's thread cap: trace(scene, ctx, o,
 // n, t, b) returns how many of a point's rays are open, given its origin o, unit normal n and
 // basis (t, b). Everything but the tracing is the same for the three bare loops.
@@ -293,6 +332,8 @@ void BM_RayTracer_build(benchmark::State& state) {
 
 // Real time: the work runs on TBB workers, not on the benchmark's thread.
 BENCHMARK(BM_RayTracer_ao)->Args({1, 0})->Args({2, 0})->Args({1, 1})->Args({2, 1})
+    ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
+BENCHMARK(BM_RayTracer_vertices)->Args({1, 0})->Args({1, 1})->Args({2, 0})->Args({2, 1})
     ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
 BENCHMARK(BM_RayTrace_bare_occluded1)->Args({1, 0})->Args({2, 0})->Unit(benchmark::kMillisecond)
     ->UseRealTime()->MinTime(1.0);

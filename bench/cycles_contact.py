@@ -6,8 +6,9 @@
 A 100 m ground grid; three 2 cm blades standing on it (upright, leaning back 25° so their normal
 tilts up, leaning forward so it tilts down); a 16-sided trunk with both ends capped, its bottom
 cap in the ground plane. Cycles bakes AO per vertex (the add-on's cycles_check, AO distance 20);
-RayTracer traces the same vertices with their own triangles skipped (vertex_ids, the add-on's
-path) and with the old normal offset. Prints the mean per group of vertices (blade roots,
+RayTracer traces the same vertices at Cycles' bake point (given the vertex normals and faces:
+the add-on's path), with their own triangles skipped from a hair off the vertex (the rule
+before), and with the old normal offset. Prints the mean per group of vertices (blade roots,
 blade tips, the trunk's bottom and top rings). Closed forms for the roots: a plane through the
 receiver blocks (1 − n·up)/2 of its hemisphere, so AO = (1 + n·up)/2.
 """
@@ -62,7 +63,8 @@ def arrays(ob):
     v = np.array([x.co[:] for x in me.vertices], np.float32)
     nrm = np.array([x.normal[:] for x in me.vertices], np.float32)
     t = np.array([lt.vertices[:] for lt in me.loop_triangles], np.int32)
-    return v, nrm, t
+    faces = np.array([lt.polygon_index for lt in me.loop_triangles], np.int32)
+    return v, nrm, t, faces
 
 
 def main():
@@ -75,7 +77,7 @@ def main():
     data = {o.name: arrays(o) for o in objs}
     verts, tris, base = [], [], {}
     count = 0
-    for name, (v, _n, t) in data.items():
+    for name, (v, _n, t, _f) in data.items():
         base[name] = count
         verts.append(v)
         tris.append(t + count)
@@ -85,11 +87,14 @@ def main():
     bake = _core.RayTracer(np.ascontiguousarray(np.concatenate(verts)),
                            np.ascontiguousarray(np.concatenate(tris), np.int32),
                            normals=np.ascontiguousarray(np.concatenate(
-                               [n for _v, n, _t in data.values()]), np.float32))
+                               [n for _v, n, _t, _f in data.values()]), np.float32),
+                           polygons=np.ascontiguousarray(np.concatenate(
+                               [f + 1_000_000 * k for k, (_v, _n, _t, f) in
+                                enumerate(data.values())]), np.int32))
     print(f"Cycles {samples} samples vs RayTracer {samples} rays, AO distance 20")
     print(f"{'vertices':28s} {'Cycles':>8s} {'bake point':>11s} {'own skipped':>12s} "
           f"{'old offset':>11s} {'closed form':>12s}")
-    for name, (v, nrm, _t) in data.items():
+    for name, (v, nrm, _t, _f) in data.items():
         if name == "Ground":
             continue
         ids = np.ascontiguousarray(base[name] + np.arange(len(v), dtype=np.int32))
