@@ -31,7 +31,9 @@ from .native import _core
 # the shared 2-core machine at load average 10. Scaled by 0.36 to a quiet machine: the same
 # tree's rays took 0.70 s for 80,000 vertices × 64 rays on 2 threads quiet (the README's
 # example bake), 1.74e-8 per BVH step against 4.8e-8 under that load. Re-measure when a kernel
-# changes speed by 2×.
+# changes speed by 2×. (Since the exact rung starts each vertex at Cycles' bake point in a
+# ROBUST scene its rays take 1.24× as long — README, 'Speed' — within the model's margin, so
+# the constant stands.)
 SECONDS_PER_UNIT = {
     "shell": 6.0e-9,         # one analytic shell evaluation (in-shell model or occluder)
     "medium": 1.7e-8,        # one medium-table shell evaluation
