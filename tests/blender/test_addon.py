@@ -618,9 +618,9 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     asked, force = {}, [True]
     real = mio.evaluated_arrays
 
-    def spy(obj, depsgraph, same_count=True, triangles=True, timings=None):
+    def spy(obj, depsgraph, same_count=True, triangles=True, timings=None, **kw):
         asked[obj.name] = triangles
-        return real(obj, depsgraph, same_count, triangles or force[0], timings)
+        return real(obj, depsgraph, same_count, triangles or force[0], timings, **kw)
     monkeypatch.setattr(mio, "evaluated_arrays", spy)
     assert bake(method="sphere", tau=1.5) == {'FINISHED'}  # every triangle fetched
     before = {n: ao_of(n) for n in roles}
