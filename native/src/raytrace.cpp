@@ -255,7 +255,7 @@ constexpr float kTerminatorCutoff = 0.1f;
 
 /// One corner of a vertex receiver started at Cycles' bake point (raytrace.h, "Origins").
 struct Corner {
-  Vec3 start;         // the vertex moved towards the triangle's centroid (bake_offset_towards_center)
+  Vec3 start;         // the vertex moved towards the centroid (bake_offset_towards_center)
   Vec3 t, b, n;       // frame around the smooth normal interpolated at `start`
   Vec3 ng;            // the face normal, on n's side
   Vec3 lift;          // Cycles' shadow_ray_smooth_surface_offset at `start` (full amount)

@@ -38,12 +38,17 @@
 //  - only the corner's triangle is skipped; a ray within cos⁻¹(0.1) of grazing the face (Cycles'
 //    default shadow-terminator geometry offset, 0.1) starts lifted onto the smooth surface the
 //    vertex normals describe (Cycles' shadow_ray_smooth_surface_offset), and one that dives below
-//    the face keeps its own triangle as an occluder.
-// Checked against Cycles (bench/cycles_contact_probe.py, 1024 samples): a vertex of a branch
-// piece lying 25–90 µm from another piece's face, an isolated square tube (1.0 where a start
-// inside a face without the lift gives 0.85–0.89).
+//    the face keeps its own triangle as an occluder;
+//  - the scene is built ROBUST, as Cycles builds it: its hit test also counts a face through
+//    the ray's start (t = 0), so a start lying in another face's plane sees that face.
+// A texel (triangle_ids) on such a tracer starts at the texel itself with its own normal,
+// skips its triangle and gets the same terminator lift. Checked against Cycles
+// (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
+// 1024 samples): a vertex of a branch piece lying 25–90 µm from another piece's face, an
+// isolated square tube (1.0 where a start inside a face without the lift gives 0.85–0.89), a
+// trunk's capped rim in the ground (0.130 against 0.129).
 //
-// A vertex without the tracer's vertex normals, or a triangle, skips all its own triangles
+// A vertex or a triangle on a tracer without vertex normals skips all its own triangles
 // (every triangle using that vertex, or that triangle: an Embree filter on the primitive id) and
 // starts on the surface itself, moved a hair (1e-3 of the way, at least the float spacing of the
 // coordinates, at most half) towards the centroid of one own triangle: a texel's, or of a
@@ -146,11 +151,13 @@ struct OwnPrimitives {
 };
 
 /// How the Embree scene is built (tuning, not semantics: results are the same up to float
-/// rounding at triangle edges).
+/// rounding at triangle edges, and at a ray's start, where ROBUST counts a face through it).
 struct RayTracerBuildOptions {
   /// RTC_BUILD_QUALITY_HIGH (spatial splits: slower build, faster traversal) instead of MEDIUM.
   bool high_quality = false;
-  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed, docs/DESIGN.md, 'Facts measured in Blender').
+  /// RTC_SCENE_FLAG_ROBUST (watertight-safe traversal; costs about a third of the speed,
+  /// docs/DESIGN.md, 'Facts measured in Blender'). Always on for a tracer built with vertex
+  /// normals (Cycles' bake point, "Origins" above).
   bool robust = false;
 };
 
