@@ -360,6 +360,29 @@ def c_raytracer(g, core, tmp):
     return (lambda: core.RayTracer(v, t).ao(p, nrm, **kw)), (lambda r: check_ao(r, n))
 
 
+def c_raytracer_bake_point(g, core, tmp):
+    """The tracer with vertex normals (and sometimes faces): its own vertices and triangles as
+    receivers, at Cycles' bake point (native raytrace.h, 'Origins')."""
+    v, t = g.mesh()
+    nv = len(v) if isinstance(v, np.ndarray) and v.ndim == 2 else 0
+    vn = g.normals(nv) if not g.chance(0.05) else g.normals(max(nv - 1, 0))
+    mt = len(t) if isinstance(t, np.ndarray) and t.ndim == 2 else 0
+    polys = None
+    if g.chance(0.5):
+        polys = g.mutate((np.arange(mt) // int(g.r.integers(1, 4))).astype(np.int32), 0.05)
+    n = int(g.r.integers(0, nv + 1)) if nv else 0  # a count, not a special value to allocate
+    own = {}
+    if n and g.chance(0.5):
+        own["vertex_ids"] = g.mutate(g.r.integers(-1, nv, size=n).astype(np.int32), 0.05)
+    elif n and mt:
+        own["triangle_ids"] = g.mutate(g.r.integers(-1, mt, size=n).astype(np.int32), 0.05)
+    p = v[:n] if nv else g.points(0)
+    nrm = g.normals(n)
+    kw = dict(samples=g.integer(1, 64), distance=g.scalar(0.1, 10), seed=g.integer(0, 9), **own)
+    return (lambda: core.RayTracer(v, t, normals=vn, polygons=polys).ao(p, nrm, **kw)), \
+        (lambda r: check_ao(r, n))
+
+
 def c_ao_raytrace(g, core, tmp):
     v, t = g.mesh()
     p, nrm, n = receivers(g)
