@@ -249,6 +249,26 @@ inline Vec3 own_surface_origin(Vec3 x, Vec3 target, float precision) {
   return x + d * (step / len);
 }
 
+/// raw normalised, or (0, 0, 0) when it is zero: scaled by its largest component first, so
+/// tiny (1e-25) normals do not underflow to zero.
+inline Vec3 unit_or_zero(Vec3 raw) {
+  const float big = std::max(std::fabs(raw.x), std::max(std::fabs(raw.y), std::fabs(raw.z)));
+  return big > 0.0f ? normalize(raw / big) : Vec3{0.0f, 0.0f, 0.0f};
+}
+
+/// The barycentric weights (of V[1], V[2]) of x's projection onto triangle V's plane, unclamped;
+/// false for a degenerate triangle.
+inline bool barycentric(const Vec3 V[3], Vec3 x, float* v, float* w) {
+  const Vec3 e1 = V[1] - V[0], e2 = V[2] - V[0], vp = x - V[0];
+  const float d11 = dot(e1, e1), d12 = dot(e1, e2), d22 = dot(e2, e2);
+  const float denom = d11 * d22 - d12 * d12;
+  if (!(denom > 0.0f)) return false;
+  const float dp1 = dot(vp, e1), dp2 = dot(vp, e2);
+  *v = (d22 * dp1 - d12 * dp2) / denom;
+  *w = (d11 * dp2 - d12 * dp1) / denom;
+  return true;
+}
+
 /// Cycles' default shadow-terminator geometry offset (Object > Shading): rays within this
 /// cosine of grazing their face start lifted onto the smooth surface (raytrace.h, "Origins").
 constexpr float kTerminatorCutoff = 0.1f;
@@ -395,17 +415,12 @@ void accumulate_open(const RTCRay* rays, const std::uint32_t* owner, std::size_t
 void finish_bent(PointsView normals, std::size_t begin, std::size_t end, const float* sums,
                  float* bent) {
   for (std::size_t i = begin; i < end; ++i) {
-    const Vec3 raw = normals[i];
-    const float big = std::max(std::fabs(raw.x), std::max(std::fabs(raw.y), std::fabs(raw.z)));
-    Vec3 b{0.0f, 0.0f, 0.0f};
-    if (big > 0.0f) {
-      b = normalize(raw / big);
-      if (sums) {
-        const float* s = sums + 3 * (i - begin);
-        const Vec3 v{s[0], s[1], s[2]};
-        const float len = length(v);
-        if (len > 0.0f) b = v / len;
-      }
+    Vec3 b = unit_or_zero(normals[i]);
+    if (sums && length(b) > 0.0f) {
+      const float* s = sums + 3 * (i - begin);
+      const Vec3 v{s[0], s[1], s[2]};
+      const float len = length(v);
+      if (len > 0.0f) b = v / len;
     }
     bent[3 * i] = b.x;
     bent[3 * i + 1] = b.y;
@@ -488,24 +503,19 @@ struct RayTracer::Impl {
         if (seen) continue;
       }
       const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
-      Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
-      const Vec3 e1 = V[1] - V[0], e2 = V[2] - V[0];
-      const Vec3 c = cross(e1, e2);
+      const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
+      const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
       const float area2 = length(c);
       if (!(area2 > 0.0f)) continue;
-      Vec3 ng = c / area2;
+      const Vec3 ng = c / area2;
       // bake_offset_towards_center: move towards the centroid, then clamp the barycentrics.
       const Vec3 to = (V[0] + V[1] + V[2]) / 3.0f - P;
       const float len = length(to);
       const Vec3 moved = len > 0.0f ? P + to * (std::min(len, reach) / len) : P;
-      const Vec3 vp = moved - V[0];
-      const float d11 = dot(e1, e1), d12 = dot(e1, e2), d22 = dot(e2, e2);
-      const float dp1 = dot(vp, e1), dp2 = dot(vp, e2);
-      const float denom = d11 * d22 - d12 * d12;
       float w[3] = {1.0f, 0.0f, 0.0f};
-      if (denom > 0.0f) {
-        w[1] = std::clamp((d22 * dp1 - d12 * dp2) / denom, 1e-5f, 1.0f - 1e-5f);
-        w[2] = std::clamp((d11 * dp2 - d12 * dp1) / denom, 1e-5f, 1.0f - 1e-5f);
+      if (barycentric(V, moved, &w[1], &w[2])) {
+        w[1] = std::clamp(w[1], 1e-5f, 1.0f - 1e-5f);
+        w[2] = std::clamp(w[2], 1e-5f, 1.0f - 1e-5f);
         w[0] = std::clamp(1.0f - w[1] - w[2], 1e-5f, 1.0f - 1e-5f);
       } else {  // a sliver: stay at the vertex
         for (int j = 0; j < 3; ++j) w[j] = t[j] == v ? 1.0f : 0.0f;
@@ -547,17 +557,12 @@ struct RayTracer::Impl {
   bool texel_corner(Vec3 x, std::uint32_t tri, Vec3 n, Corner* out) const {
     const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
     const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
-    const Vec3 e1 = V[1] - V[0], e2 = V[2] - V[0];
-    const Vec3 c = cross(e1, e2);
+    const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
     const float area2 = length(c);
-    const float d11 = dot(e1, e1), d12 = dot(e1, e2), d22 = dot(e2, e2);
-    const float denom = d11 * d22 - d12 * d12;
-    if (!(area2 > 0.0f) || !(denom > 0.0f)) return false;
-    const Vec3 vp = x - V[0];
-    const float dp1 = dot(vp, e1), dp2 = dot(vp, e2);
     float w[3];
-    w[1] = std::clamp((d22 * dp1 - d12 * dp2) / denom, 0.0f, 1.0f);
-    w[2] = std::clamp((d11 * dp2 - d12 * dp1) / denom, 0.0f, 1.0f - w[1]);
+    if (!(area2 > 0.0f) || !barycentric(V, x, &w[1], &w[2])) return false;
+    w[1] = std::clamp(w[1], 0.0f, 1.0f);
+    w[2] = std::clamp(w[2], 0.0f, 1.0f - w[1]);
     w[0] = 1.0f - w[1] - w[2];
     *out = corner_at(tri, V, c / area2, w, &n);
     out->start = x;  // the texel itself (the weights only shape the lift)
@@ -621,9 +626,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     check_points(vertex_normals, "vertex_normals");
     m.vertex_normals.resize(3 * vertex_normals.size);
     for (std::size_t i = 0; i < vertex_normals.size; ++i) {
-      const Vec3 q = vertex_normals[i];
-      const float big = std::max(std::fabs(q.x), std::max(std::fabs(q.y), std::fabs(q.z)));
-      const Vec3 u = big > 0.0f ? normalize(q / big) : Vec3{0.0f, 0.0f, 0.0f};
+      const Vec3 u = unit_or_zero(vertex_normals[i]);
       m.vertex_normals[3 * i] = u.x;
       m.vertex_normals[3 * i + 1] = u.y;
       m.vertex_normals[3 * i + 2] = u.z;
@@ -862,14 +865,11 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     };
 
     for (std::size_t i = begin; i < end; ++i) {
-      // Scale by the largest component first so tiny (1e-25) normals do not underflow to zero.
-      const Vec3 raw = normals[i];
-      const float big = std::max(std::fabs(raw.x), std::max(std::fabs(raw.y), std::fabs(raw.z)));
-      if (!(big > 0.0f)) {  // zero normal: documented fallback, no hemisphere
+      const Vec3 nn = unit_or_zero(normals[i]);
+      if (!(length(nn) > 0.0f)) {  // zero normal: documented fallback, no hemisphere
         open[i - begin] = samples;
         continue;
       }
-      const Vec3 nn = normalize(raw / big);
       Vec3 t, b;
       onb(nn, &t, &b);
       // The start (see raytrace.h, "Origins"): Cycles' bake point for a vertex when the tracer
