@@ -14,7 +14,6 @@ from ..core import native
 from ..core.native import CanopyAOError
 from .ownership import mark_owned, owned_attributes, ownership, set_record  # noqa: F401
 
-_mark_owned = mark_owned  # its old name, for writers outside this module
 
 class MeshIOError(CanopyAOError):
     """A mesh that cannot be read or written as asked (a user-facing error)."""

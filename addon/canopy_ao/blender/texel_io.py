@@ -17,7 +17,6 @@ import numpy as np
 from . import materials, mesh_io
 from .files_io import Output, check_outputs, image_path, write_own_file
 # Kept under their old names for code that writes image files of its own through texel_io.
-from .files_io import keep_file, write_exr  # noqa: F401
 from ..core.native import CanopyAOError, _core
 
 TAG = "canopy_ao"

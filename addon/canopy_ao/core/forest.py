@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lighting import tau_of
-from .native import _core, require
+from .lighting import _scene_triangles, tau_of
+from .native import CanopyAOError, _core, require
 
 DEFAULT_EPSILON = 1e-3  # the core's default cut-off (occluders.h)
 
@@ -171,18 +171,11 @@ class Forest:
 
 def prototype_mesh(items):
     """(vertices float32 (V, 3), triangles int32 (M, 3)): every non-ignored item's triangles
-    in one mesh, or None when there are none."""
-    verts, tris, base = [], [], 0
-    for it in items:
-        if it.role == "IGNORE" or not len(it.triangles):
-            continue
-        verts.append(np.asarray(it.positions, np.float32).reshape(-1, 3))
-        tris.append(np.asarray(it.triangles, np.int64).reshape(-1, 3) + base)
-        base += len(verts[-1])
-    if not verts:
+    in one mesh (lighting._scene_triangles), or None when there are none."""
+    try:
+        return _scene_triangles(items)
+    except CanopyAOError:  # no triangles
         return None
-    return (np.ascontiguousarray(np.concatenate(verts), np.float32),
-            np.ascontiguousarray(np.concatenate(tris), np.int32))
 
 
 def prototype_from_plan(plan, tree, matrices, name=None, items=None):

@@ -178,16 +178,17 @@ def own_ids(plan: Plan, name, own):
     return out or None
 
 
-def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None):
+def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra):
     """Ray-traced AO of points p, n against the scene's triangles (the exact rung). own: the
     tracer-mesh ids of own_ids, so each ray skips only its receiver's own triangles, as Cycles'
     does (docs/DESIGN.md, 'The method ladder'). distance: the AO distance (default: the
-    settings'; 0 = unlimited)."""
+    settings'; 0 = unlimited). extra: more RayTracer.ao arguments (bent_normals=True)."""
     if plan.tracer is None:
         raise CanopyAOError("ray tracing needs the scene's triangles; none were given")
     d = plan.settings.distance if distance is None else distance
     return plan.tracer.ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
-                          seed=plan.settings.seed if seed is None else int(seed), **(own or {}))
+                          seed=plan.settings.seed if seed is None else int(seed), **(own or {}),
+                          **extra)
 
 
 def _grid_ao(plan, p, n):

@@ -19,7 +19,6 @@ point, and the crown's centre, where shells meet, would read as shallow.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -103,12 +102,8 @@ def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
         raise CanopyAOError("bent normals need the ray tracer (maps.ensure_tracer)")
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
-    own = own_primitives(item, vertices, triangles)
-    d = plan.settings.distance
-    ao, bent = plan.tracer.ao(p, n, samples=int(plan.settings.samples),
-                              distance=float(d) if d > 0 else math.inf,
-                              seed=int(plan.settings.seed), bent_normals=True,
-                              **(lighting.own_ids(plan, item.name, own) or {}))
+    own = lighting.own_ids(plan, item.name, own_primitives(item, vertices, triangles))
+    ao, bent = lighting.trace(plan, p, n, plan.settings.samples, own=own, bent_normals=True)
     bent = np.asarray(bent, np.float32)
     return (np.asarray(ao, np.float32), bent) if with_ao else bent
 
