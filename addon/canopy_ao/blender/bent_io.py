@@ -76,7 +76,9 @@ def texel_frames(obj, depsgraph, rx):
     blended by the texel centre's barycentric coordinates in UV (clamped to the triangle:
     a texel the conservative raster added outside it takes the nearest edge's blend)."""
     tan, sign, _v, corners = _corner_tangents(obj, depsgraph, rx.uv_map)
-    uvs, _p, _n = texel_io.gather_corner_triangles(obj, depsgraph, rx.uv_map)
+    uvs = rx.uvs  # the corner UVs receivers() read: the mesh is not read again for them
+    if uvs is None:
+        uvs, _p, _n = texel_io.gather_corner_triangles(obj, depsgraph, rx.uv_map)
     tri = np.asarray(rx.triangles if rx.triangles is not None else [], np.int64)
     if rx.triangles is None or len(corners) != len(uvs) or (len(tri) and
                                                              tri.max() * 3 >= len(corners)):

@@ -113,6 +113,7 @@ class TexelReceivers:
     stats: dict = field(default_factory=dict)  # raster counts, "warnings", "notes"
     triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
     tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
+    uvs: np.ndarray | None = None  # float32 (3M, 2): the mesh's corner UVs, as gathered
 
 
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False):
@@ -164,7 +165,7 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
                                  f"map '{uv_map}' at {res}×{res}; raise the resolution or "
                                  "check the UVs lie in the 0–1 square")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles, uvs)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):
