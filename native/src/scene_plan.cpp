@@ -39,7 +39,7 @@ std::vector<std::vector<Ellipsoid>> trunks_of(const std::vector<TreeProxies>& tr
   return out;
 }
 
-const std::vector<TreeProxies>& checked(const std::vector<TreeProxies>& trees) {
+std::vector<TreeProxies> checked(std::vector<TreeProxies> trees) {
   for (std::size_t t = 0; t < trees.size(); ++t) {
     const TreeProxies& p = trees[t];
     if (!p.has_crown) continue;
@@ -106,8 +106,8 @@ int ScenePlan::set_of(PlanMethod m) {
 
 ScenePlan::ScenePlan(std::vector<TreeProxies> trees, const ScenePlanOptions& options,
                      std::vector<GrassCover> covers)
-    : trees_(checked(trees)),
-      trunks_(grouped_field(trunks_of(trees), /*solid=*/true, options)),
+    : trees_(checked(std::move(trees))),  // moved, not copied; trunks_ follows trees_
+      trunks_(grouped_field(trunks_of(trees_), /*solid=*/true, options)),
       covers_(std::move(covers)) {
   for (const TreeProxies& t : trees_) {
     sets_[0].push_back(t.has_crown ? std::vector<Ellipsoid>{Ellipsoid::from_sphere(t.sphere)}
@@ -251,6 +251,10 @@ void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const P
   std::fill(out, out + n, 1.0f);
   std::vector<std::size_t> count(n_trees + 1, 0);
   for (std::int32_t c : claim) ++count[static_cast<std::size_t>(c + 1)];
+  // The receivers grouped by claiming tree, ascending within each (one counting sort, not a
+  // scan of every receiver per tree): tree t's are order[start[t + 1] .. start[t + 2]).
+  std::vector<std::size_t> start(n_trees + 2, 0), order;
+  for (std::size_t t = 0; t <= n_trees; ++t) start[t + 1] = start[t] + count[t];
   std::vector<float> pbuf, nbuf, vbuf;
   for (std::size_t t = 0; t < n_trees; ++t) {
     const std::size_t m = count[t + 1];
@@ -259,14 +263,17 @@ void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const P
       in_shell(positions, normals, trees_[t], method, tau[t], *held[t], out);
       continue;
     }
+    if (order.empty()) {
+      order.resize(n);
+      std::vector<std::size_t> fill(start.begin(), start.end() - 1);
+      for (std::size_t i = 0; i < n; ++i) {
+        order[fill[static_cast<std::size_t>(claim[i] + 1)]++] = i;
+      }
+    }
+    const std::size_t* idx = order.data() + start[t + 1];
     pbuf.resize(3 * m);
     nbuf.resize(3 * m);
     vbuf.resize(m);
-    std::vector<std::size_t> idx;
-    idx.reserve(m);
-    for (std::size_t i = 0; i < n; ++i) {
-      if (claim[i] == static_cast<std::int32_t>(t)) idx.push_back(i);
-    }
     for (std::size_t j = 0; j < m; ++j) {
       std::copy_n(positions.data + 3 * idx[j], 3, pbuf.data() + 3 * j);
       std::copy_n(normals.data + 3 * idx[j], 3, nbuf.data() + 3 * j);
