@@ -278,6 +278,12 @@ float OccluderField::visibility(Vec3 x, Vec3 n, const OccluderMaterial* const* b
   });
 }
 
+float OccluderField::visibility(Vec3 x, Vec3 n, std::int32_t skip) const {
+  return visit(x, n, [&](std::uint32_t i) -> const OccluderMaterial* {
+    return group(i) == skip ? nullptr : &material_;
+  });
+}
+
 void OccluderField::ao(PointsView positions, PointsView normals, float* out) const {
   check_receivers(positions, normals);
   parallel_for_blocks(positions.size, 4096, [&](std::size_t b, std::size_t e) {

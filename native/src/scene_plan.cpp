@@ -191,9 +191,8 @@ void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const P
   // Materials per tree (the medium table's slice at its τ), made outside the parallel loops.
   const int set = set_of(method);
   const std::vector<std::vector<Ellipsoid>>& shells = sets_[set];
-  const OccluderMaterial opaque;  // trunks: opacity 1
   std::vector<std::shared_ptr<const OccluderMaterial>> held(n_trees);
-  std::vector<const OccluderMaterial*> crown_law(n_trees, nullptr), solid(n_trees, &opaque);
+  std::vector<const OccluderMaterial*> crown_law(n_trees, nullptr);
   for (std::size_t t = 0; t < n_trees; ++t) {
     if (shells[t].empty()) continue;
     held[t] = material(tau[t]);
@@ -304,7 +303,7 @@ void ScenePlan::evaluate_trees(PointsView positions, PointsView normals, const P
       const Vec3 x = positions[i], nv = normals[i];
       float v = out[i] * crowns.visibility(x, nv, crown_law.data(), claim[i]);
       const std::int32_t own = r.trees != nullptr ? r.trees[i] : r.tree;
-      v *= trunks_.visibility(x, nv, solid.data(), own_trunks_skipped ? own : -1);
+      v *= trunks_.visibility(x, nv, own_trunks_skipped ? own : -1);  // solid: opacity 1
       if (!grass.empty()) v *= grass[i];
       out[i] = std::clamp(v, 0.0f, 1.0f);
     }

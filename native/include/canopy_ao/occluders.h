@@ -171,6 +171,9 @@ class OccluderField {
   /// caller's array covers every group), the shells of group `skip` left out (−1: none).
   float visibility(Vec3 x, Vec3 n, const OccluderMaterial* const* by_group,
                    std::int32_t skip) const;
+  /// One receiver, every shell with the field's own material, those of group `skip` left out
+  /// (−1: none).
+  float visibility(Vec3 x, Vec3 n, std::int32_t skip) const;
   /// The group of shell i (0 for a field built without groups).
   std::int32_t group(std::size_t i) const { return groups_.empty() ? 0 : groups_[i]; }
 
