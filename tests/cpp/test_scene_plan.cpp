@@ -43,6 +43,14 @@ TreeProxies tree_at(float cx) {
   return t;
 }
 
+// Whether x lies in one of the tree's crown shells (the receivers a crown claims).
+bool in_crown(const TreeProxies& t, Vec3 x) {
+  for (const Ellipsoid& s : t.shells) {
+    if (s.contains(x)) return true;
+  }
+  return false;
+}
+
 // Points spread over the two crowns (which interlock), the ground and the air, with
 // random unit normals.
 void scatter(std::vector<float>& p, std::vector<float>& n, int count, unsigned seed) {
@@ -147,6 +155,7 @@ TEST(ScenePlan, OneCrownHoldingEveryReceiverIsTheInShellModelAlone) {
     test::add(n, std::cos(a), std::sin(a), 0.2f);
   }
   const std::size_t count = p.size() / 3;
+  for (std::size_t i = 0; i < count; ++i) ASSERT_TRUE(in_crown(tree, view(p)[i])) << i;
   PlanReceivers own;
   own.role = ReceiverRole::Canopy;
   own.tree = 0;
@@ -474,22 +483,29 @@ TEST(ScenePlan, GroundTimesItsGrassCoversAndEveryRoleTimesTheAttachedForest) {
 // Receivers the trees' part lights with one kernel alone (one crown holding all of them, or no
 // tree at all) still get the grass covers and the forest.
 TEST(ScenePlan, CoversAndForestReachReceiversOfOneCrownOrOfNoTree) {
-  std::vector<float> p, n;
+  // A ring inside the crown's shells (so the one-crown shortcut runs), and one around the
+  // grass for the no-tree case.
+  std::vector<float> p, n, pg, ng;
   for (int i = 0; i < 300; ++i) {
     const float a = 0.07f * i;
-    test::add(p, 0.5f * std::cos(a), 0.5f * std::sin(a), 2.8f + 0.4f * std::sin(2 * a));
+    test::add(p, 0.4f * std::cos(a), 0.4f * std::sin(a), 3.0f + 0.3f * std::sin(2 * a));
+    test::add(pg, 0.5f * std::cos(a), 0.5f * std::sin(a), 2.8f + 0.4f * std::sin(2 * a));
     test::add(n, std::cos(a), std::sin(a), 0.3f);
   }
+  ng = n;
   const std::size_t count = p.size() / 3;
+  const TreeProxies tree = tree_at(0.0f);
+  for (std::size_t i = 0; i < count; ++i) ASSERT_TRUE(in_crown(tree, view(p)[i])) << i;
   auto forest = std::make_shared<const ForestOccluders>(
       std::vector<ForestCrowns>{{{ball(2.2f, 0, 3, 1.0f)}, 2.0f}},
       std::vector<Ellipsoid>{ball(-2.0f, 0, 1.5f, 0.4f)});
-  std::vector<float> shade(count), bare(count), got(count);
+  std::vector<float> shade(count), bare(count), got(count), shade_g(count);
   forest->ao(view(p), view(n), shade.data());
+  forest->ao(view(pg), view(ng), shade_g.data());
   PlanReceivers own;
   own.role = ReceiverRole::Canopy;
   own.tree = 0;
-  ScenePlan one({tree_at(0.0f)}, ScenePlanOptions{});
+  ScenePlan one({tree}, ScenePlanOptions{});
   one.evaluate(view(p), view(n), own, PlanMethod::Shells, {1.2f}, bare.data());
   one.set_forest(forest);
   one.evaluate(view(p), view(n), own, PlanMethod::Shells, {1.2f}, got.data());
@@ -512,11 +528,11 @@ TEST(ScenePlan, CoversAndForestReachReceiversOfOneCrownOrOfNoTree) {
   const GrassCover cover(d);
   ScenePlan none({}, ScenePlanOptions{}, {cover});
   none.set_forest(forest);
-  none.evaluate(view(p), view(n), PlanReceivers{}, PlanMethod::Medium, {}, got.data());
+  none.evaluate(view(pg), view(ng), PlanReceivers{}, PlanMethod::Medium, {}, got.data());
   int covered = 0;
   for (std::size_t i = 0; i < count; ++i) {
-    const float c = cover.visibility(view(p)[i]);
-    ASSERT_EQ(got[i], std::clamp(c * shade[i], 0.0f, 1.0f)) << "point " << i;
+    const float c = cover.visibility(view(pg)[i]);
+    ASSERT_EQ(got[i], std::clamp(c * shade_g[i], 0.0f, 1.0f)) << "point " << i;
     covered += c < 1.0f;
   }
   EXPECT_GT(covered, 100);
