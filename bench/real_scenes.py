@@ -44,6 +44,8 @@ class RealScene:
                 self.parts[n] = dict(positions=z[f"{n}/positions"].astype(np.float32),
                                      normals=z[f"{n}/normals"].astype(np.float32),
                                      triangles=z[f"{n}/triangles"].astype(np.int32),
+                                     polygons=(z[f"{n}/polygons"].astype(np.int64)
+                                               if f"{n}/polygons" in z.files else None),
                                      role=str(z[f"{n}/role"]), tree=str(z[f"{n}/tree"]))
             self.distance = float(z["distance"])
             self.geometry = str(z["geometry"])
@@ -60,6 +62,15 @@ class RealScene:
         self.tree = np.concatenate([np.full(b - a, self.parts[n]["tree"], dtype=object)
                                     for n, a, b in zip(self.names, offs[:-1], offs[1:])])
         self.object = np.repeat(np.arange(len(self.names)), np.diff(offs))
+        # Each triangle's face, numbered apart per object (exports older than the faces: None,
+        # every triangle its own corner).
+        self.P = None
+        if all(self.parts[n]["polygons"] is not None for n in self.names):
+            firsts = np.cumsum([0] + [int(self.parts[n]["polygons"].max()) + 1
+                                      if len(self.parts[n]["polygons"]) else 0
+                                      for n in self.names])
+            self.P = np.concatenate([self.parts[n]["polygons"] + f
+                                     for n, f in zip(self.names, firsts[:-1])]).astype(np.int32)
 
     @property
     def n_vertices(self):
@@ -92,9 +103,9 @@ def tracer_tag():
 
 
 def scene_tracer(sc: RealScene):
-    """The scene's ray tracer as the add-on builds it: with the vertex normals, so every vertex
-    starts at Cycles' bake point."""
-    return _core.RayTracer(sc.V, sc.T, normals=sc.N)
+    """The scene's ray tracer as the add-on builds it: with the vertex normals and, where the
+    export has them, Blender's faces, so every vertex starts at Cycles' bake point."""
+    return _core.RayTracer(sc.V, sc.T, normals=sc.N, polygons=sc.P)
 
 
 def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None)):

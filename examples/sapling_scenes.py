@@ -205,13 +205,15 @@ def _world_arrays(ob):
         me.calc_loop_triangles()
         tri = np.empty(3 * len(me.loop_triangles), np.int32)
         me.loop_triangles.foreach_get("vertices", tri)
+        faces = np.empty(len(me.loop_triangles), np.int32)
+        me.loop_triangles.foreach_get("polygon_index", faces)
     finally:
         ev.to_mesh_clear()
     m = np.array(ob.matrix_world, np.float64)
     co = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
     nrm = no.reshape(-1, 3) @ np.linalg.inv(m[:3, :3])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
-    return co.astype(np.float32), nrm.astype(np.float32), tri.reshape(-1, 3)
+    return co.astype(np.float32), nrm.astype(np.float32), tri.reshape(-1, 3), faces
 
 
 def _bbox(objects):
@@ -224,11 +226,12 @@ def export(path, objs, info):
     h = hashlib.sha1()
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for ob, role, tree in objs:
-        p, n, t = _world_arrays(ob)
+        p, n, t, f = _world_arrays(ob)
         names.append(ob.name)
         arrays[f"{ob.name}/positions"] = p
         arrays[f"{ob.name}/normals"] = n
         arrays[f"{ob.name}/triangles"] = t
+        arrays[f"{ob.name}/polygons"] = f  # each triangle's face (not hashed: not geometry)
         arrays[f"{ob.name}/role"] = np.array(role)
         arrays[f"{ob.name}/tree"] = np.array(tree)
         h.update(ob.name.encode())

@@ -408,6 +408,21 @@ def test_bake_point_shading_is_checked():
     bad[2, 1] = np.nan
     with pytest.raises(ValueError, match="non-finite"):
         _core.RayTracer(v, t, normals=bad)
+    # What they change: a 40 µm roof 1 µm over the second triangle's bake point of vertex 0
+    # (the quad's diagonal) shades half its rays by triangles, none as one face; the rule
+    # before starts a hair from the vertex, outside the roof.
+    p2 = 1e-4 * np.array([1, 2, 0]) / np.sqrt(5)
+    roof = np.float32([p2 + [-2e-5, -2e-5, 1e-6], p2 + [2e-5, -2e-5, 1e-6],
+                       p2 + [2e-5, 2e-5, 1e-6], p2 + [-2e-5, 2e-5, 1e-6]])
+    vq = np.concatenate([v * 0.01, roof])
+    tq = np.int32([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    upq = np.tile(np.float32([0, 0, 1]), (8, 1))
+    kw = dict(samples=1024, vertex_ids=np.int32([0]))
+    by_triangle = _core.RayTracer(vq, tq, normals=upq).ao(vq[:1], upq[:1], **kw)[0]
+    by_face = _core.RayTracer(vq, tq, normals=upq, polygons=np.int32([0, 0, 1, 1])).ao(
+        vq[:1], upq[:1], **kw)[0]
+    before = _core.RayTracer(vq, tq).ao(vq[:1], upq[:1], **kw)[0]
+    assert abs(by_triangle - 0.5) < 0.05 and by_face > 0.95 and before > 0.95
 
 
 def test_engine_tracer_carries_normals_and_faces():
