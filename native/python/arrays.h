@@ -291,6 +291,28 @@ inline py::array_t<float> new_floats(std::size_t n) {
   return py::array_t<float>(static_cast<py::ssize_t>(n));
 }
 
+/// Runs fn(out) without the GIL on a new float32 array (N,), or (N, columns) when columns > 0,
+/// and returns the array.
+template <class Fn>
+py::array_t<float> compute(std::size_t n, Fn&& fn, py::ssize_t columns = 0) {
+  py::array_t<float> out = columns > 0
+                               ? py::array_t<float>({static_cast<py::ssize_t>(n), columns})
+                               : new_floats(n);
+  float* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    fn(o);
+  }
+  return out;
+}
+
+/// fn()'s result, computed without the GIL (fn must touch no Python object).
+template <class Fn>
+auto without_gil(Fn&& fn) {
+  py::gil_scoped_release release;
+  return fn();
+}
+
 /// An AO distance: >= kMinLength, inf = unlimited (Cycles' meaning: a hard cut-off on ray
 /// length); anything beyond kMaxLength is as good as unlimited and is passed as given.
 inline float distance_arg(double distance, const char* name = "distance") {

@@ -66,14 +66,8 @@ void bind_mesh_arrays(py::module_& m) {
         if (values.ndim() != 1)
           throw py::value_error("values must have shape (N,), got " + shape_str(values));
         const std::size_t n = static_cast<std::size_t>(values.shape(0));
-        py::array_t<float> out({static_cast<py::ssize_t>(n), py::ssize_t{4}});
         const float* v = static_cast<const float*>(values.data());
-        float* o = out.mutable_data();
-        {
-          py::gil_scoped_release release;
-          gray_rgba(v, n, o);
-        }
-        return out;
+        return compute(n, [&](float* o) { gray_rgba(v, n, o); }, 4);
       },
       py::arg("values"),
       "gray_rgba(values) -> float32 (N, 4)\n\n"

@@ -33,18 +33,6 @@ ShellCombine combine_arg(const std::string& s) {
   throw py::value_error("combine must be \"product\" or \"nearest\", got \"" + s + "\"");
 }
 
-// Runs fn(out) without the GIL on a new (N,) float32 array.
-template <class Fn>
-py::array_t<float> compute(std::size_t n, Fn&& fn) {
-  py::array_t<float> out = new_floats(n);
-  float* o = out.mutable_data();
-  {
-    py::gil_scoped_release release;
-    fn(o);
-  }
-  return out;
-}
-
 }  // namespace
 
 void bind_models(py::module_& m) {

@@ -175,13 +175,7 @@ void bind_parts(py::module_& m) {
           "ground_visibility",
           [](const GrassCover& c, const py::array& positions) {
             const PointsView p = points_arg(positions, "positions", /*allow_empty=*/true);
-            py::array_t<float> out = new_floats(p.size);
-            float* o = out.mutable_data();
-            {
-              py::gil_scoped_release release;
-              c.ground_visibility(p, o);
-            }
-            return out;
+            return compute(p.size, [&](float* o) { c.ground_visibility(p, o); });
           },
           py::arg("positions"),
           "Visibility float32 (N,) under the layer of ground points (float32 (N, 3)).")
@@ -219,13 +213,8 @@ void bind_parts(py::module_& m) {
           "ao",
           [](const ForestOccluders& f, const py::array& positions, const py::array& normals) {
             const Receivers r = receivers_arg(positions, normals);
-            py::array_t<float> out = new_floats(r.positions.size);
-            float* o = out.mutable_data();
-            {
-              py::gil_scoped_release release;
-              f.ao(r.positions, r.normals, o);
-            }
-            return out;
+            return compute(r.positions.size,
+                           [&](float* o) { f.ao(r.positions, r.normals, o); });
           },
           py::arg("positions"), py::arg("normals"),
           "Visibility float32 (N,) in [0, 1] of receivers (float32 (N, 3) each).")
@@ -305,13 +294,9 @@ void bind_scene_plan(py::module_& m) {
             }
             const PlanMethod pm = plan_method_arg(method);
             const std::vector<float> taus = plan_taus_arg(tau, plan.trees());
-            py::array_t<float> out = new_floats(r.positions.size);
-            float* o = out.mutable_data();
-            {
-              py::gil_scoped_release release;
+            return compute(r.positions.size, [&](float* o) {
               plan.evaluate(r.positions, r.normals, who, pm, taus, o);
-            }
-            return out;
+            });
           },
           py::arg("positions"), py::arg("normals"), py::arg("role"), py::arg("tree"),
           py::arg("method"), py::arg("tau"), py::arg("grass") = py::none(),

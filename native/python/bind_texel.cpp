@@ -471,11 +471,7 @@ a NUL in one, is a ValueError). Releases the GIL.
       "read_image_attributes",
       [](const py::object& path) {
         const std::string p = path_arg(path);
-        std::vector<std::pair<std::string, std::string>> attrs;
-        {
-          py::gil_scoped_release release;
-          attrs = read_image_attributes(p);
-        }
+        const auto attrs = without_gil([&] { return read_image_attributes(p); });
         // A header is another program's data: bytes that are not UTF-8 must not raise.
         const auto text = [](const std::string& b) {
           return py::reinterpret_steal<py::str>(
