@@ -98,8 +98,9 @@ def load(scene, quick=True, out_dir=REAL):
 
 def tracer_tag():
     """Which ray tracer made a reference: each vertex starts at Cycles' bake point (native
-    raytrace.h, 'Origins'), as the add-on's tracer does."""
-    return "bake-point"
+    raytrace.h, 'Origins') and casts its samples at every face corner, as the add-on's tracer
+    does."""
+    return "bake-point-per-corner"
 
 
 def scene_tracer(sc: RealScene):
@@ -108,11 +109,13 @@ def scene_tracer(sc: RealScene):
     return _core.RayTracer(sc.V, sc.T, normals=sc.N, polygons=sc.P)
 
 
-def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None)):
-    """AO at the scene's own vertices ``rows``, each skipping only its own triangles."""
+def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None), per_corner=True):
+    """AO at the scene's own vertices ``rows``, each skipping only its own triangles; samples
+    per face corner (as the add-on and Cycles), or dealt out to the corners (per_corner=False,
+    the rule before)."""
     ids = np.arange(sc.n_vertices, dtype=np.int32)[rows]
     return np.asarray(tracer.ao(sc.V[rows], sc.N[rows], samples=samples, distance=distance,
-                                seed=seed, vertex_ids=ids), np.float32)
+                                seed=seed, vertex_ids=ids, per_corner=per_corner), np.float32)
 
 
 def reference(sc: RealScene, samples=1024, tracer=None):

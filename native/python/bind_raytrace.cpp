@@ -202,18 +202,20 @@ void bind_raytrace(py::module_& m) {
           [](const RayTracer& self, const py::array& points, const py::array& normals,
              const py::object& samples, double distance, const py::object& seed,
              double offset, const py::object& vertex_ids, const py::object& triangle_ids,
-             const std::string& sampling, bool bent_normals) {
+             const std::string& sampling, bool bent_normals, bool per_corner) {
             RayTraceOptions o = options_arg(samples, distance, seed, offset);
             o.sampling = sampling_arg(sampling);
+            o.per_corner = per_corner;
             return trace(self, points, normals, o, vertex_ids, triangle_ids, bent_normals);
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("offset") = -1.0,
           py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
           py::arg("sampling") = "lattice", py::arg("bent_normals") = false,
+          py::arg("per_corner") = true,
           "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
-          "triangle_ids=None, sampling='lattice', bent_normals=False) -> float32 (N,), or "
-          "(ao, bent) with bent_normals\n\n"
+          "triangle_ids=None, sampling='lattice', bent_normals=False, per_corner=True) -> "
+          "float32 (N,), or (ao, bent) with bent_normals\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
           "hemisphere of its normal (float32 (N, 3), normalised here; a zero normal gives 1) "
@@ -231,6 +233,11 @@ void bind_raytrace(py::module_& m) {
           "under a blade root) still occludes. Ids outside their range: ValueError.\n\n"
           "sampling: 'lattice' (a Fibonacci lattice rotated per point), 'sobol' (Owen-scrambled "
           "Sobol' per point) or 'independent' (i.i.d. rays, the baseline).\n\n"
+          "A vertex at Cycles' bake point (a tracer with normals, vertex_ids given) has one "
+          "corner per face using it; per_corner=True casts `samples` rays per corner, as "
+          "Cycles' bake samples every corner with its full count (one set of k x samples "
+          "directions dealt out to the k corners in turn; at most max(samples, 65536)); False "
+          "deals `samples` rays out to the corners.\n\n"
           "bent_normals=True also returns each point's bent normal, float32 (N, 3), world "
           "space: the normalised sum of its unblocked rays' directions (the cosine-weighted "
           "mean unoccluded direction), from the same rays as the AO. Every ray blocked: the "
@@ -240,6 +247,9 @@ void bind_raytrace(py::module_& m) {
       .def_property_readonly("instance_count", &RayTracer::instance_count)
       .def_property_readonly("has_vertex_normals", &RayTracer::has_vertex_normals,
                              "Whether vertex receivers start at Cycles' bake point.")
+      .def_property_readonly("corners_per_vertex", &RayTracer::corners_per_vertex,
+                             "Mean corners per vertex: what per-corner rays multiply a bake of "
+                             "every vertex's rays by (1 without vertex normals).")
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,
                              "The origin offset used when offset < 0, in scene units.")
       .def("__repr__", [](const RayTracer& self) {

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <mutex>
 #include <numeric>
 #include <type_traits>
@@ -29,6 +30,9 @@ constexpr std::size_t kStream = 256;
 constexpr std::size_t kMinStream = 64;
 // Points per parallel block are chosen so a block holds about this many rays.
 constexpr std::size_t kRaysPerBlock = 4096;
+/// Per-corner rays of one vertex stop here (RayTraceOptions::per_corner; the samples cap of the
+/// bindings, 2^16).
+constexpr std::int64_t kMaxRaysPerVertex = 1 << 16;
 
 // === Embree error plumbing
 // Embree calls this from whichever thread hit the error; the first message is kept until the
@@ -453,6 +457,7 @@ struct RayTracer::Impl {
   std::vector<float> vertex_normals;  // 3V unit (or zero) normals, or empty: no bake point
   std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
+  double corners_per_vertex = 1.0;  // mean corners of the vertices (bake point), else 1
   float auto_offset = 0;
   float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
   DevicePtr device;
@@ -714,6 +719,29 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
         m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
     }
+    if (!m.vertex_normals.empty() && vertices.size > 0) {  // as corners(): faces with area
+      std::vector<char> has_area(triangle_count);
+      for (std::size_t j = 0; j < triangle_count; ++j) {
+        const std::uint32_t* t = m.indices.data() + 3 * j;
+        const Vec3 a = m.vertex(t[0]);
+        has_area[j] = length(cross(m.vertex(t[1]) - a, m.vertex(t[2]) - a)) > 0.0f;
+      }
+      std::size_t total = 0;
+      std::vector<std::int32_t> seen;
+      for (std::size_t v = 0; v < vertices.size; ++v) {
+        seen.clear();
+        for (std::uint32_t k = m.first_tri[v]; k < m.first_tri[v + 1]; ++k) {
+          const std::uint32_t tri = m.tris_of[k];
+          const std::int32_t face =
+              m.polygons.empty() ? static_cast<std::int32_t>(tri) : m.polygons[tri];
+          if (has_area[tri] && std::find(seen.begin(), seen.end(), face) == seen.end()) {
+            seen.push_back(face);
+          }
+        }
+        total += std::max<std::size_t>(1, seen.size());
+      }
+      m.corners_per_vertex = static_cast<double>(total) / static_cast<double>(vertices.size);
+    }
     // Both windings share primitive ids, so one filter on the original indices serves both.
     for (int w = 0; w < (culls ? 2 : 1); ++w) {
       attach_triangles(m.device.get(), m.scene.get(), m.vertices.data(), vertices.size,
@@ -774,6 +802,8 @@ std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
 std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
 bool RayTracer::has_vertex_normals() const { return !impl_->vertex_normals.empty(); }
 
+double RayTracer::corners_per_vertex() const { return impl_->corners_per_vertex; }
+
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
                    float* out) const {
@@ -829,7 +859,6 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
                           !m.vertex_normals.empty();
   const float tfar = options.distance;  // +inf is fine for Embree
   const SampleSet set(samples);
-  const float inv_samples = 1.0f / static_cast<float>(samples);
   RTCScene scene = m.scene.get();
   const std::size_t grain =
       std::max<std::size_t>(1, kRaysPerBlock / static_cast<std::size_t>(samples));
@@ -838,9 +867,12 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     // INV: rays[0..filled) belong to points owner[0..filled); hits are counted when flushed.
     alignas(64) RTCRay rays[kStream];
     std::uint32_t owner[kStream];
-    std::vector<int> open(end - begin, 0);
+    std::vector<int> open(end - begin, 0), cast(end - begin, samples);
     std::vector<float> open_sum(bent ? 3 * (end - begin) : 0, 0.0f);  // Σ unblocked ω
     std::vector<float> xs(samples), ys(samples), zs(samples);
+    // Per corner (RayTraceOptions::per_corner): k corners cast one set of k × samples rays; the
+    // lattice of each size this block meets, built once per block.
+    std::vector<std::unique_ptr<SampleSet>> sets;
     std::size_t filled = 0;
     std::int32_t skip[kStream];  // bake-point mode: the triangle each batched ray skips
     std::vector<Corner> corners;
@@ -898,11 +930,31 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         o = points[i] + nn * offset;
         own_skip = ot;
       }
-      point_directions(options.sampling, set, i, options.seed, samples, xs.data(), ys.data(),
-                       zs.data());
       const std::uint32_t local = static_cast<std::uint32_t>(i - begin);
       const std::size_t k = corners.size();
-      for (int s = 0; s < samples; ++s) {
+      // (at most kMaxRaysPerVertex, or samples if more: a fan of thousands of faces stays finite)
+      const int rays_here =
+          options.per_corner && k > 1
+              ? static_cast<int>(std::max<std::int64_t>(
+                    samples, std::min<std::int64_t>(static_cast<std::int64_t>(samples) *
+                                                        static_cast<std::int64_t>(k),
+                                                    kMaxRaysPerVertex)))
+              : samples;
+      const SampleSet* here = &set;
+      if (rays_here != samples) {
+        if (sets.size() < k + 1) sets.resize(k + 1);
+        if (!sets[k]) sets[k] = std::make_unique<SampleSet>(rays_here);
+        here = sets[k].get();
+        if (xs.size() < static_cast<std::size_t>(rays_here)) {
+          xs.resize(rays_here);
+          ys.resize(rays_here);
+          zs.resize(rays_here);
+        }
+      }
+      cast[local] = rays_here;
+      point_directions(options.sampling, *here, i, options.seed, rays_here, xs.data(), ys.data(),
+                       zs.data());
+      for (int s = 0; s < rays_here; ++s) {
         const float x = xs[s], y = ys[s], z = zs[s];
         RTCRay& ray = rays[filled];
         Vec3 d, org = o;
@@ -945,7 +997,8 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     }
     if (filled) flush();
     for (std::size_t i = begin; i < end; ++i) {
-      out[i] = std::min(1.0f, static_cast<float>(open[i - begin]) * inv_samples);
+      out[i] = std::min(1.0f, static_cast<float>(open[i - begin]) /
+                                  static_cast<float>(cast[i - begin]));
     }
     if (bent) finish_bent(normals, begin, end, open_sum.data(), bent);
   });

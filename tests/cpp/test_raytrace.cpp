@@ -829,6 +829,84 @@ TEST(BakePoint, OnePolygonIsOneCorner) {
   EXPECT_NEAR(per_triangle, 0.5f, 0.05f);  // half its rays from the roofed bake point
 }
 
+namespace {
+
+// A flat hexagonal fan of unit radius around vertex 0 (six triangles, normal +z).
+Mesh hexagon_fan() {
+  Mesh m;
+  m.add({0, 0, 0});
+  for (int k = 0; k < 6; ++k) {
+    const float a = 2.0f * 3.14159265f * static_cast<float>(k) / 6.0f;
+    m.add({std::cos(a), std::sin(a), 0});
+  }
+  for (int k = 0; k < 6; ++k) m.tri(0, 1 + k, 1 + (k + 1) % 6);
+  return m;
+}
+
+}  // namespace
+
+TEST(BakePoint, EveryCornerCastsTheFullSampleCount) {
+  // Cycles bakes every face corner with its sample count; so do we (per_corner): a vertex of k
+  // corners casts the k × S rays that dealing k × S out to its corners casts, the same
+  // directions (so bit-identical AO), and its AO is a multiple of 1 / (k × S).
+  Mesh m = hexagon_fan();
+  m.quad({-0.2f, -0.3f, 0.15f}, {0.6f, -0.3f, 0.15f}, {0.6f, 0.5f, 0.15f}, {-0.2f, 0.5f, 0.15f});
+  const std::vector<float> up = same_normals(m, {0, 0, 1});
+  const RayTracer tracer = m.baking(up);
+  const int S = 8;
+  for (std::int32_t v = 0; v < 7; ++v) {
+    const int k = v == 0 ? 6 : 2;  // the hub uses six triangles, a rim vertex two
+    const Receivers r(m.view()[static_cast<std::size_t>(v)], {0, 0, 1}, 1);
+    OwnPrimitives own;
+    own.vertex_ids = &v;
+    RayTraceOptions per_corner = opts(S), dealt = opts(S * k), dealt_s = opts(S);
+    dealt.per_corner = dealt_s.per_corner = false;
+    float a = -1, b = -1, c = -1;
+    tracer.ao(r.points(), r.normals(), own, per_corner, &a);
+    tracer.ao(r.points(), r.normals(), own, dealt, &b);
+    tracer.ao(r.points(), r.normals(), own, dealt_s, &c);
+    EXPECT_EQ(a, b) << "vertex " << v;
+    const float rays = a * static_cast<float>(S * k);
+    EXPECT_NEAR(rays, std::round(rays), 1e-3f) << "vertex " << v;
+    if (v == 0) {  // the roof covers the hub: some rays blocked, not all
+      EXPECT_GT(a, 0.05f);
+      EXPECT_LT(a, 0.95f);
+      const float dealt_rays = c * static_cast<float>(S);
+      EXPECT_NEAR(dealt_rays, std::round(dealt_rays), 1e-3f);
+    }
+  }
+  // A receiver that is not a vertex (no corners) casts S either way.
+  const Receivers free_point({0.1f, 0.1f, 0.05f}, {0, 0, 1}, 1);
+  RayTraceOptions dealt = opts(S);
+  dealt.per_corner = false;
+  EXPECT_EQ(tracer.ao(free_point.points(), free_point.normals(), opts(S)),
+            tracer.ao(free_point.points(), free_point.normals(), dealt));
+}
+
+TEST(BakePoint, CornersPerVertexCountsFacesWithArea) {
+  const Mesh fan = hexagon_fan();
+  const std::vector<float> up = same_normals(fan, {0, 0, 1});
+  // By triangles: the hub 6, each rim vertex 2: 18 / 7.
+  EXPECT_NEAR(fan.baking(up).corners_per_vertex(), 18.0 / 7.0, 1e-12);
+  // Triangles paired into three quads: the hub 3, rim vertices 1 (inside a quad) or 2: 12 / 7.
+  const std::vector<std::int32_t> quads = {0, 0, 1, 1, 2, 2};
+  EXPECT_NEAR(fan.baking(up, &quads).corners_per_vertex(), 12.0 / 7.0, 1e-12);
+  // Without vertex normals there is no bake point: one start per receiver.
+  EXPECT_EQ(fan.tracer().corners_per_vertex(), 1.0);
+  // A degenerate triangle is no corner (as corners() skips it); an unused vertex counts one.
+  Mesh sliver;
+  for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{2, 0, 0}, Vec3{0, 1, 0},
+                       Vec3{-1, 0, 0}, Vec3{5, 5, 5}}) {
+    sliver.add(p);  // the last one used by no triangle
+  }
+  sliver.tri(0, 1, 2);  // zero area
+  sliver.tri(0, 1, 3);
+  sliver.tri(0, 3, 4);
+  // 0: 2 corners, 1: 1, 2: none (counts 1), 3: 2, 4: 1, 5: unused (1); with the sliver 10 / 6.
+  EXPECT_NEAR(sliver.baking(same_normals(sliver, {0, 0, 1})).corners_per_vertex(), 8.0 / 6.0,
+              1e-12);
+}
+
 TEST(BakePoint, BadShadingThrowsInvalidArgument) {
   const Mesh m = horizontal(-1, 1, -1, 1, 0);
   std::vector<float> short_normals(3 * 3, 0.0f), nan_normals = same_normals(m, {0, 0, 1});

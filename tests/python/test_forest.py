@@ -165,8 +165,17 @@ def small_forest(settings):
         real_v.append((v.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
         real_t.append(t + base)
         base += len(v)
-    realised = (np.ascontiguousarray(np.concatenate(real_v)),
-                np.ascontiguousarray(np.concatenate(real_t), np.int32))
+    rv = np.ascontiguousarray(np.concatenate(real_v))
+    rt = np.ascontiguousarray(np.concatenate(real_t), np.int32)
+    # The add-on's tracer starts the ground's vertices at Cycles' bake point with its faces;
+    # so does this one (the trees' rows only occlude: any normal, each triangle a face).
+    normals = np.zeros_like(rv)
+    normals[:len(ground.positions)] = ground.normals
+    faces = (ground.polygons if ground.polygons is not None
+             else np.arange(len(ground.triangles)))
+    first = int(faces.max()) + 1 if len(faces) else 0
+    polygons = np.concatenate([faces, first + np.arange(len(rt) - len(ground.triangles))])
+    realised = (rv, rt, {"normals": normals, "polygons": np.ascontiguousarray(polygons, np.int32)})
     return protos, ground, realised
 
 
@@ -174,13 +183,13 @@ def test_raytrace_ground_sees_instances_as_their_triangles():
     """The exact rung's ground AO under instanced trees is the AO of a tracer over the same
     triangles realised (un-instanced), to noise: rays hit the instances, no shell law."""
     settings = core.BakeSettings(method="raytrace", samples=64, seed=3)
-    protos, ground, (rv, rt) = small_forest(settings)
+    protos, ground, (rv, rt, shading) = small_forest(settings)
     plan = core.prepare([ground], settings, prototypes=protos)
     assert plan.tracer.instance_count == len(FOREST)
     got = core.evaluate_item(plan, ground).ao
     ids = np.arange(len(ground.positions), dtype=np.int32)
-    want = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=1024,
-                                                 seed=11, vertex_ids=ids))
+    want = np.asarray(_core.RayTracer(rv, rt, **shading).ao(
+        ground.positions, ground.normals, samples=1024, seed=11, vertex_ids=ids))
     shaded = want < 0.95
     assert shaded.sum() > 50  # the trees do shade the ground
     # 64 rays against 1024: per-vertex noise ≤ sqrt(a(1−a)/64) ≤ 0.063, so the mean of |Δ|
@@ -189,23 +198,23 @@ def test_raytrace_ground_sees_instances_as_their_triangles():
     assert abs(float(np.mean(got[shaded] - want[shaded]))) < 0.01
     # The same rays (same seed) through the realised mesh: equal but for float rounding of
     # the instance transforms.
-    same = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=64,
-                                                 seed=3, vertex_ids=ids))
+    same = np.asarray(_core.RayTracer(rv, rt, **shading).ao(
+        ground.positions, ground.normals, samples=64, seed=3, vertex_ids=ids))
     assert np.abs(got - same).max() <= 2.0 / 64
 
 
 def test_attach_forest_after_prepare_traces_instances():
     """attach_forest on an exact-rung plan rebuilds its tracer with the instances."""
     settings = core.BakeSettings(method="raytrace", samples=32, seed=3)
-    protos, ground, (rv, rt) = small_forest(settings)
+    protos, ground, (rv, rt, shading) = small_forest(settings)
     plan = core.prepare([ground], settings)
     before = core.evaluate_item(plan, ground).ao
     core.attach_forest(plan, protos)
     assert plan.tracer.instance_count == len(FOREST)
     got = core.evaluate_item(plan, ground).ao
     ids = np.arange(len(ground.positions), dtype=np.int32)
-    same = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=32,
-                                                 seed=3, vertex_ids=ids))
+    same = np.asarray(_core.RayTracer(rv, rt, **shading).ao(
+        ground.positions, ground.normals, samples=32, seed=3, vertex_ids=ids))
     assert np.abs(got - same).max() <= 2.0 / 32
     assert before.min() > 0.99 and got.min() < 0.8
 
@@ -215,7 +224,7 @@ def test_auto_on_a_forest_is_checked_against_traced_instances():
     reference rays see them (the exact rung's sample error is its own noise only), and the
     proxy candidate's error is the instances' shell law against those rays."""
     settings = core.BakeSettings(method="auto", samples=64, seed=3, calibration_points=200)
-    protos, ground, (rv, rt) = small_forest(settings)
+    protos, ground, (rv, rt, shading) = small_forest(settings)
     plan = core.prepare([ground], settings, prototypes=protos)
     cal = plan.calibration
     assert cal and cal["instances_traced"]
@@ -227,8 +236,8 @@ def test_auto_on_a_forest_is_checked_against_traced_instances():
     assert cands["ellipsoid"]["rmse"] > cands["raytrace"]["rmse"]
     got = core.evaluate_item(plan, ground).ao
     ids = np.arange(len(ground.positions), dtype=np.int32)
-    want = np.asarray(_core.RayTracer(rv, rt).ao(ground.positions, ground.normals, samples=256,
-                                                 seed=11, vertex_ids=ids))
+    want = np.asarray(_core.RayTracer(rv, rt, **shading).ao(
+        ground.positions, ground.normals, samples=256, seed=11, vertex_ids=ids))
     # Whatever auto chose, it was scored against these rays: its ground error stays near the
     # sample RMSE it reported.
     rmse = float(np.sqrt(np.mean((got - want) ** 2)))

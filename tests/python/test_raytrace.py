@@ -441,3 +441,41 @@ def test_engine_tracer_carries_normals_and_faces():
     assert lighting.build_tracer([a, b]).has_vertex_normals
     with pytest.raises(engine.CanopyAOError, match="polygon ids"):
         engine.SceneItem("C", "GROUND", "", v, up, t, polygons=np.int32([0]))
+
+
+def test_vertex_rays_are_per_corner_and_counted_so():
+    """A vertex at the bake point casts `samples` rays at each face corner, as Cycles does
+    (per_corner=True, the default): the same rays as dealing corners × samples out to its
+    corners. The cost model counts them (corners_per_vertex)."""
+    from canopy_ao import core as engine
+    from canopy_ao.core import cost, lighting
+
+    # A pyramid (its apex has four faces, each base vertex two) under a roof.
+    v = np.float32([[0, 0, 1], [-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0],
+                    [-0.3, -0.3, 1.2], [0.9, -0.3, 1.2], [0.9, 0.9, 1.2], [-0.3, 0.9, 1.2]])
+    t = np.int32([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 6, 7], [5, 7, 8]])
+    n = np.float32([[0, 0, 1]] + [[x, y, 0.5] for x, y in v[1:5, :2]] + [[0, 0, -1]] * 4)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    tracer = _core.RayTracer(v, t, normals=n)
+    ids = np.arange(5, dtype=np.int32)
+    kw = dict(vertex_ids=ids, seed=5)
+    got = tracer.ao(v[:5], n[:5], samples=16, **kw)
+    apex_dealt = tracer.ao(v[:1], n[:1], samples=64, per_corner=False, vertex_ids=ids[:1], seed=5)
+    # Seeds rotate by a point's row: the apex is row 0 in both calls, the base rows are not.
+    assert got[0] == apex_dealt[0] and 0.05 < got[0] < 0.95
+    base = got[1:] * 32  # each base vertex: two corners × 16 rays
+    assert np.all(np.abs(base - np.round(base)) < 1e-4)
+    old = tracer.ao(v[:5], n[:5], samples=16, per_corner=False, **kw)
+    assert np.all(np.abs(old * 16 - np.round(old * 16)) < 1e-4)
+    assert not np.array_equal(got, old)
+    # Mean corners: apex 4, base 2 each, roof 2, 1, 2, 1: 18 / 9; without normals 1.
+    assert abs(tracer.corners_per_vertex - 2.0) < 1e-12
+    assert _core.RayTracer(v, t).corners_per_vertex == 1.0
+    # The cost model's raytrace work is receivers × samples × corners × log2(triangles).
+    item = engine.SceneItem("P", "GROUND", "", v, n, t)
+    settings = engine.BakeSettings(method="raytrace", samples=16)
+    plan = engine.prepare([item], settings)
+    plan.tracer = lighting.build_tracer([item])
+    unit, work = cost.work(plan, "raytrace", 9)
+    assert unit == "bvh_step"
+    assert abs(work - 9 * 16 * 2.0 * np.log2(6)) < 1e-9

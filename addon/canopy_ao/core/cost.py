@@ -8,7 +8,9 @@ Work per receiver, counted from the plan:
 - medium: as shells, each a medium-table lookup (a costlier unit);
 - grid: DensityAOOptions.directions line integrals, each ~kExactVoxels + 2 log2(resolution)
   voxel steps (exact DDA near, mip steps growing with distance: density_grid.h);
-- raytrace: samples rays, each ~log2(triangles) BVH steps;
+- raytrace: samples rays per face corner (a vertex at Cycles' bake point casts its sample
+  count at each of its corners, as Cycles does: RayTracer.corners_per_vertex on average),
+  each ~log2(triangles) BVH steps;
 - regression: one trilinear look-up of the swept optical depth per feature direction
   (occlusion_features.h), counted as a voxel step each;
 - hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps.
@@ -38,12 +40,12 @@ SECONDS_PER_UNIT = {
     "shell": 6.0e-9,         # one analytic shell evaluation (in-shell model or occluder)
     "medium": 1.7e-8,        # one medium-table shell evaluation
     "voxel_step": 1.8e-8,    # one step of a density-grid line integral
-    "bvh_step": 1.75e-8,     # one BVH level of one Embree ray (rays: samples × log2 M)
+    "bvh_step": 1.75e-8,     # one BVH level of one Embree ray (rays: samples × corners × log2 M)
 }
 FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: analytic 1 + "
            "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "
            "directions × (exact voxels + 2 log2 resolution), regression feature directions, raytrace "
-           "samples × log2 triangles, hybrid raytrace + grid")
+           "samples × corners per vertex × log2 triangles, hybrid raytrace + grid")
 GRID_DIRECTIONS = 32         # DensityAOOptions.directions (the add-on's default)
 GRID_RESOLUTION = 48         # DensityGridOptions.resolution (the add-on's default)
 GRID_EXACT_VOXELS = 4        # DensityGrid::kExactVoxels
@@ -68,9 +70,11 @@ def work(plan, method: str, receivers: int) -> tuple[str, float]:
     if method == "regression":
         return "voxel_step", receivers * float(FEATURE_DIRECTIONS)
     if method == "raytrace":
-        m = plan.tracer.triangle_count if plan.tracer is not None else 1
+        tracer = plan.tracer
+        m = tracer.triangle_count if tracer is not None else 1
+        corners = float(tracer.corners_per_vertex) if tracer is not None else 1.0
         depth = math.log2(max(int(m), 2))
-        return "bvh_step", receivers * float(plan.settings.samples) * depth
+        return "bvh_step", receivers * float(plan.settings.samples) * corners * depth
     if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
         _u, rays = work(plan, "raytrace", receivers)
         _u, steps = work(plan, "grid", receivers)

@@ -27,7 +27,8 @@
 // bake starts it ("Cycles' bake point"; Blender 3.x–5.x, kernel integrator_init_from_bake and
 // shadow_ray_offset). Every triangle using the vertex is one of its corners; its rays are dealt
 // to the corners in turn (ray s to corner s mod k; one corner per polygon when the polygons
-// are known, BakeShading), and for each corner:
+// are known, BakeShading) — k × samples rays in all, as Cycles bakes every corner with its full
+// sample count (RayTraceOptions::per_corner) — and for each corner:
 //  - the start is the vertex moved towards the corner triangle's centroid by
 //    min(distance to the centroid, 1e-4 × max(1, largest |coordinate| of the vertex)) — Cycles'
 //    bake_offset_towards_center; it depends on the distance from the world origin, as Cycles'
@@ -138,6 +139,12 @@ struct RayTraceOptions {
   float offset = -1.0f;
   /// Which sample set (see Sampling; all unbiased, deterministic, thread-count independent).
   Sampling sampling = Sampling::kLattice;
+  /// A vertex started at Cycles' bake point ("Origins" above) casts `samples` rays per corner,
+  /// as Cycles' bake takes its sample count at every face corner: k corners, one set of k ×
+  /// samples directions dealt out to them in turn. False deals `samples` rays out to the corners
+  /// (k times fewer rays; docs/DESIGN.md, 'Rays against Cycles' samples'). Other receivers have
+  /// one start and cast `samples` either way. A vertex casts at most max(samples, 65,536) rays.
+  bool per_corner = true;
 };
 
 /// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no
@@ -245,6 +252,10 @@ class RayTracer {
   std::size_t instance_count() const;
   /// Whether vertex receivers start at Cycles' bake point (built with vertex normals).
   bool has_vertex_normals() const;
+  /// The mean number of corners ("Origins" above) of the mesh's vertices: what per-corner rays
+  /// (RayTraceOptions::per_corner) multiply a bake of every vertex's rays by. 1 without vertex
+  /// normals or vertices; a vertex with no triangle with area counts 1.
+  double corners_per_vertex() const;
 
  private:
   struct Impl;
