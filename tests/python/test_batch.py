@@ -192,9 +192,25 @@ def test_bad_batch_arguments_exit_2_before_any_bake(tmp_path, env, scenes):
     assert not os.path.exists(tmp_path / "o")
 
 
-def test_ctrl_c_stops_every_blender_and_starts_no_retry(tmp_path, env):
+# tgkill(2), to hand a signal to one thread of another process as the kernel may hand Ctrl-C's.
+_TGKILL = {"x86_64": 234, "aarch64": 131}.get(os.uname().machine)
+
+
+def _signal_a_worker_thread(pid):
+    """SIGINT to a thread of process pid other than its main one (a worker of the pool)."""
+    import ctypes
+    tids = [int(t) for t in os.listdir(f"/proc/{pid}/task") if int(t) != pid]
+    assert tids, "the batch has no worker thread"
+    libc = ctypes.CDLL(None, use_errno=True)
+    assert libc.syscall(_TGKILL, pid, tids[0], int(signal.SIGINT)) == 0, ctypes.get_errno()
+
+
+@pytest.mark.parametrize("to", ["process", pytest.param("worker thread", marks=pytest.mark.skipif(
+    _TGKILL is None or not os.path.isdir("/proc/self/task"), reason="needs Linux tgkill"))])
+def test_ctrl_c_stops_every_blender_and_starts_no_retry(tmp_path, env, to):
     """A cancelled batch leaves no Blender running (they run in their own sessions, out of a
-    terminal's reach) and exits 130."""
+    terminal's reach) and exits 130, also when the kernel hands the SIGINT to a worker thread
+    (then it interrupts no wait of the main thread's: the run must look for it)."""
     for i in range(3):
         (tmp_path / "in").mkdir(exist_ok=True)
         (tmp_path / "in" / f"s{i}.blend").write_bytes(b"stand-in")
@@ -213,7 +229,10 @@ def test_ctrl_c_stops_every_blender_and_starts_no_retry(tmp_path, env):
             time.sleep(0.1)
         started = [int(x) for x in pids.read_text().split()]
         assert len(started) == 2
-        proc.send_signal(signal.SIGINT)
+        if to == "process":
+            proc.send_signal(signal.SIGINT)
+        else:
+            _signal_a_worker_thread(proc.pid)
         out, _ = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:

@@ -16,7 +16,7 @@ import shlex
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 from . import plan, runner
 
@@ -157,7 +157,14 @@ def run_local(p, args):
 
     pool = ThreadPoolExecutor(max_workers=args.jobs)
     try:
-        list(pool.map(one, range(len(p["tasks"]))))
+        pending = {pool.submit(one, i) for i in range(len(p["tasks"]))}
+        while pending:
+            # Wake up now and then: the kernel may hand Ctrl-C's SIGINT to a worker thread,
+            # and then nothing interrupts a main thread blocked on a future (the run would
+            # wait for every Blender to finish).
+            done, pending = wait(pending, timeout=0.25)
+            for f in done:
+                f.result()  # a worker's error stops the run as Ctrl-C does
     except BaseException:  # Ctrl-C: stop every Blender, start no other
         runner.stop_all()
         raise
