@@ -952,8 +952,10 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         }
       }
       cast[local] = rays_here;
-      point_directions(options.sampling, *here, i, options.seed, rays_here, xs.data(), ys.data(),
-                       zs.data());
+      // Keyed by the vertex id where there is one: the same rays in any split into calls.
+      const std::size_t key = ov >= 0 ? static_cast<std::size_t>(ov) : i;
+      point_directions(options.sampling, *here, key, options.seed, rays_here, xs.data(),
+                       ys.data(), zs.data());
       for (int s = 0; s < rays_here; ++s) {
         const float x = xs[s], y = ys[s], z = zs[s];
         RTCRay& ray = rays[filled];

@@ -461,7 +461,7 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     kw = dict(vertex_ids=ids, seed=5)
     got = tracer.ao(v[:5], n[:5], samples=16, **kw)
     apex_dealt = tracer.ao(v[:1], n[:1], samples=64, per_corner=False, vertex_ids=ids[:1], seed=5)
-    # Seeds rotate by a point's row: the apex is row 0 in both calls, the base rows are not.
+    # Rays are keyed by the vertex id: the apex gets the same rotation in both calls.
     assert got[0] == apex_dealt[0] and 0.05 < got[0] < 0.95
     base = got[1:] * 32  # each base vertex: two corners × 16 rays
     assert np.all(np.abs(base - np.round(base)) < 1e-4)
@@ -479,3 +479,33 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     unit, work = cost.work(plan, "raytrace", 9)
     assert unit == "bvh_step"
     assert abs(work - 9 * 16 * 2.0 * np.log2(6)) < 1e-9
+
+
+def test_a_vertex_gets_the_same_rays_in_any_split_into_calls():
+    """Rays are keyed by the vertex id (not the row in the call): a mesh's vertices traced in
+    one call or in chunks, in any order, give the same bytes; points naming no vertex follow
+    their row."""
+    g = np.linspace(-1, 1, 9, dtype=np.float32)
+    xx, yy = np.meshgrid(g, g)
+    v = np.stack([xx.ravel(), yy.ravel(), 0.2 * np.sin(3 * xx.ravel()) * yy.ravel()], 1)
+    v = np.ascontiguousarray(np.concatenate([v, v[:20] + [0, 0, 0.3]]), np.float32)
+    q = np.arange(81).reshape(9, 9)
+    quads = np.stack([q[:-1, :-1], q[:-1, 1:], q[1:, 1:], q[1:, :-1]], -1).reshape(-1, 4)
+    t = np.ascontiguousarray(np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]],
+                                             [[81 + i, 82 + i, 90 + i] for i in range(9)]]),
+                             np.int32)
+    n = np.tile(np.float32([0, 0, 1]), (len(v), 1))
+    tracer = _core.RayTracer(v, t, normals=n)
+    ids = np.arange(81, dtype=np.int32)
+    kw = dict(samples=8, seed=3)
+    whole = tracer.ao(v[:81], n[:81], vertex_ids=ids, **kw)
+    assert 0 < whole.min() < 1  # the lifted strip shades some vertices
+    order = np.random.default_rng(0).permutation(81)
+    parts = np.empty(81, np.float32)
+    for chunk in np.array_split(order, 4):
+        parts[chunk] = tracer.ao(v[chunk], n[chunk], vertex_ids=ids[chunk], **kw)
+    assert np.array_equal(parts, whole)
+    lift = np.float32([0, 0, 0.01])
+    free = tracer.ao(v[:81] + lift, n[:81], **kw)  # no vertex: keyed by row
+    moved = tracer.ao(v[order] + lift, n[order], **kw)
+    assert not np.array_equal(moved, free[order])

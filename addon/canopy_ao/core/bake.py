@@ -127,7 +127,7 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
     texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
     and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
-    rung's ray pattern aside, which follows a point's index in the call).
+    rung's rays follow a vertex's id, a texel's index in the call).
 
     An item holding several trees (item.tree_names) lights each receiver with its own tree's:
     ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the

@@ -15,9 +15,11 @@
 // Sampling: each point gets the same low-discrepancy set (a Fibonacci lattice on [0,1)², mapped
 // to the cosine-weighted hemisphere around an orthonormal basis built from n with the branchless
 // construction of Duff et al., "Building an Orthonormal Basis, Revisited", JCGT 6(1), 2017),
-// shifted by a Cranley–Patterson rotation seeded from hash(row index, seed). So every point's
-// estimate is unbiased, stratified, and depends only on (its row index, seed, its own data):
-// never on the thread count, the block split or other points. No rand(), no global state.
+// shifted by a Cranley–Patterson rotation seeded from hash(key, seed), the key being the
+// point's vertex id when it names one (OwnPrimitives::vertex_ids) and its row index otherwise.
+// So every point's estimate is unbiased, stratified, and depends only on (its key, seed, its
+// own data): never on the thread count, the block split or other points, and a vertex gets the
+// same rays however its mesh's vertices are split into calls. No rand(), no global state.
 //
 // Origins (docs/DESIGN.md, 'Baselines and references' and 'Rays against Cycles' samples'):
 // skip only what the receiver starts on, as Cycles does. A receiver may name the triangles it
