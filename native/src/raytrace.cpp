@@ -921,7 +921,12 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         o = own_surface_origin(points[i], m.vertex_target(static_cast<std::uint32_t>(ov), nn),
                                m.precision);
       } else if (bake_point && ov >= 0) {
-        o = points[i];  // used only when the vertex has no triangle with area
+        // Used only when no triangle with area uses the vertex (a branch tip collapsed to a
+        // point): a hair off it along its normal, Cycles' bake offset 1e-4 × max(1, |x|max),
+        // since from the point itself every face meeting there blocks every ray at t = 0.
+        const Vec3 x = points[i];
+        o = x + nn * (1e-4f * std::max(1.0f, std::max(std::fabs(x.x),
+                                                      std::max(std::fabs(x.y), std::fabs(x.z)))));
       } else if (automatic && ot >= 0) {
         o = own_surface_origin(points[i], m.centroid(static_cast<std::uint32_t>(ot)),
                                m.precision);

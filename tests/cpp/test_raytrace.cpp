@@ -907,6 +907,27 @@ TEST(BakePoint, CornersPerVertexCountsFacesWithArea) {
               1e-12);
 }
 
+TEST(BakePoint, AVertexWithOnlyZeroAreaFacesStartsOffItsPoint) {
+  // A branch tip collapsed to a point (Sapling's tapering to radius 0): the tip vertex's own
+  // faces have zero area, and a cone's faces meet at the same point through another vertex.
+  // From the point itself every ray hits a cone face at t = 0 (the scene is ROBUST): AO 0. The
+  // tip starts 1e-4 × max(1, |x|max) off along its normal, so looking up it sees the sky.
+  Mesh m;
+  const Vec3 tip{3, 2, 12};
+  const std::int32_t v = m.add(tip), w = m.add(tip), below = m.add(tip - Vec3{0, 0, 0.1f});
+  m.tri(below, v, w);  // zero area: two of its corners coincide
+  const std::int32_t apex = m.add(tip);
+  std::int32_t ring[6];
+  for (int k = 0; k < 6; ++k) {
+    const float a = 2.0f * 3.14159265f * static_cast<float>(k) / 6.0f;
+    ring[k] = m.add(tip + Vec3{0.02f * std::cos(a), 0.02f * std::sin(a), -0.3f});
+  }
+  for (int k = 0; k < 6; ++k) m.tri(ring[k], ring[(k + 1) % 6], apex);
+  std::vector<float> normals = same_normals(m, {0, 0, 1});
+  const RayTracer tracer = m.baking(normals);
+  EXPECT_GT(vertex_ao(tracer, m, v, {0, 0, 1}), 0.95f);
+}
+
 TEST(BakePoint, BadShadingThrowsInvalidArgument) {
   const Mesh m = horizontal(-1, 1, -1, 1, 0);
   std::vector<float> short_normals(3 * 3, 0.0f), nan_normals = same_normals(m, {0, 0, 1});

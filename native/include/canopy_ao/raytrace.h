@@ -44,6 +44,12 @@
 //    the face keeps its own triangle as an occluder;
 //  - the scene is built ROBUST, as Cycles builds it: its hit test also counts a face through
 //    the ray's start (t = 0), so a start lying in another face's plane sees that face.
+// A vertex that no triangle with area uses (a branch tip Sapling collapses to a point: all its
+// faces have zero area, and every face meeting there would block every ray at t = 0) starts
+// 1e-4 × max(1, largest |coordinate|) off it along its normal and skips nothing. (Cycles gives
+// such a corner a NaN face normal, and what it then bakes depends on float rounding: 0.1–0.99,
+// mean 0.59 on the Douglas fir's 1,791 tips, where this start gives 0.69, MAE 0.15 to Cycles
+// against 0.59 from the point itself.)
 // A texel (triangle_ids) on such a tracer starts at the texel itself with its own normal,
 // skips its triangle and gets the same terminator lift. Checked against Cycles
 // (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
