@@ -108,3 +108,50 @@ def test_blades_and_a_capped_trunk_on_the_ground_agree_with_cycles(clean):
     # Per vertex: the 16-gon cap is one face corner of each rim vertex (Blender's polygons reach
     # the tracer), not the 1 to 14 fan triangles it is cut into (0.095–0.143 that way).
     assert np.all(np.abs(ours["Trunk"] - cyc["Trunk"]) < 0.02)
+
+
+def _quads_mesh(name, verts, faces):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([tuple(map(float, v)) for v in verts], [], faces)
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    _smooth(ob)
+    return ob
+
+
+def test_at_the_same_samples_our_rays_beat_cycles(clean):
+    """Samples mean rays at every face corner, as in Cycles' bake, so a vertex on four quads
+    casts four times the samples, as Cycles does; our corners share one stratified set where
+    Blender seeds all corners of a vertex alike. Against Cycles at 1024 samples our 16 samples
+    err less than Cycles' 16: 0.38 of it here, on quads (Blender 3.4; dealing 16 rays out to the
+    corners, the rule before, 0.97)."""
+    n = 16
+    g = np.linspace(-2.0, 2.0, n + 1)
+    gv = [(x, y, 0.0) for y in g for x in g]
+    gf = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+          for j in range(n) for i in range(n)]
+    _quads_mesh("Ground", gv, gf)
+    s, rings = 12, 10
+    for k, (cx, tilt) in enumerate(((0.0, 0.0), (0.45, 0.6))):
+        tv = [(cx + 0.15 * np.cos(2 * np.pi * i / s) + tilt * r / rings,
+               0.15 * np.sin(2 * np.pi * i / s), 2.0 * r / rings) for r in range(rings + 1)
+              for i in range(s)]
+        tf = [(r * s + i, r * s + (i + 1) % s, (r + 1) * s + (i + 1) % s, (r + 1) * s + i)
+              for r in range(rings) for i in range(s)]
+        _quads_mesh(f"Stem{k}", tv, tf)
+    names = ["Ground", "Stem0", "Stem1"]
+    distance = 3.0
+    opts = properties.scene_options(bpy.context.scene)
+    opts.update(method="raytrace", samples=16, distance=distance, use_world_distance=False)
+    run_bake(bpy.context, names, opts)
+    ours = np.concatenate([mesh_io.read_ao_attribute(bpy.data.objects[m], "CanopyAO")
+                           for m in names])
+    obs = [bpy.data.objects[m] for m in names]
+    ref = cycles_check.bake_cycles_vertex_ao(bpy.context, obs, distance, 1024)
+    c16 = cycles_check.bake_cycles_vertex_ao(bpy.context, obs, distance, 16)
+    ref = np.concatenate([ref[m] for m in names])
+    c16 = np.concatenate([c16[m] for m in names])
+    assert 0.05 < ref.mean() < 0.95  # the stems shade the ground and each other
+    e_ours, e_cycles = np.abs(ours - ref).mean(), np.abs(c16 - ref).mean()
+    assert e_ours < 0.85 * e_cycles, (e_ours, e_cycles)

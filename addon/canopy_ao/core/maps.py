@@ -94,7 +94,7 @@ def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
                  triangles=None, with_ao=False):
     """World-space bent normals float32 (N, 3) of receivers on item (as
     bake.evaluate_receivers: its vertices, a chunk of them, or texels with their triangles):
-    the cosine-weighted mean unoccluded direction of settings.samples rays per receiver,
+    the cosine-weighted mean unoccluded direction of settings.samples rays per face corner,
     normalised, against the plan's tracer (ensure_tracer). Every ray blocked: the unit normal;
     a zero normal: (0, 0, 0) (raytrace.h, "Bent normals"). with_ao: (the trace's AO float32
     (N,), bent normals); the AO is the exact rung's where rung_is_the_trace."""

@@ -135,8 +135,9 @@ OPTIONS = (
            "instanced forests) count only what lies within it; the in-shell models do not "
            "shorten paths inside a crown", min=0.0, unit='LENGTH',
            cli_default="the World's AO distance, as Cycles uses it; unlimited without a world"),
-    Option("samples", "int", 64, "Samples", "Rays per vertex for the ray-traced method",
-           min=1, max=65536, soft_max=1024),
+    Option("samples", "int", 64, "Samples", "Rays per face corner for the ray-traced method, "
+           "as Cycles' bake samples count (a vertex on k faces casts k times this many; a "
+           "texel one)", min=1, max=65536, soft_max=1024),
     Option("time_budget", "float", 2.0, "Time Budget",
            "Auto: seconds the bake may take; richer models predicted to take longer are not "
            "chosen (0 = no limit)", min=0.0, unit='TIME'),
