@@ -5,8 +5,10 @@
 Pure Python over numpy, ``canopy_ao._core`` and the add-on's bpy-free ``engine`` (the same code
 path as a bake in Blender, minus bpy I/O). For each scene (examples/canopy_scenes.py):
 
-1. Reference: Embree (``_core.RayTracer``) at ``--ref-samples`` cosine-weighted rays per vertex
-   (1024 unless --ref-samples), AO distance D = the scene's bbox diagonal, seed 12345 so its noise
+1. Reference: Embree (``_core.RayTracer``) at ``--ref-samples`` cosine-weighted rays per face
+   corner (1024 unless --ref-samples), every vertex traced as the add-on's exact rung traces it
+   (its own receiver, started at Cycles' bake point; the scenes are built in Blender one face per
+   triangle), AO distance D = the scene's bbox diagonal, seed 12345 so its noise
    is independent of the methods' own ray-traced runs. Cached in
    bench/out/cache/embree_<scene>[_quick]_<samples>.npz (keyed by a hash of the geometry).
    Cycles' bake (bench/cycles_reference.py, run in Blender) is read from the same cache folder
@@ -23,7 +25,8 @@ path as a bake in Blender, minus bpy I/O). For each scene (examples/canopy_scene
    - medium_sphere / medium_ellipsoid / medium_shells (k = 2, 4, 8): the leaf-medium expectation
      (ao_medium_shells over every tree's proxies, product), τ calibrated the engine's way (256
      traced points) and best τ; not yet used by the engine.
-   - raytrace at 1, 4, 16, 64, 256 rays (prepare = BVH build).
+   - raytrace at 1, 4, 16, 64, 256 samples per face corner, as the reference (prepare = BVH
+     build).
    - cycles at every cached sample count below the Cycles reference (time = the bake call).
 3. Errors per object role (canopy, trunk, ground, grass, all, and "unburied": all but the
    vertices whose reference AO is <= 0.02, i.e. buried inside other geometry) against each reference: MAE,
@@ -57,6 +60,9 @@ from canopy_ao.core.metrics import compare  # noqa: E402
 OUT = os.path.join(HERE, "out")
 CACHE = os.path.join(OUT, "cache")
 REF_SEED = 12345
+# Which tracer made a cached reference: each vertex its own receiver at Cycles' bake point, its
+# samples at every face corner (native raytrace.h, 'Origins'), as the add-on traces it.
+TRACER_TAG = "bake-point-per-corner"
 ROLES = ("canopy", "trunk", "ground", "grass")
 BURIED = 0.02   # reference AO at or below this: a vertex buried inside other geometry
 DEFAULT_SCENES = [n for n in cs.SCENES if n != "large_tree"]
@@ -85,8 +91,19 @@ class Prepared:
                                        p.triangles) for p, n in zip(scene, self.normals)]
         self.V, self.T, self.part = scene.merged()
         self.N = np.concatenate(self.normals)
+        self.ids = np.arange(len(self.V), dtype=np.int32)
         self.role = np.concatenate([np.full(p.n_vertices, p.role, dtype=object) for p in scene])
         self.offsets = np.cumsum([0] + [p.n_vertices for p in scene])
+
+    def tracer(self):
+        """The scene's tracer as the add-on builds it (vertex normals: Cycles' bake point)."""
+        return _core.RayTracer(self.V, self.T, normals=np.ascontiguousarray(self.N, np.float32))
+
+    def trace(self, tracer, samples, distance, seed, rows=slice(None)):
+        """AO at vertices ``rows``, each its own receiver (as the add-on's exact rung)."""
+        return np.asarray(tracer.ao(self.V[rows], self.N[rows], samples=samples,
+                                    distance=distance, seed=seed, vertex_ids=self.ids[rows]),
+                          np.float32)
 
     def split(self, ao_all):
         return {p.name: ao_all[a:b] for p, a, b in zip(self.scene, self.offsets[:-1],
@@ -105,18 +122,17 @@ def embree_reference(prep, samples):
     path = cache_name("embree", prep, samples)
     if os.path.exists(path):
         with np.load(path) as z:
-            if str(z["geometry"]) == prep.hash and float(z["distance"]) == prep.distance:
+            if (str(z["geometry"]) == prep.hash and float(z["distance"]) == prep.distance
+                    and "tracer" in z.files and str(z["tracer"]) == TRACER_TAG):
                 return z["ao"].astype(np.float32), float(z["seconds"])
     if not hasattr(_core, "RayTracer"):
         return None, None
     t0 = time.perf_counter()
-    tracer = _core.RayTracer(prep.V, prep.T)
-    ao = np.asarray(tracer.ao(prep.V, prep.N, samples=samples, distance=prep.distance,
-                              seed=REF_SEED), np.float32)
+    ao = prep.trace(prep.tracer(), samples, prep.distance, REF_SEED)
     dt = time.perf_counter() - t0
     os.makedirs(CACHE, exist_ok=True)
     np.savez_compressed(path, ao=ao, seconds=dt, samples=samples, distance=prep.distance,
-                        geometry=prep.hash)
+                        geometry=prep.hash, tracer=TRACER_TAG)
     return ao, dt
 
 
@@ -250,10 +266,9 @@ def method_runs(prep, ref, args):
                 f"{type(exc).__name__}: {exc}"
     yield from raw_runs(prep, ref, args)
     if hasattr(_core, "RayTracer"):
-        tracer, t_build = timed(lambda: _core.RayTracer(prep.V, prep.T), 1)
+        tracer, t_build = timed(prep.tracer, 1)
         for n in args.ray_samples:
-            ao, te = timed(lambda: np.asarray(tracer.ao(prep.V, prep.N, samples=n, distance=D,
-                                                        seed=0), np.float32), args.repeats)
+            ao, te = timed(lambda: prep.trace(tracer, n, D, 0), args.repeats)
             yield "raytrace", "raytrace", f"{n} rays", math.nan, "", ao, t_build, te, ""
 
 
@@ -285,8 +300,7 @@ def _calibration_sample(prep, n=256, rays=128, seed=0):
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     idx = np.sort(rng.choice(len(prep.V), size=min(n, len(prep.V)), replace=False))
-    tr = _core.RayTracer(prep.V, prep.T)
-    ao = np.asarray(tr.ao(prep.V[idx], prep.N[idx], samples=rays, distance=prep.distance), np.float32)
+    ao = prep.trace(prep.tracer(), rays, prep.distance, 0, rows=idx)
     return idx, ao, time.perf_counter() - t0
 
 

@@ -65,10 +65,6 @@ def timed(fn):
     return r, time.perf_counter() - t0
 
 
-def engine_items(sc):
-    return [core.SceneItem(n, r.upper(), t, p, nn, tr) for n, r, t, p, nn, tr in sc.items()]
-
-
 def cycles_runs(sc):
     """{samples: (ao over all vertices, seconds)} from sapling_scenes.py --bake-cycles."""
     out = {}
@@ -92,7 +88,7 @@ def near_distance(sc, voxels):
 
 def methods(sc):
     """Yield (method, ao over all vertices, seconds, note)."""
-    items = engine_items(sc)
+    items = sc.engine_items()
     D = sc.distance
     if not _WARM:  # the first bake of a process builds the medium table and thread pools
         core.bake(items, core.BakeSettings(method="medium", distance=D))

@@ -82,6 +82,14 @@ class RealScene:
             p = self.parts[n]
             yield n, p["role"], p["tree"], p["positions"], p["normals"], p["triangles"]
 
+    def engine_items(self):
+        """The add-on's SceneItems of this scene (roles, trees and faces as exported)."""
+        from canopy_ao import core
+        return [core.SceneItem(n, self.parts[n]["role"].upper(), self.parts[n]["tree"],
+                               self.parts[n]["positions"], self.parts[n]["normals"],
+                               self.parts[n]["triangles"], polygons=self.parts[n]["polygons"])
+                for n in self.names]
+
 
 def scene_path(scene, quick=True, out_dir=REAL):
     return os.path.join(out_dir, f"{scene}{'_quick' if quick else ''}.npz")
