@@ -35,7 +35,9 @@ from .native import _core
 # example bake), 1.74e-8 per BVH step against 4.8e-8 under that load. Re-measure when a kernel
 # changes speed by 2×. (Since the exact rung starts each vertex at Cycles' bake point in a
 # ROBUST scene its rays take 1.24× as long — README, 'Speed' — within the model's margin, so
-# the constant stands.)
+# the constant stands. Re-measured 2026-12-01 with rays at every face corner, counted so:
+# 1.57e-8 per BVH step on one thread of the quiet machine, `bench/cost_constants.py --quick`,
+# within 11 % of it.)
 SECONDS_PER_UNIT = {
     "shell": 6.0e-9,         # one analytic shell evaluation (in-shell model or occluder)
     "medium": 1.7e-8,        # one medium-table shell evaluation
