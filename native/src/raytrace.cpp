@@ -493,25 +493,45 @@ struct RayTracer::Impl {
     return best >= 0.0f ? centroid(pick) : vertex(v);
   }
 
-  /// Vertex v's corners at Cycles' bake point (raytrace.h, "Origins"), one per triangle with
-  /// area using v, in triangle order; none when no such triangle exists.
-  void corners(std::uint32_t v, std::vector<Corner>* out) const {
+  /// Cycles' bake offset at P: 1e-4 × max(1, largest |coordinate|) (bake_offset_towards_center).
+  static float bake_reach(Vec3 P) {
+    return 1e-4f *
+           std::max(1.0f, std::max(std::fabs(P.x), std::max(std::fabs(P.y), std::fabs(P.z))));
+  }
+
+  bool has_area(std::uint32_t tri) const {
+    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+    const Vec3 a = vertex(t[0]);
+    return length(cross(vertex(t[1]) - a, vertex(t[2]) - a)) > 0.0f;
+  }
+
+  /// The triangles vertex v's corners are baked on (raytrace.h, "Origins"): each triangle with
+  /// area using v, in triangle order, or with polygons the first such triangle of each one.
+  void corner_triangles(std::uint32_t v, std::vector<std::uint32_t>* out) const {
     out->clear();
-    const Vec3 P = vertex(v);
-    const float reach = 1e-4f * std::max(1.0f, std::max(std::fabs(P.x),
-                                                        std::max(std::fabs(P.y), std::fabs(P.z))));
     for (std::uint32_t k = first_tri[v]; k < first_tri[v + 1]; ++k) {
       const std::uint32_t tri = tris_of[k];
-      if (!polygons.empty()) {  // one corner per polygon: its first triangle (Blender's rule)
-        bool seen = false;
-        for (const Corner& c : *out) seen = seen || polygons[c.tri] == polygons[tri];
-        if (seen) continue;
+      if (!has_area(tri)) continue;
+      bool seen = false;
+      if (!polygons.empty()) {  // one corner per polygon (Blender's rule)
+        for (const std::uint32_t u : *out) seen = seen || polygons[u] == polygons[tri];
       }
+      if (!seen) out->push_back(tri);
+    }
+  }
+
+  /// Vertex v's corners at Cycles' bake point (raytrace.h, "Origins"), one per triangle of
+  /// corner_triangles (tris: its scratch); none when no triangle with area uses v.
+  void corners(std::uint32_t v, std::vector<Corner>* out, std::vector<std::uint32_t>* tris) const {
+    out->clear();
+    const Vec3 P = vertex(v);
+    const float reach = bake_reach(P);
+    corner_triangles(v, tris);
+    for (const std::uint32_t tri : *tris) {
       const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
       const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
       const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
       const float area2 = length(c);
-      if (!(area2 > 0.0f)) continue;
       const Vec3 ng = c / area2;
       // bake_offset_towards_center: move towards the centroid, then clamp the barycentrics.
       const Vec3 to = (V[0] + V[1] + V[2]) / 3.0f - P;
@@ -719,26 +739,12 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
         m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
     }
-    if (!m.vertex_normals.empty() && vertices.size > 0) {  // as corners(): faces with area
-      std::vector<char> has_area(triangle_count);
-      for (std::size_t j = 0; j < triangle_count; ++j) {
-        const std::uint32_t* t = m.indices.data() + 3 * j;
-        const Vec3 a = m.vertex(t[0]);
-        has_area[j] = length(cross(m.vertex(t[1]) - a, m.vertex(t[2]) - a)) > 0.0f;
-      }
+    if (!m.vertex_normals.empty() && vertices.size > 0) {
       std::size_t total = 0;
-      std::vector<std::int32_t> seen;
+      std::vector<std::uint32_t> tris;
       for (std::size_t v = 0; v < vertices.size; ++v) {
-        seen.clear();
-        for (std::uint32_t k = m.first_tri[v]; k < m.first_tri[v + 1]; ++k) {
-          const std::uint32_t tri = m.tris_of[k];
-          const std::int32_t face =
-              m.polygons.empty() ? static_cast<std::int32_t>(tri) : m.polygons[tri];
-          if (has_area[tri] && std::find(seen.begin(), seen.end(), face) == seen.end()) {
-            seen.push_back(face);
-          }
-        }
-        total += std::max<std::size_t>(1, seen.size());
+        m.corner_triangles(static_cast<std::uint32_t>(v), &tris);
+        total += std::max<std::size_t>(1, tris.size());
       }
       m.corners_per_vertex = static_cast<double>(total) / static_cast<double>(vertices.size);
     }
@@ -876,6 +882,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     std::size_t filled = 0;
     std::int32_t skip[kStream];  // bake-point mode: the triangle each batched ray skips
     std::vector<Corner> corners;
+    std::vector<std::uint32_t> corner_tris;  // corners()'s scratch
     TraceContext context;
     embree::init_context(&context.base);  // incoherent: AO rays go every way
     if (bake_point) {
@@ -910,7 +917,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
       corners.clear();
       if (bake_point && ov >= 0) {
-        m.corners(static_cast<std::uint32_t>(ov), &corners);
+        m.corners(static_cast<std::uint32_t>(ov), &corners, &corner_tris);
       } else if (bake_point && ot >= 0) {
         Corner c;
         if (m.texel_corner(points[i], static_cast<std::uint32_t>(ot), nn, &c)) corners.push_back(c);
@@ -924,9 +931,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         // Used only when no triangle with area uses the vertex (a branch tip collapsed to a
         // point): a hair off it along its normal, Cycles' bake offset 1e-4 × max(1, |x|max),
         // since from the point itself every face meeting there blocks every ray at t = 0.
-        const Vec3 x = points[i];
-        o = x + nn * (1e-4f * std::max(1.0f, std::max(std::fabs(x.x),
-                                                      std::max(std::fabs(x.y), std::fabs(x.z)))));
+        o = points[i] + nn * Impl::bake_reach(points[i]);
       } else if (automatic && ot >= 0) {
         o = own_surface_origin(points[i], m.centroid(static_cast<std::uint32_t>(ot)),
                                m.precision);
@@ -937,14 +942,14 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       }
       const std::uint32_t local = static_cast<std::uint32_t>(i - begin);
       const std::size_t k = corners.size();
-      // (at most kMaxRaysPerVertex, or samples if more: a fan of thousands of faces stays finite)
-      const int rays_here =
+      // Per corner: k × samples, at most kMaxRaysPerVertex (or samples if more): a fan of
+      // thousands of faces stays finite.
+      const std::int64_t wanted =
           options.per_corner && k > 1
-              ? static_cast<int>(std::max<std::int64_t>(
-                    samples, std::min<std::int64_t>(static_cast<std::int64_t>(samples) *
-                                                        static_cast<std::int64_t>(k),
-                                                    kMaxRaysPerVertex)))
+              ? static_cast<std::int64_t>(samples) * static_cast<std::int64_t>(k)
               : samples;
+      const int rays_here = static_cast<int>(
+          std::min<std::int64_t>(wanted, std::max<std::int64_t>(samples, kMaxRaysPerVertex)));
       const SampleSet* here = &set;
       if (rays_here != samples) {
         if (sets.size() < k + 1) sets.resize(k + 1);
