@@ -13,7 +13,9 @@ Per scene and sample count S: Cycles at S samples (when baked), our rays at S sa
 corner as the add-on casts them (and as Cycles does: the same rays per vertex), mean of --seeds
 seeds; their ratio (docs/DESIGN.md, 'Rays against Cycles' samples': the target is ours ≤ 0.85 ×
 Cycles); the rule before (S rays per vertex dealt out to its corners) and its ratio; and the
-contact share (vertices with a ray blocked within 1e-4 of the AO distance) with the MAE there.
+contact share (vertices with a ray blocked within 1e-4 of the AO distance) with the MAE there;
+where faces of zero area exist, how many vertices touch one or have only such faces, and the
+error at the latter.
 """
 from __future__ import annotations
 
@@ -42,6 +44,18 @@ def cycles(sc, samples):
         if str(z["geometry"]) != sc.geometry:
             return None
         return np.concatenate([z[f"ao/{n}"] for n in sc.names]).astype(np.float32)
+
+
+def zero_area(sc):
+    """(touching, only) bool (N,): vertices on a face of zero area, and those whose every face
+    has zero area (a branch tip collapsed to a point: no corner, raytrace.h 'Origins')."""
+    v = sc.V.astype(np.float64)
+    t = sc.T.astype(np.int64)
+    flat = np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1) == 0
+    n = sc.n_vertices
+    on_flat = np.bincount(t[flat].ravel(), minlength=n) > 0
+    on_area = np.bincount(t[~flat].ravel(), minlength=n) > 0
+    return on_flat, on_flat & ~on_area
 
 
 def main():
@@ -98,6 +112,14 @@ def main():
                 line += f"            —          | {e_old.mean():.4f}, —                 |    —"
             print(line)
             summary.append((name, s, ra, ru, rb))
+        touching, only = zero_area(sc)
+        if touching.any():  # where Cycles bakes with NaN face normals (docs/DESIGN.md)
+            last = args.samples[-1]
+            ours = rs.trace_vertices(tracer, sc, last, sc.distance, 0)
+            print(f"  zero-area faces: {touching.sum()} vertices touch one, {only.sum()} have "
+                  f"only such faces; there, at {last} rays, ours {ours[only].mean():.3f} and "
+                  f"Cycles {ref[only].mean():.3f} on average, MAE "
+                  f"{np.abs(ours - ref)[only].mean():.3f}")
         print(f"  ({time.perf_counter() - t0:.0f} s)")
     print("\nours / Cycles (target ≤ 0.85), all vertices / unburied; before (S per vertex):")
     for name, s, ra, ru, rb in summary:

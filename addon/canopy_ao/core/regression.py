@@ -41,7 +41,7 @@ BURIED_RAYS = 2 * LADDER_BURIED_RAYS
 MIN_GROUP = 96           # sample points a group needs for its own fit
 POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
 # Sizing on small scenes (calibration_size): counted work, scale-free.
-RAYS_PER_RECEIVER = 8    # calibration rays per receiver at most: 1/8 of a 64-ray bake
+RAYS_PER_RECEIVER = 8    # calibration samples per receiver at most: 1/8 of a 64-sample bake
 MIN_SAMPLES = 32         # rays per calibration point at least
 MIN_POINTS = 256         # calibration points at least (when the scene has them)
 
@@ -90,10 +90,11 @@ def _sample(groups, count, seed):
 def calibration_size(receivers, points=POINTS, samples=128):
     """(points, rays per point) of the calibration sample for ``receivers`` receiver points,
     sized so the sample stays a fraction of a ray-traced bake of the same scene whatever its
-    size (docs/DESIGN.md, 'The ray-free rung'): at most RAYS_PER_RECEIVER rays per receiver
-    (an eighth of a 64-ray bake), fewer rays per point first (down to MIN_SAMPLES: the fit
-    averages their noise out), then fewer points (down to MIN_POINTS; the floor is
-    MIN_POINTS × MIN_SAMPLES rays, or every receiver at MIN_SAMPLES on a smaller scene).
+    size (docs/DESIGN.md, 'The ray-free rung'): at most RAYS_PER_RECEIVER samples per receiver
+    (an eighth of a 64-sample bake; a vertex casts both at each face corner), fewer per point
+    first (down to MIN_SAMPLES: the fit averages their noise out), then fewer points (down to
+    MIN_POINTS; the floor is MIN_POINTS × MIN_SAMPLES, or every receiver at MIN_SAMPLES on a
+    smaller scene).
     Counted, never timed: the same scene always gets the same sample. The grid is not sized
     down: 48 or 32 voxels instead of 64 cut the rung's time on a 14k-vertex tree by 40-50 %
     but cost MAE 0.003-0.006 (callistemon)."""
