@@ -31,7 +31,6 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-import real_rays as rr  # noqa: E402
 import real_scenes as rs  # noqa: E402
 
 SAME_SIDE, SAMPLE, SECOND_SEED = 0.8, 2000, 7919
@@ -100,12 +99,12 @@ def main():
     print("scene, S: ratio to Cycles at S (seconds) — plain S | pooled S | plain 2S | plain 3S")
     for name in [s for s in (args.scenes or names) if s in names]:
         sc = rs.load(name)
-        ref = rr.cycles(sc, 1024)
+        ref = rs.cycles_ao(sc, 1024)
         if ref is None:
             continue
         tracer = rs.scene_tracer(sc)
         for s in args.samples:
-            cyc = rr.cycles(sc, s)
+            cyc = rs.cycles_ao(sc, s)
             if cyc is None:
                 continue
             e_c = np.abs(cyc - ref).mean()

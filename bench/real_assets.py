@@ -65,20 +65,6 @@ def timed(fn):
     return r, time.perf_counter() - t0
 
 
-def cycles_runs(sc):
-    """{samples: (ao over all vertices, seconds)} from sapling_scenes.py --bake-cycles."""
-    out = {}
-    stem = os.path.basename(sc.path)[:-4] + "_cycles_"
-    for f in sorted(os.listdir(os.path.dirname(sc.path))):
-        if f.startswith(stem) and f.endswith(".npz") and f[len(stem):-4].isdigit():
-            with np.load(os.path.join(os.path.dirname(sc.path), f)) as z:
-                if str(z["geometry"]) != sc.geometry:
-                    continue
-                out[int(f[len(stem):-4])] = (np.concatenate([z[f"ao/{n}"] for n in sc.names]),
-                                             float(z["seconds"]))
-    return dict(sorted(out.items()))
-
-
 def near_distance(sc, voxels):
     """The hybrid's near distance: `voxels` voxels of the far grid (its box / resolution)."""
     occ = sc.role != "ground"
@@ -117,7 +103,7 @@ def methods(sc):
         ao, dt = timed(lambda: np.asarray(_core.ao_near_far(tracer, grid, sc.V, sc.N, near,
                                                             samples=n, distance=D)))
         yield f"hybrid {c:g}v/{n}", ao, dt + t_bvh + t_grid, f"near {near:.3g}"
-    for s, (ao, dt) in cycles_runs(sc).items():
+    for s, (ao, dt) in rs.cycles_runs(sc).items():
         yield f"cycles {s}", ao, dt, "Cycles bake"
 
 
@@ -130,7 +116,7 @@ def run_scene(name, quick, writer):
     print(f"\n== {name}{star}: {sc.n_vertices} vertices, {len(sc.T)} triangles, buried "
           f"{bur.sum()} ({bur.sum() / max(1, np.isin(sc.role, ('canopy', 'trunk')).sum()):.0%} "
           f"of leaf+branch vertices), mean AO {ref.mean():.3f}, AO distance {sc.distance:.3g}")
-    cyc = cycles_runs(sc)
+    cyc = rs.cycles_runs(sc)
     cref = cyc[max(cyc)][0] if cyc else None  # the highest-sample Cycles bake: 2nd reference
     ctitle = f"vs cy{max(cyc)}" if cyc else ""
     print(f"{'method':16s} {'MAE all':>8s} {'MAE unb':>8s} {'corr':>6s} {'seconds':>8s} "

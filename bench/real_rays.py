@@ -35,17 +35,6 @@ import real_scenes as rs  # noqa: E402
 CONTACT = 1e-4  # of the AO distance: a ray blocked this close starts on touching geometry
 
 
-def cycles(sc, samples):
-    """Cycles' AO per vertex at ``samples`` (merged like sc.V), or None when not baked."""
-    path = sc.path[:-4] + f"_cycles_{samples}.npz"
-    if not os.path.exists(path):
-        return None
-    with np.load(path) as z:
-        if str(z["geometry"]) != sc.geometry:
-            return None
-        return np.concatenate([z[f"ao/{n}"] for n in sc.names]).astype(np.float32)
-
-
 def zero_area(sc):
     """(touching, only) bool (N,): vertices on a face of zero area, and those whose every face
     has zero area (a branch tip collapsed to a point: no corner, raytrace.h 'Origins')."""
@@ -75,7 +64,7 @@ def main():
     summary = []
     for name in picked:
         sc = rs.load(name)
-        ref = cycles(sc, args.reference)
+        ref = rs.cycles_ao(sc, args.reference)
         if ref is None:
             print(f"\n{name}: no Cycles bake at {args.reference} samples, skipped")
             continue
@@ -90,7 +79,7 @@ def main():
         print("   S | Cycles all / unburied | ours all / unburied | ours / Cycles all / "
               "unburied | before (S per vertex): all, ratio | contact: Cycles / ours")
         for s in args.samples:
-            cyc = cycles(sc, s)
+            cyc = rs.cycles_ao(sc, s)
             e_ours = np.mean([np.abs(rs.trace_vertices(tracer, sc, s, sc.distance, seed) - ref)
                               for seed in range(args.seeds)], axis=0)
             e_old = np.mean([np.abs(rs.trace_vertices(tracer, sc, s, sc.distance, seed,

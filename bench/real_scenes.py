@@ -91,6 +91,36 @@ class RealScene:
                 for n in self.names]
 
 
+
+def cycles_bake(sc: RealScene, samples):
+    """(AO float32 over all vertices, as sc.V; seconds) of the Cycles bake at ``samples``
+    cached beside the scene (examples/sapling_scenes.py --bake-cycles), or None: not baked, or
+    baked from other geometry."""
+    path = sc.path[:-4] + f"_cycles_{samples}.npz"
+    if not os.path.exists(path):
+        return None
+    with np.load(path) as z:
+        if str(z["geometry"]) != sc.geometry:
+            return None
+        return (np.concatenate([z[f"ao/{n}"] for n in sc.names]).astype(np.float32),
+                float(z["seconds"]))
+
+
+def cycles_ao(sc: RealScene, samples):
+    """The AO of cycles_bake, or None."""
+    got = cycles_bake(sc, samples)
+    return got[0] if got is not None else None
+
+
+def cycles_runs(sc: RealScene):
+    """{samples: (AO, seconds)} of every Cycles bake cached beside the scene, by sample count."""
+    stem = os.path.basename(sc.path)[:-4] + "_cycles_"
+    counts = sorted(int(f[len(stem):-4]) for f in os.listdir(os.path.dirname(sc.path))
+                    if f.startswith(stem) and f.endswith(".npz") and f[len(stem):-4].isdigit())
+    runs = {s: cycles_bake(sc, s) for s in counts}
+    return {s: r for s, r in runs.items() if r is not None}
+
+
 def scene_path(scene, quick=True, out_dir=REAL):
     return os.path.join(out_dir, f"{scene}{'_quick' if quick else ''}.npz")
 
