@@ -448,7 +448,7 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     (per_corner=True, the default): the same rays as dealing corners × samples out to its
     corners. The cost model counts them (corners_per_vertex)."""
     from canopy_ao import core as engine
-    from canopy_ao.core import cost, lighting
+    from canopy_ao.core import cost
 
     # A pyramid (its apex has four faces, each base vertex two) under a roof.
     v = np.float32([[0, 0, 1], [-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0],
@@ -474,8 +474,8 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     # The cost model's raytrace work is receivers × samples × corners × log2(triangles).
     item = engine.SceneItem("P", "GROUND", "", v, n, t)
     settings = engine.BakeSettings(method="raytrace", samples=16)
-    plan = engine.prepare([item], settings)
-    plan.tracer = lighting.build_tracer([item])
+    plan = engine.prepare([item], settings)  # the exact rung: the plan's tracer, with normals
+    assert plan.tracer.corners_per_vertex == tracer.corners_per_vertex
     unit, work = cost.work(plan, "raytrace", 9)
     assert unit == "bvh_step"
     assert abs(work - 9 * 16 * 2.0 * np.log2(6)) < 1e-9
