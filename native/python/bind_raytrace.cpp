@@ -251,6 +251,11 @@ void bind_raytrace(py::module_& m) {
       .def_property_readonly("corners_per_vertex", &RayTracer::corners_per_vertex,
                              "Mean corners per vertex: what per-corner rays multiply a bake of "
                              "every vertex's rays by (1 without vertex normals).")
+      .def("vertex_rays", &RayTracer::vertex_rays, py::arg("first"), py::arg("count"),
+           py::arg("samples"),
+           "The rays a bake of the tracer's vertices [first, first + count) casts at `samples` "
+           "per face corner (each vertex at Cycles' bake point): what the cost model counts. "
+           "ValueError if the range is not in the mesh or samples < 1.")
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,
                              "The origin offset used when offset < 0, in scene units.")
       .def("__repr__", [](const RayTracer& self) {

@@ -458,6 +458,7 @@ struct RayTracer::Impl {
   std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
   double corners_per_vertex = 1.0;  // mean corners of the vertices (bake point), else 1
+  std::vector<std::uint32_t> corner_count;  // V: corners per vertex (≥ 1), or empty: 1 each
   float auto_offset = 0;
   float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
   DevicePtr device;
@@ -742,9 +743,11 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
     if (!m.vertex_normals.empty() && vertices.size > 0) {
       std::size_t total = 0;
       std::vector<std::uint32_t> tris;
+      m.corner_count.resize(vertices.size);
       for (std::size_t v = 0; v < vertices.size; ++v) {
         m.corner_triangles(static_cast<std::uint32_t>(v), &tris);
-        total += std::max<std::size_t>(1, tris.size());
+        m.corner_count[v] = static_cast<std::uint32_t>(std::max<std::size_t>(1, tris.size()));
+        total += m.corner_count[v];
       }
       m.corners_per_vertex = static_cast<double>(total) / static_cast<double>(vertices.size);
     }
@@ -809,6 +812,33 @@ std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
 bool RayTracer::has_vertex_normals() const { return !impl_->vertex_normals.empty(); }
 
 double RayTracer::corners_per_vertex() const { return impl_->corners_per_vertex; }
+
+namespace {
+/// The rays one vertex with k corners casts at `samples` (RayTracer::ao's per-corner count).
+std::int64_t vertex_ray_count(std::int64_t k, int samples, bool per_corner) {
+  const std::int64_t wanted = per_corner && k > 1 ? samples * k : samples;
+  return std::min<std::int64_t>(wanted, std::max<std::int64_t>(samples, kMaxRaysPerVertex));
+}
+}  // namespace
+
+std::uint64_t RayTracer::vertex_rays(std::size_t first, std::size_t count, int samples) const {
+  const Impl& m = *impl_;
+  if (samples < 1) {
+    throw std::invalid_argument("samples must be at least 1, got " + std::to_string(samples));
+  }
+  if (first > m.vertex_count || count > m.vertex_count - first) {
+    std::ostringstream s;
+    s << "vertices [" << first << ", " << first + count << ") are not in the tracer's "
+      << m.vertex_count;
+    throw std::invalid_argument(s.str());
+  }
+  if (m.corner_count.empty()) return static_cast<std::uint64_t>(count) * samples;
+  std::uint64_t total = 0;
+  for (std::size_t v = first; v < first + count; ++v) {
+    total += static_cast<std::uint64_t>(vertex_ray_count(m.corner_count[v], samples, true));
+  }
+  return total;
+}
 
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
@@ -944,12 +974,8 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const std::size_t k = corners.size();
       // Per corner: k × samples, at most kMaxRaysPerVertex (or samples if more): a fan of
       // thousands of faces stays finite.
-      const std::int64_t wanted =
-          options.per_corner && k > 1
-              ? static_cast<std::int64_t>(samples) * static_cast<std::int64_t>(k)
-              : samples;
       const int rays_here = static_cast<int>(
-          std::min<std::int64_t>(wanted, std::max<std::int64_t>(samples, kMaxRaysPerVertex)));
+          vertex_ray_count(static_cast<std::int64_t>(k), samples, options.per_corner));
       const SampleSet* here = &set;
       if (rays_here != samples) {
         if (sets.size() < k + 1) sets.resize(k + 1);

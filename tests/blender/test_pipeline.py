@@ -9,6 +9,7 @@ import pytest
 import helpers_materials as H
 from canopy_ao.blender import job as job_mod, mesh_io, properties
 from canopy_ao.blender.job import BakeJob, run_bake
+from canopy_ao.core import cost
 
 
 @pytest.fixture
@@ -44,6 +45,9 @@ def test_texel_bake_evaluates_texels_in_chunks_and_checks_them_with_cycles(
     assert target.kind == "texel" and texels > 3000  # most of the 64 x 64 square
     assert job.steps == 1 + -(-texels // 1000)  # prepare, then one step per chunk
     job.prepare()
+    # Auto's cost model counts what the bake evaluates: Ground's texels, not the leaves' vertices.
+    assert job.plan.targets == {"Ground": ("texel", texels)}
+    assert cost.receiver_count(job.plan, job.items) == texels
     lines = []
     while (line := job.step()) is not None:
         lines.append(line)

@@ -910,6 +910,21 @@ TEST(BakePoint, CornersPerVertexCountsFacesWithArea) {
               1e-12);
 }
 
+TEST(BakePoint, VertexRaysCountWhatABakeCasts) {
+  const Mesh fan = hexagon_fan();
+  const RayTracer baking = fan.baking(same_normals(fan, {0, 0, 1}));
+  // The hub (vertex 0) has 6 corners, each rim vertex 2: the cost model's counted rays.
+  EXPECT_EQ(baking.vertex_rays(0, 7, 16), 18u * 16u);
+  EXPECT_EQ(baking.vertex_rays(1, 2, 16), 4u * 16u);
+  EXPECT_EQ(baking.vertex_rays(3, 0, 16), 0u);
+  // At most max(samples, 65,536) rays per vertex, as RayTracer::ao casts.
+  EXPECT_EQ(baking.vertex_rays(0, 1, 20000), 65536u);
+  EXPECT_EQ(baking.vertex_rays(0, 1, 70000), 70000u);
+  EXPECT_EQ(fan.tracer().vertex_rays(0, 7, 16), 7u * 16u);  // no bake point: one start each
+  EXPECT_THROW(baking.vertex_rays(5, 3, 16), std::invalid_argument);
+  EXPECT_THROW(baking.vertex_rays(0, 1, 0), std::invalid_argument);
+}
+
 TEST(BakePoint, AVertexWithOnlyZeroAreaFacesStartsOffItsPoint) {
   // A branch tip collapsed to a point (Sapling's tapering to radius 0): the tip vertex's own
   // faces have zero area, and a cone's faces meet at the same point through another vertex.

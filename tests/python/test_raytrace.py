@@ -446,7 +446,7 @@ def test_engine_tracer_carries_normals_and_faces():
 def test_vertex_rays_are_per_corner_and_counted_so():
     """A vertex at the bake point casts `samples` rays at each face corner, as Cycles does
     (per_corner=True, the default): the same rays as dealing corners × samples out to its
-    corners. The cost model counts them (corners_per_vertex)."""
+    corners. The cost model counts them over the receivers it predicts (vertex_rays)."""
     from canopy_ao import core as engine
     from canopy_ao.core import cost
 
@@ -471,14 +471,46 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     # Mean corners: apex 4, base 2 each, roof 2, 1, 2, 1: 18 / 9; without normals 1.
     assert abs(tracer.corners_per_vertex - 2.0) < 1e-12
     assert _core.RayTracer(v, t).corners_per_vertex == 1.0
-    # The cost model's raytrace work is receivers × samples × corners × log2(triangles).
-    item = engine.SceneItem("P", "GROUND", "", v, n, t)
+    # The rays a bake casts, counted per vertex: the pyramid's 12 corners, the cap of 65,536
+    # rays per vertex (the apex: 4 × 30,000 wanted; a base vertex 2 × 30,000), the range checked.
+    assert tracer.vertex_rays(0, 5, 16) == 12 * 16
+    assert tracer.vertex_rays(0, 1, 30000) == 65536
+    assert tracer.vertex_rays(1, 1, 30000) == 2 * 30000
+    assert tracer.vertex_rays(0, 1, 70000) == 70000
+    assert _core.RayTracer(v, t).vertex_rays(0, 9, 16) == 9 * 16
+    with pytest.raises(ValueError, match="not in the tracer"):
+        tracer.vertex_rays(5, 5, 16)
+    with pytest.raises(ValueError, match="samples"):
+        tracer.vertex_rays(0, 1, 0)
+    # The cost model's raytrace work is receivers × samples × their corners × log2(triangles):
+    # the corners of the receivers it is asked about (pyramid 12 / 5, roof 6 / 4), 1 per texel.
+    pyramid = engine.SceneItem("P", "GROUND", "", v[:5], n[:5], t[:4])
+    roof = engine.SceneItem("R", "TRUNK", "", v[5:], n[5:], t[4:] - 5)
     settings = engine.BakeSettings(method="raytrace", samples=16)
-    plan = engine.prepare([item], settings)  # the exact rung: the plan's tracer, with normals
+    plan = engine.prepare([pyramid, roof], settings)  # the exact rung: its tracer, with normals
     assert plan.tracer.corners_per_vertex == tracer.corners_per_vertex
     unit, work = cost.work(plan, "raytrace", 9)
     assert unit == "bvh_step"
     assert abs(work - 9 * 16 * 2.0 * np.log2(6)) < 1e-9
+    assert abs(cost.corners(plan, ("P",)) - 2.4) < 1e-12
+    assert abs(cost.corners(plan, ("R",)) - 1.5) < 1e-12
+    _u, roof_work = cost.work(plan, "raytrace", 4, names=("R",))
+    assert abs(roof_work - 4 * 16 * 1.5 * np.log2(6)) < 1e-9
+    _results, report = engine.bake([pyramid, roof], settings)
+    predicted = {k: o["predicted_seconds"] for k, o in report["objects"].items()}
+    assert abs(predicted["P"] / predicted["R"] - (5 * 2.4) / (4 * 1.5)) < 1e-9
+    # The receivers counted are the bake's targets: a texel has one corner, an object not
+    # baked is not counted.
+    both = [pyramid, roof]
+    texels = engine.prepare(both, settings, targets={"P": ("texel", 100), "R": ("texel", 50)})
+    assert cost.corners(texels) == 1.0 and cost.receiver_count(texels, both) == 150
+    mixed = engine.prepare(both, settings, targets={"P": ("vertex", 5), "R": ("texel", 50)})
+    assert abs(cost.corners(mixed) - (12 + 50) / 55) < 1e-12
+    assert cost.receiver_count(mixed, both) == 55
+    roof_only = engine.prepare(both, settings, targets={"R": ("vertex", 4)})
+    assert cost.corners(roof_only) == 1.5 and cost.receiver_count(roof_only, both) == 4
+    with pytest.raises(engine.CanopyAOError, match="not a vertex or texel count"):
+        engine.prepare(both, settings, targets={"R": ("face", 4)})
 
 
 def test_a_vertex_gets_the_same_rays_in_any_split_into_calls():

@@ -118,7 +118,8 @@ class BakeJob:
             protos = self.prototypes.bake(self.settings, skip=skip)
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
-        self.plan = core.prepare(self.items, self.settings, prototypes=protos)
+        targets = {t.item.name: (t.kind, t.count) for t in self.targets}
+        self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
             maps.ensure_tracer(self.plan, self.items)

@@ -22,8 +22,12 @@ from .settings import BakeSettings, validate
 
 
 @refusals_are_user_errors
-def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
+def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
+
+    targets: {item name: ("vertex" | "texel", count)}, the receivers the bake will evaluate
+    (an item's vertices, or the texels of its image: one face corner each); None = every
+    receiver item at its vertices. Auto's cost model counts them (cost.py).
 
     prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every
     receiver. Given here rather than attached afterwards, the ray tracer traces their meshes
@@ -34,7 +38,8 @@ def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
     items = list(items)
     t_start = time.perf_counter()
     plan = Plan(settings=settings, method=settings.method,
-                tau=settings.tau if settings.tau is not None else DEFAULT_TAU)
+                tau=settings.tau if settings.tau is not None else DEFAULT_TAU,
+                targets=_targets(targets))
     t0 = time.perf_counter()
     trees.resolve(items)  # trees only a collection groups: told apart by where they stand
     plan.timings["trees"] = time.perf_counter() - t0
@@ -106,6 +111,17 @@ def prepare(items, settings: BakeSettings, prototypes=None) -> Plan:
     return plan
 
 
+def _targets(targets) -> dict:
+    """prepare's targets checked: {name: (kind, count ≥ 0)}."""
+    out = {}
+    for name, (kind, count) in (targets or {}).items():
+        if kind not in ("vertex", "texel") or int(count) < 0:
+            raise CanopyAOError(f"target {name!r}: {kind!r} × {count} is not a vertex or "
+                                "texel count")
+        out[str(name)] = (kind, int(count))
+    return out
+
+
 def _wants_regression(plan: Plan, items, settings) -> bool:
     """Whether prepare builds the ray-free rung: asked for, --ray-free, or auto where rays are
     over the time budget (a big tree: on real trees the ray-free rung is the best one short of
@@ -116,7 +132,7 @@ def _wants_regression(plan: Plan, items, settings) -> bool:
         return False
     if settings.ray_free:
         return True
-    receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
+    receivers = cost.receiver_count(plan, items)
     return (settings.time_budget > 0
             and cost.predict(plan, "raytrace", receivers)["seconds"] > settings.time_budget)
 
@@ -260,7 +276,7 @@ def report(plan: Plan, results) -> dict:
 def _predicted(plan: Plan, r: ItemResult):
     """The cost model's seconds for this result's receivers (cost.py), None off the model."""
     try:
-        return cost.predict(plan, r.method, r.vertices)["seconds"]
+        return cost.predict(plan, r.method, r.vertices, names=(r.name,))["seconds"]
     except (ValueError, KeyError):
         return None
 

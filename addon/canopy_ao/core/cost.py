@@ -9,8 +9,8 @@ Work per receiver, counted from the plan:
 - grid: DensityAOOptions.directions line integrals, each ~kExactVoxels + 2 log2(resolution)
   voxel steps (exact DDA near, mip steps growing with distance: density_grid.h);
 - raytrace: samples rays per face corner (a vertex at Cycles' bake point casts its sample
-  count at each of its corners, as Cycles does: RayTracer.corners_per_vertex on average),
-  each ~log2(triangles) BVH steps;
+  count at each of its corners, as Cycles does), counted over the receivers' own vertices
+  (RayTracer.vertex_rays; a texel has one corner), each ~log2(triangles) BVH steps;
 - regression: one trilinear look-up of the swept optical depth per feature direction
   (occlusion_features.h), counted as a voxel step each;
 - hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps.
@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 from .native import _core
+from .scene import RECEIVER_ROLES
 
 # Seconds per unit of work on one core. Ratios measured with
 #   nice /usr/bin/python3 bench/cost_constants.py
@@ -47,15 +48,50 @@ SECONDS_PER_UNIT = {
 FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: analytic 1 + "
            "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "
            "directions × (exact voxels + 2 log2 resolution), regression feature directions, raytrace "
-           "samples × corners per vertex × log2 triangles, hybrid raytrace + grid")
+           "samples × the receivers' face corners per vertex (1 per texel) × log2 triangles, "
+           "hybrid raytrace + grid")
 GRID_DIRECTIONS = 32         # DensityAOOptions.directions (the add-on's default)
 GRID_RESOLUTION = 48         # DensityGridOptions.resolution (the add-on's default)
 GRID_EXACT_VOXELS = 4        # DensityGrid::kExactVoxels
 FEATURE_DIRECTIONS = 24      # OcclusionFeatures' default directions (core/regression.py)
 
 
-def work(plan, method: str, receivers: int) -> tuple[str, float]:
-    """(unit, count) of the work ``method`` does for ``receivers`` points of this plan."""
+def receiver_count(plan, items) -> int:
+    """The receivers a bake with this plan evaluates: its targets' vertices or texels
+    (plan.targets), or without targets every receiver item's vertices."""
+    if plan.targets:
+        return sum(int(count) for _kind, count in plan.targets.values())
+    return sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
+
+
+def corners(plan, names=None) -> float:
+    """Rays per sample a receiver of this plan casts with the exact rung: the mean face corners
+    per receiver over the items named ``names`` (None: the plan's targets, else every receiver
+    the tracer holds), counted by the tracer (RayTracer.vertex_rays, its per-vertex cap
+    included); a texel has one corner, and so has a vertex the tracer does not hold by name."""
+    tracer = plan.tracer
+    if tracer is None:
+        return 1.0
+    if names is None and plan.targets:
+        names = plan.targets
+    samples = int(plan.settings.samples)
+    rays = count = 0
+    for it in plan.tracer_items:
+        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
+            continue
+        kind, n = plan.targets.get(it.name, ("vertex", len(it.positions)))
+        base = plan.tracer_bases.get(it.name)
+        rays += (int(tracer.vertex_rays(base[0], n, samples))
+                 if base is not None and kind == "vertex" else int(n) * samples)
+        count += int(n)
+    if count == 0:  # no receiver held by name: the mesh's mean
+        return float(tracer.corners_per_vertex)
+    return rays / (count * samples)
+
+
+def work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
+    """(unit, count) of the work ``method`` does for ``receivers`` points of this plan (names:
+    the items they are on, for the rays' corner count; None = every receiver)."""
     from .proxies import own_shells
     solids = sum(len(es) for es in plan.trunks.values())
     shells = {t: len(own_shells(plan, t, method)) for t in plan.fits} if method in (
@@ -74,11 +110,11 @@ def work(plan, method: str, receivers: int) -> tuple[str, float]:
     if method == "raytrace":
         tracer = plan.tracer
         m = tracer.triangle_count if tracer is not None else 1
-        corners = float(tracer.corners_per_vertex) if tracer is not None else 1.0
         depth = math.log2(max(int(m), 2))
-        return "bvh_step", receivers * float(plan.settings.samples) * corners * depth
+        return "bvh_step", (receivers * float(plan.settings.samples) * corners(plan, names)
+                            * depth)
     if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
-        _u, rays = work(plan, "raytrace", receivers)
+        _u, rays = work(plan, "raytrace", receivers, names)
         _u, steps = work(plan, "grid", receivers)
         ratio = SECONDS_PER_UNIT["voxel_step"] / SECONDS_PER_UNIT["bvh_step"]
         return "bvh_step", rays + steps * ratio
@@ -90,10 +126,11 @@ def threads() -> int:
     return max(1, int(_core.max_threads())) if _core is not None else 1
 
 
-def predict(plan, method: str, receivers: int) -> dict:
+def predict(plan, method: str, receivers: int, names=None) -> dict:
     """{"unit", "work", "seconds_per_unit", "threads", "seconds"} for ``method`` on
-    ``receivers`` points: the cost model above, no timing."""
-    unit, count = work(plan, method, receivers)
+    ``receivers`` points (on the items named ``names``; None = every receiver): the cost model
+    above, no timing."""
+    unit, count = work(plan, method, receivers, names)
     c = SECONDS_PER_UNIT[unit]
     n = threads()
     return {"unit": unit, "work": count, "seconds_per_unit": c, "threads": n,

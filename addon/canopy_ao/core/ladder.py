@@ -183,7 +183,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
 
-    n_receivers = sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
+    n_receivers = cost.receiver_count(plan, items)
     results, predicted = {}, {}
     for m in candidates:
         if m not in TAU_METHODS:  # physical density / exact: no τ to fit

@@ -85,6 +85,9 @@ class Plan:
     shell_labels: dict = field(default_factory=dict)
     # lighting.Lights: the native scene plan of fits and trunks, built once (lighting.lights)
     lights: object = None
+    # item name -> ("vertex" | "texel", count): the receivers the bake evaluates (its
+    # targets), or empty: every receiver item at its vertices (what the cost model counts)
+    targets: dict = field(default_factory=dict)
 
     def taus(self):
         """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""

@@ -264,6 +264,12 @@ class RayTracer {
   /// (RayTraceOptions::per_corner) multiply a bake of every vertex's rays by. 1 without vertex
   /// normals or vertices; a vertex with no triangle with area counts 1.
   double corners_per_vertex() const;
+  /// The rays a bake of vertices [first, first + count) casts at `samples` per corner (each
+  /// vertex at Cycles' bake point, RayTraceOptions::per_corner): Σ min(k × samples, max(samples,
+  /// 65,536)) over their corner counts k; count × samples without vertex normals. The cost
+  /// model's counted work. Throws std::invalid_argument if the range is not in the mesh or
+  /// samples < 1.
+  std::uint64_t vertex_rays(std::size_t first, std::size_t count, int samples) const;
 
  private:
   struct Impl;
