@@ -92,11 +92,11 @@ class RealScene:
 
 
 
-def cycles_bake(sc: RealScene, samples):
-    """(AO float32 over all vertices, as sc.V; seconds) of the Cycles bake at ``samples``
-    cached beside the scene (examples/sapling_scenes.py --bake-cycles), or None: not baked, or
-    baked from other geometry."""
-    path = sc.path[:-4] + f"_cycles_{samples}.npz"
+def cycles_bake(sc: RealScene, samples, seed=0):
+    """(AO float32 over all vertices, as sc.V; seconds) of the Cycles bake at ``samples`` with
+    Cycles' seed ``seed`` cached beside the scene (examples/sapling_scenes.py --bake-cycles
+    [--cycles-seed]), or None: not baked, or baked from other geometry."""
+    path = sc.path[:-4] + f"_cycles_{samples}{f'_seed{seed}' if seed else ''}.npz"
     if not os.path.exists(path):
         return None
     with np.load(path) as z:
@@ -106,14 +106,15 @@ def cycles_bake(sc: RealScene, samples):
                 float(z["seconds"]))
 
 
-def cycles_ao(sc: RealScene, samples):
+def cycles_ao(sc: RealScene, samples, seed=0):
     """The AO of cycles_bake, or None."""
-    got = cycles_bake(sc, samples)
+    got = cycles_bake(sc, samples, seed)
     return got[0] if got is not None else None
 
 
 def cycles_runs(sc: RealScene):
-    """{samples: (AO, seconds)} of every Cycles bake cached beside the scene, by sample count."""
+    """{samples: (AO, seconds)} of every seed-0 Cycles bake cached beside the scene, by sample
+    count."""
     stem = os.path.basename(sc.path)[:-4] + "_cycles_"
     counts = sorted(int(f[len(stem):-4]) for f in os.listdir(os.path.dirname(sc.path))
                     if f.startswith(stem) and f.endswith(".npz") and f[len(stem):-4].isdigit())

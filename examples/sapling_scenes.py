@@ -1,7 +1,8 @@
 """Real-generator benchmark scenes: Blender's own Sapling Tree Gen trees, a grass field, a grove.
 
     blender -b --factory-startup --python examples/sapling_scenes.py -- [--scenes NAME ...]
-        [--quick] [--out-dir bench/out/real] [--bake-cycles N ...] [--blend DIR] [--force] [--list]
+        [--quick] [--out-dir bench/out/real] [--bake-cycles N ...] [--cycles-seed K] [--blend DIR]
+        [--force] [--list]
 
 Each tree is built the way a user builds one: ``bpy.ops.curve.tree_add`` (the add-on
 ``add_curve_sapling`` bundled with Blender 3.4) with one of its bundled presets, a fixed seed and
@@ -26,7 +27,10 @@ Every scene is exported to ``<out-dir>/<scene>[_quick].npz`` so benchmarks run w
 
 ``--bake-cycles N`` also bakes Cycles' own AO per vertex at N samples (denoising and adaptive
 sampling off, AO distance as above; not ``--cycles``, which Blender's Cycles add-on claims) into ``<out-dir>/<scene>[_quick]_cycles_<N>.npz`` (``ao/<name>``,
-``seconds``, ``samples``, ``geometry``). ``--blend DIR`` saves each scene's .blend there.
+``seconds``, ``samples``, ``seed``, ``geometry``); ``--cycles-seed K`` bakes with Cycles' seed K
+instead of 0, into ``..._cycles_<N>_seed<K>.npz`` (a reference whose noise is independent of
+the seed-0 bakes at fewer samples, which are the first samples of seed 0's own 1024).
+``--blend DIR`` saves each scene's .blend there.
 Presets and seeds are fixed, so the same command gives the same bytes. Exits non-zero on failure.
 """
 import argparse
@@ -254,6 +258,9 @@ def main(argv):
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out-dir", default=DEFAULT_OUT)
     ap.add_argument("--bake-cycles", type=int, nargs="*", default=[], dest="cycles")
+    ap.add_argument("--cycles-seed", type=int, default=0,
+                    help="Cycles' seed for --bake-cycles (0: _cycles_<N>.npz; K > 0: "
+                         "_cycles_<N>_seed<K>.npz, noise independent of seed 0's)")
     ap.add_argument("--blend", help="also save each scene's .blend in this folder")
     ap.add_argument("--force", action="store_true", help="rebuild scenes already exported")
     ap.add_argument("--list", action="store_true")
@@ -261,11 +268,14 @@ def main(argv):
     if a.list:
         print("\n".join(SCENES))
         return 0
+    if a.cycles_seed < 0:
+        ap.error("--cycles-seed must be ≥ 0")
+    seed_tag = f"_seed{a.cycles_seed}" if a.cycles_seed else ""
     for scene in a.scenes:
         path = cache_path(a.out_dir, scene, a.quick)
         todo_cycles = [s for s in a.cycles
                        if a.force or not os.path.exists(cache_path(a.out_dir, scene, a.quick,
-                                                                   f"_cycles_{s}"))]
+                                                                   f"_cycles_{s}{seed_tag}"))]
         if os.path.exists(path) and not a.force and not todo_cycles and not a.blend:
             print(f"sapling_scenes: cached {path}")
             continue
@@ -286,10 +296,11 @@ def main(argv):
         for s in todo_cycles:
             from canopy_ao.blender.cycles_check import bake_cycles_vertex_ao
             t2 = time.perf_counter()
-            res = bake_cycles_vertex_ao(bpy.context, [o for o, _, _ in objs], distance, s)
+            res = bake_cycles_vertex_ao(bpy.context, [o for o, _, _ in objs], distance, s,
+                                        seed=a.cycles_seed)
             dt = time.perf_counter() - t2
-            cpath = cache_path(a.out_dir, scene, a.quick, f"_cycles_{s}")
-            np.savez_compressed(cpath, seconds=dt, samples=s, geometry=ghash,
+            cpath = cache_path(a.out_dir, scene, a.quick, f"_cycles_{s}{seed_tag}")
+            np.savez_compressed(cpath, seconds=dt, samples=s, seed=a.cycles_seed, geometry=ghash,
                                 **{f"ao/{k}": np.asarray(v, np.float32) for k, v in res.items()})
             print(f"sapling_scenes: {scene}: Cycles {s} samples in {dt:.1f} s -> {cpath}",
                   flush=True)

@@ -29,7 +29,7 @@ _TMP_IMAGE = "_CanopyAO_CyclesBake"
 _TMP_MATERIAL = "_CanopyAO_CyclesBakeMat"
 _TMP_WORLD = "_CanopyAO_CyclesBakeWorld"
 
-_CYCLES_KEYS = ("samples", "use_denoising", "use_adaptive_sampling", "device")
+_CYCLES_KEYS = ("samples", "use_denoising", "use_adaptive_sampling", "device", "seed")
 _BAKE_KEYS = ("target", "margin", "margin_type", "use_clear", "use_selected_to_active",
               "use_cage", "max_ray_distance")
 
@@ -47,8 +47,9 @@ def render_settings_snapshot(scene):
 
 
 @contextlib.contextmanager
-def _cycles_bake_settings(context, objects, distance, samples):
-    """Switch the scene to a Cycles AO bake of `objects`, restore everything afterwards."""
+def _cycles_bake_settings(context, objects, distance, samples, seed=None):
+    """Switch the scene to a Cycles AO bake of `objects`, restore everything afterwards.
+    seed: Cycles' sampling seed (None: the scene's)."""
     scene = context.scene
     view_layer = context.view_layer
     saved = render_settings_snapshot(scene)
@@ -65,6 +66,8 @@ def _cycles_bake_settings(context, objects, distance, samples):
         scene.cycles.use_denoising = False
         scene.cycles.use_adaptive_sampling = False
         scene.cycles.device = "CPU"
+        if seed is not None:
+            scene.cycles.seed = int(seed)
         scene.world.light_settings.distance = float(distance)
         for o in saved_selection:
             o.select_set(False)
@@ -117,15 +120,17 @@ def _run_bake(target, use_clear=True):
         raise RuntimeError(f"Cycles AO bake did not finish ({result})")
 
 
-def bake_cycles_vertex_ao(context, objects, distance, samples):
+def bake_cycles_vertex_ao(context, objects, distance, samples, seed=None):
     """Cycles AO per vertex of each mesh object (its *original* mesh: Cycles writes the bake into
-    the original mesh's attribute). Returns {object name: float32 (V,) in [0, 1]}."""
+    the original mesh's attribute). seed: Cycles' sampling seed (None: the scene's; another
+    seed gives noise independent of this one's). Returns {object name: float32 (V,) in
+    [0, 1]}."""
     objects = list(objects)
     _check_bakeable(context, objects)
     # Per mesh: (previous active colour name, previous render colour index, temporary attr).
     state = {}
     try:
-        with _cycles_bake_settings(context, objects, distance, samples):
+        with _cycles_bake_settings(context, objects, distance, samples, seed):
             for o in objects:
                 me = o.data
                 if me in state:
