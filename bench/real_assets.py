@@ -18,8 +18,9 @@ grids, fits and calibration included):
 - regression: the ray-free rung (addon/canopy_ao/core/regression.py, occlusion_features.h):
   a traced calibration sample sized to the scene (at most 1024 points × 128 rays and 8 rays
   per receiver), then no rays;
-- hybrid c/N: ao_near_far with N rays out to near = c grid voxels, the grid beyond
-  (near is scale-free: the voxel is the grid's box / its resolution);
+- hybrid 2v/N: the engine's hybrid at N samples (N rays per face corner out to 2 voxels of
+  its density grid, the grid beyond: what `--method hybrid --samples N` bakes; other near
+  distances in bench/hybrid_study.py);
 - cycles N: Cycles' bake at N samples, when cached (time: the bake call).
 
 Designed on sap_callistemon, sap_white_birch, sap_small_maple (marked *); every other scene is
@@ -42,7 +43,7 @@ sys.path.insert(0, os.path.join(REPO, "examples"))
 import numpy as np  # noqa: E402
 
 import real_scenes as rs  # noqa: E402
-from canopy_ao import _core, core  # noqa: E402
+from canopy_ao import core  # noqa: E402
 from canopy_ao.core import regression  # noqa: E402
 from canopy_ao.core.metrics import compare  # noqa: E402
 
@@ -52,8 +53,7 @@ TREES = DESIGN + ("sap_douglas_fir", "sap_small_pine", "sap_weeping_willow",
 SCENES = TREES + ("grass_field_real",)
 ENGINE_RUNGS = ("sphere", "ellipsoid", "shells", "medium", "grid")
 RAYS = (1, 4, 16, 64, 256)
-GRID_RESOLUTION = 48       # DensityGrid's default: the hybrid's far field
-HYBRID = ((2.0, 16), (2.0, 64), (8.0, 64))   # (near in voxels, rays); the ladder's: 2, 64
+HYBRID_SAMPLES = (16, 64)  # the engine's hybrid (lighting.HYBRID_VOXELS = 2) at these samples
 
 
 _WARM = []
@@ -63,13 +63,6 @@ def timed(fn):
     t0 = time.perf_counter()
     r = fn()
     return r, time.perf_counter() - t0
-
-
-def near_distance(sc, voxels):
-    """The hybrid's near distance: `voxels` voxels of the far grid (its box / resolution)."""
-    occ = sc.role != "ground"
-    ext = sc.V[occ].max(0) - sc.V[occ].min(0)
-    return voxels * float(ext.max()) / GRID_RESOLUTION
 
 
 def methods(sc):
@@ -94,15 +87,10 @@ def methods(sc):
     yield "regression", np.concatenate([per[n] for n in sc.names]), dt, \
         (f"sample {rep['calibration_points']} x {rep['calibration_samples']} rays; " +
          " ".join(f"{k}:{v['source']}" for k, v in rep["groups"].items()))
-    occ = np.isin(sc.role, ("canopy", "trunk", "grass"))
-    keep_t = np.all(occ[sc.T], axis=1)
-    grid, t_grid = timed(lambda: _core.DensityGrid(sc.V, np.ascontiguousarray(sc.T[keep_t]),
-                                                   resolution=GRID_RESOLUTION))
-    for c, n in HYBRID:
-        near = near_distance(sc, c)
-        ao, dt = timed(lambda: np.asarray(_core.ao_near_far(tracer, grid, sc.V, sc.N, near,
-                                                            samples=n, distance=D)))
-        yield f"hybrid {c:g}v/{n}", ao, dt + t_bvh + t_grid, f"near {near:.3g}"
+    for n in HYBRID_SAMPLES:
+        (res, _rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
+            method="hybrid", samples=n, distance=D)))
+        yield f"hybrid 2v/{n}", np.concatenate([r.ao for r in res]), dt, "engine"
     for s, (ao, dt) in rs.cycles_runs(sc).items():
         yield f"cycles {s}", ao, dt, "Cycles bake"
 

@@ -244,6 +244,23 @@ inline Receivers receivers_arg(const py::array& positions, const py::array& norm
   return Receivers{p, n.view, std::move(n.keep)};
 }
 
+/// An optional int32 (N,) array of own-primitive ids (None → nullptr). Values are range-checked
+/// by RayTracer::ao (std::invalid_argument → ValueError).
+inline const std::int32_t* ids_arg(const py::object& ids, const char* name, std::size_t n) {
+  if (ids.is_none()) return nullptr;
+  if (!py::isinstance<py::array>(ids)) {
+    throw py::value_error(std::string(name) + " must be None or an int32 numpy array");
+  }
+  const auto a = py::reinterpret_borrow<py::array>(ids);
+  require_dtype(a, name, py::dtype::of<std::int32_t>(), "int32");
+  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != n) {
+    std::ostringstream s;
+    s << name << " must have shape (" << n << ",) like points, got " << shape_str(a);
+    throw py::value_error(s.str());
+  }
+  return static_cast<const std::int32_t*>(a.data());
+}
+
 /// Checks an (N,) float32 C-contiguous array; returns a pointer (nullptr when N == 0).
 inline const float* floats_arg(const py::array& a, const char* name, std::size_t expect_n,
                                bool check_finite = true) {

@@ -296,26 +296,39 @@ void bind_medium(py::module_& m) {
       [](const RayTracer& tracer, const DensityGrid& grid, const py::array& points,
          const py::array& normals, double near, const py::object& samples,
          const py::object& directions, double distance, const py::object& seed,
-         double sigma_scale) {
+         double sigma_scale, const py::object& vertex_ids, const py::object& triangle_ids) {
         length_arg(near, "near");
         const DensityAOOptions far = grid_options(directions, distance, seed, sigma_scale, 0.0);
         RayTraceOptions rt;
         rt.samples = static_cast<int>(int_arg(samples, "samples", 1, kMaxSamples));
         rt.distance = static_cast<float>(distance);
         rt.seed = far.seed;
-        return per_point(points, normals, [&](PointsView p, PointsView n, float* out) {
-          ao_near_far(tracer, grid, p, n, static_cast<float>(near), rt, far, out);
-        }, "points");
+        const Receivers r = receivers_arg(points, normals, "points");
+        OwnPrimitives own;
+        own.vertex_ids = ids_arg(vertex_ids, "vertex_ids", r.positions.size);
+        own.triangle_ids = ids_arg(triangle_ids, "triangle_ids", r.positions.size);
+        py::array_t<float> out = new_floats(r.positions.size);
+        float* dst = out.mutable_data();
+        {
+          py::gil_scoped_release release;
+          ao_near_far(tracer, grid, r.positions, r.normals, static_cast<float>(near), own, rt,
+                      far, dst);
+        }
+        return out;
       },
       py::arg("tracer"), py::arg("grid"), py::arg("points"), py::arg("normals"),
       py::arg("near"), py::arg("samples") = 64, py::arg("directions") = 32,
       py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("sigma_scale") = 1.0,
+      py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
       "ao_near_far(tracer, grid, points, normals, near, samples=64, directions=32, "
-      "distance=inf, seed=0, sigma_scale=1.0) -> float32 (N,)\n\n"
+      "distance=inf, seed=0, sigma_scale=1.0, vertex_ids=None, triangle_ids=None) -> float32 "
+      "(N,)\n\n"
       "Near exact, far statistical: tracer.ao(points, normals, samples, distance=min(near, "
-      "distance)) times grid.ao(points, normals, directions, distance, start=near). Contact "
-      "shadows from real geometry, the canopy's bulk from the density grid; the product of "
-      "the two averages assumes near and far occlusion are independent.");
+      "distance), vertex_ids, triangle_ids) times grid.ao(points, normals, directions, "
+      "distance, start=near, self_skip=0). Contact shadows from real geometry (each receiver "
+      "named by its own primitives starts as in tracer.ao: a vertex at Cycles' bake point, "
+      "its samples cast at every face corner), the canopy's bulk from the density grid; the "
+      "product of the two averages assumes near and far occlusion are independent.");
 }
 
 }  // namespace canopy_ao::py_bind

@@ -120,23 +120,6 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
   return std::make_unique<RayTracer>(v, t, m, shading, protos, placed);
 }
 
-/// An optional int32 (N,) array of own-primitive ids (None → nullptr). Values are range-checked
-/// by RayTracer::ao (std::invalid_argument → ValueError).
-const std::int32_t* ids_arg(const py::object& ids, const char* name, std::size_t n) {
-  if (ids.is_none()) return nullptr;
-  if (!py::isinstance<py::array>(ids)) {
-    throw py::value_error(std::string(name) + " must be None or an int32 numpy array");
-  }
-  const auto a = py::reinterpret_borrow<py::array>(ids);
-  require_dtype(a, name, py::dtype::of<std::int32_t>(), "int32");
-  if (a.ndim() != 1 || static_cast<std::size_t>(a.shape(0)) != n) {
-    std::ostringstream s;
-    s << name << " must have shape (" << n << ",) like points, got " << shape_str(a);
-    throw py::value_error(s.str());
-  }
-  return static_cast<const std::int32_t*>(a.data());
-}
-
 /// The AO (N,), or (AO, bent normals float32 (N, 3)) when `bent` (raytrace.h, "Bent normals").
 py::object trace(const RayTracer& tracer, const py::array& points, const py::array& normals,
                  const RayTraceOptions& o, const py::object& vertex_ids = py::none(),

@@ -402,12 +402,18 @@ void DensityGrid::ao(PointsView positions, PointsView normals, const DensityAOOp
 void ao_near_far(const RayTracer& tracer, const DensityGrid& grid, PointsView positions,
                  PointsView normals, float near, const RayTraceOptions& rt,
                  const DensityAOOptions& far, float* out) {
+  ao_near_far(tracer, grid, positions, normals, near, OwnPrimitives{}, rt, far, out);
+}
+
+void ao_near_far(const RayTracer& tracer, const DensityGrid& grid, PointsView positions,
+                 PointsView normals, float near, const OwnPrimitives& own,
+                 const RayTraceOptions& rt, const DensityAOOptions& far, float* out) {
   if (!(near > 0) || std::isnan(near)) {
     throw std::invalid_argument("near must be > 0 (scene units)");
   }
   RayTraceOptions r = rt;
   r.distance = std::min(near, rt.distance);
-  tracer.ao(positions, normals, r, out);
+  tracer.ao(positions, normals, own, r, out);
   DensityAOOptions f = far;
   f.distance = rt.distance;
   f.start = near;

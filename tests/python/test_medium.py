@@ -146,3 +146,27 @@ def test_near_far_limits():
     assert mixed.shape == (50,) and np.all((mixed >= 0) & (mixed <= 1))
     with pytest.raises(ValueError, match="near"):
         core.ao_near_far(rt, g, pos, nrm, near=0.0)
+
+
+@pytest.mark.skipif(core is None or not hasattr(core, "RayTracer"), reason="no RayTracer")
+def test_near_far_starts_named_vertices_as_the_exact_rung():
+    """ao_near_far takes the receivers' own primitives as RayTracer.ao does: a vertex named by
+    its id starts at Cycles' bake point and casts its samples at every face corner, so the
+    hybrid's near rays are the exact rung's cut at `near` (the add-on's hybrid, whose receivers
+    are vertices, passes them; before, its rays started at the bare points)."""
+    v, t = random_ball(3000, 1.5, seed=8)
+    n = f32(np.random.default_rng(9).normal(size=v.shape))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    g = core.DensityGrid(v, t, resolution=24)
+    rt = core.RayTracer(v, t, normals=n)
+    ids = np.arange(200, dtype=np.int32)
+    p, q = v[:200], n[:200]
+    near = 4 * g.voxel_size
+    got = core.ao_near_far(rt, g, p, q, near, samples=16, seed=3, vertex_ids=ids)
+    want = (rt.ao(p, q, samples=16, seed=3, distance=near, vertex_ids=ids)
+            * g.ao(p, q, start=near, seed=3, self_skip=0.0))
+    np.testing.assert_array_equal(got, want)
+    free = core.ao_near_far(rt, g, p, q, near, samples=16, seed=3)
+    assert not np.array_equal(got, free)  # the bake point is not the bare point
+    with pytest.raises(ValueError, match="vertex_ids"):
+        core.ao_near_far(rt, g, p, q, near, vertex_ids=ids[:5])

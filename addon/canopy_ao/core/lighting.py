@@ -126,6 +126,8 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "regression":
         return plan.regression.ao(role, tree, p, n, grass_key, own)
     if method == "hybrid":
+        if plan.grid is None:  # nothing to voxelise (a grass field alone): no far field
+            return trace(plan, p, n, plan.settings.samples, own=own_ids(plan, grass_key, own))
         return _grass(plan, role, grass_key, p, n,
                       _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own)))
     # The analytic rungs: the whole per-receiver composition, grass layers and forest
@@ -206,17 +208,20 @@ HYBRID_VOXELS = 2.0
 
 
 def _hybrid_ao(plan, p, n, own=None):
-    """Near exact, far statistical (as native ao_near_far): settings.samples rays out to
-    HYBRID_VOXELS grid voxels, each skipping only its receiver's own triangles (own: the tracer
-    ids of own_ids), times the density grid's transmittance beyond (docs/DESIGN.md, 'The
-    near/far hybrid')."""
+    """Near exact, far statistical (native ao_near_far): settings.samples rays out to
+    HYBRID_VOXELS grid voxels, started as the exact rung's (own: the tracer ids of own_ids, a
+    vertex at Cycles' bake point), times the density grid's transmittance beyond
+    (docs/DESIGN.md, 'The near/far hybrid'). A scene with no leaves or branches has no grid:
+    the caller traces the whole distance instead (the rays see the grass themselves)."""
+    if plan.tracer is None:
+        raise CanopyAOError("ray tracing needs the scene's triangles; none were given")
     d = plan.settings.distance
     far = float(d) if d > 0 else math.inf
     near = min(HYBRID_VOXELS * float(plan.grid.voxel_size), far)
-    ao = np.asarray(trace(plan, p, n, plan.settings.samples, own=own, distance=near),
-                    dtype=np.float32)
-    tail = plan.grid.ao(p, n, distance=far, start=near, seed=plan.settings.seed)
-    return ao * np.asarray(tail, dtype=np.float32)
+    return np.asarray(_core.ao_near_far(plan.tracer, plan.grid, p, n, near,
+                                        samples=int(plan.settings.samples), distance=far,
+                                        seed=int(plan.settings.seed), **(own or {})),
+                      dtype=np.float32)
 
 
 def bake_shading(items):

@@ -131,6 +131,7 @@ class DensityGrid {
 
 class RayTracer;
 struct RayTraceOptions;
+struct OwnPrimitives;
 
 /// "Near exact, far statistical": Embree rays (raytrace.h) out to `near` (scene units, > 0),
 /// the density grid from `near` to rt.distance, multiplied:
@@ -139,6 +140,12 @@ struct RayTraceOptions;
 /// and far occlusion are independent, which a random canopy roughly is). Contact shadows and
 /// the receiver's own leaf come from real geometry; the canopy's bulk costs a grid march.
 /// far.distance and far.start are overridden. Shapes and errors as RayTracer::ao/DensityGrid::ao.
+/// own: the receivers' own primitives, as RayTracer::ao takes them (a vertex receiver starts at
+/// Cycles' bake point and casts its samples at every face corner, as the exact rung does).
+void ao_near_far(const RayTracer& tracer, const DensityGrid& grid, PointsView positions,
+                 PointsView normals, float near, const OwnPrimitives& own,
+                 const RayTraceOptions& rt, const DensityAOOptions& far, float* out);
+/// As above with no own primitives: every receiver a free point (the normal-offset start).
 void ao_near_far(const RayTracer& tracer, const DensityGrid& grid, PointsView positions,
                  PointsView normals, float near, const RayTraceOptions& rt,
                  const DensityAOOptions& far, float* out);
