@@ -24,6 +24,7 @@
 #include <string>
 
 #include "canopy_ao/geometry.h"
+#include "canopy_ao/grass.h"
 
 namespace canopy_ao::py_bind {
 
@@ -259,6 +260,27 @@ inline const std::int32_t* ids_arg(const py::object& ids, const char* name, std:
     throw py::value_error(s.str());
   }
   return static_cast<const std::int32_t*>(a.data());
+}
+
+/// A grass field's blade layer (grass.h, GrassOptions::layer) from None or a float32 (rows,
+/// cols) array, rows, cols >= 2; values are checked by ao_grass (std::invalid_argument).
+inline void blade_layer_arg(const py::object& layer, GrassOptions* o) {
+  o->layer.clear();
+  o->layer_rows = o->layer_cols = 0;
+  if (layer.is_none()) return;
+  if (!py::isinstance<py::array>(layer)) {
+    throw py::value_error("layer must be None or a float32 numpy array (rows, cols)");
+  }
+  const auto a = py::reinterpret_borrow<py::array>(layer);
+  require_dtype(a, "layer", py::dtype::of<float>(), "float32");
+  if (a.ndim() != 2 || a.shape(0) < 2 || a.shape(1) < 2) {
+    throw py::value_error("layer must have shape (rows, cols) with rows, cols >= 2, got " +
+                          shape_str(a));
+  }
+  const float* v = static_cast<const float*>(a.data());
+  o->layer.assign(v, v + a.shape(0) * a.shape(1));
+  o->layer_rows = static_cast<int>(a.shape(0));
+  o->layer_cols = static_cast<int>(a.shape(1));
 }
 
 /// Checks an (N,) float32 C-contiguous array; returns a pointer (nullptr when N == 0).

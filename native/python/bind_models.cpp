@@ -192,23 +192,26 @@ void bind_models(py::module_& m) {
   m.def(
       "ao_grass",
       [](const py::array& positions, const py::array& normals, double ground_height,
-         double blade_height, const py::object& up, float floor) {
+         double blade_height, const py::object& up, float floor, const py::object& layer) {
         const Receivers r = receivers_arg(positions, normals);
         GrassOptions o;
         o.ground_height = coordinate_arg(ground_height, "ground_height");
         o.blade_height = length_arg(blade_height, "blade_height");
         o.up = direction_arg(up, "up");
         o.floor = floor;
+        blade_layer_arg(layer, &o);
         return compute(r.positions.size,
                        [&](float* out) { ao_grass(r.positions, r.normals, o, out); });
       },
       py::arg("positions"), py::arg("normals"), py::arg("ground_height"),
       py::arg("blade_height"), py::arg("up") = py::make_tuple(0.0f, 0.0f, 1.0f),
-      py::arg("floor") = 0.05,
+      py::arg("floor") = 0.05, py::arg("layer") = py::none(),
       "Grass AO (Hegeman 2006 Eq. 9): (Pz / 2h)(1 + cos theta), Pz = height above "
       "ground_height along `up` clamped to [0, h], theta the angle between normal and up; "
       "clamped to [floor, 1] (ground points under grass get `floor`). Zero normals count as "
-      "horizontal. Returns float32 (N,).");
+      "horizontal. layer: the field's blade layer, float32 (rows, cols), V at s = Pz / h = "
+      "i / (rows - 1) and cos theta = -1 + 2 j / (cols - 1), read bilinearly instead of Eq. 9 "
+      "(core/grass_layer.py measures it). Returns float32 (N,).");
 }
 
 }  // namespace canopy_ao::py_bind

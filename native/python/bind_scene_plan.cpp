@@ -233,7 +233,7 @@ void bind_scene_plan(py::module_& m) {
       "Every tree's fitted proxies and solid trunks with their occluder grids, built once per "
       "bake; evaluate() lights receivers of one role in one call: the crown holding a receiver "
       "gives the in-shell model, every other crown and every trunk (not the receiver's own "
-      "tree's, for CANOPY and TRUNK) occludes, GRASS gets Hegeman's Eq. 9, GROUND the grass "
+      "tree's, for CANOPY and TRUNK) occludes, GRASS gets its grass law (ao_grass), GROUND the grass "
       "covers over it, and the attached forest occludes every receiver (docs/DESIGN.md, 'How "
       "each role is lit').")
       .def(py::init([](const py::list& crowns, const py::list& trunks, double distance,
@@ -277,20 +277,28 @@ void bind_scene_plan(py::module_& m) {
               who.tree = static_cast<std::int32_t>(int_arg(tree, "tree", -1, n_trees - 1));
             }
             if ((who.role == ReceiverRole::Grass) == grass.is_none()) {
-              throw py::value_error("grass=(ground_height, blade_height) is required for role "
-                                    "GRASS and only for it");
+              throw py::value_error("grass=(ground_height, blade_height[, layer]) is required "
+                                    "for role GRASS and only for it");
             }
             if (!grass.is_none()) {
-              std::vector<double> g;
+              std::vector<py::object> g;
               try {
-                g = grass.cast<std::vector<double>>();
+                g = grass.cast<std::vector<py::object>>();
               } catch (const py::cast_error&) {
               }
-              if (g.size() != 2) {
-                throw py::value_error("grass must be (ground_height, blade_height)");
+              if (g.size() != 2 && g.size() != 3) {
+                throw py::value_error("grass must be (ground_height, blade_height[, layer])");
               }
-              who.grass.ground_height = coordinate_arg(g[0], "ground_height");
-              who.grass.blade_height = length_arg(g[1], "blade_height");
+              double ground = 0, blade = 0;
+              try {
+                ground = g[0].cast<double>();
+                blade = g[1].cast<double>();
+              } catch (const py::cast_error&) {
+                throw py::value_error("grass must be (ground_height, blade_height[, layer])");
+              }
+              who.grass.ground_height = coordinate_arg(ground, "ground_height");
+              who.grass.blade_height = length_arg(blade, "blade_height");
+              blade_layer_arg(g.size() == 3 ? g[2] : py::none(), &who.grass);
             }
             const PlanMethod pm = plan_method_arg(method);
             const std::vector<float> taus = plan_taus_arg(tau, plan.trees());
@@ -305,7 +313,8 @@ void bind_scene_plan(py::module_& m) {
           "\"TRUNK\", \"GROUND\", \"GRASS\"). tree: the receivers' tree index (-1 = none) or "
           "an int32 (N,) array of them. method: \"sphere\", \"ellipsoid\", \"reeves_blau\", "
           "\"shells\" or \"medium\". tau: one number or one per tree. grass: (ground_height, "
-          "blade_height), for role GRASS only. GROUND receivers are multiplied by the grass "
+          "blade_height) or (ground_height, blade_height, layer) with the field's blade layer "
+          "(ao_grass), for role GRASS only. GROUND receivers are multiplied by the grass "
           "covers, every receiver by the attached forest.")
       .def_property_readonly("trees", &ScenePlan::trees, "Number of trees.")
       .def_property_readonly("grass_covers", &ScenePlan::grass_covers,

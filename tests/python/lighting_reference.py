@@ -141,7 +141,8 @@ def evaluate(plan, role, tree, grass_key, p, n, method, tau):
     ao = np.array(ao, dtype=np.float32)
     if role == "GRASS":
         ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
-        ao *= _core.ao_grass(p, n, float(ground), float(blade))
+        layer = next((g.layer for g in plan.grass_layers if g.name == grass_key), None)
+        ao *= _core.ao_grass(p, n, float(ground), float(blade), layer=layer)
     ao = np.clip(ao, 0.0, 1.0, out=ao)
     if role == "GROUND" and plan.grass_layers:
         for layer in plan.grass_layers:

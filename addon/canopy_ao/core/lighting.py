@@ -6,8 +6,9 @@ ray tracer or density grid (docs/DESIGN.md, 'How each role is lit').
   tree's shells and trunks are occluders.
 - GROUND: every tree's shells (as semi-transparent occluders) and every trunk (a solid ellipsoid
   fitted to the trunk) are occluders.
-- GRASS: Hegeman Eq. 9 with ground level and blade height found from the blades (connected
-  components) × the same occluders as the ground.
+- GRASS: the field's blade layer (grass_layer.blade_layer; Hegeman Eq. 9 without one) with
+  ground level and blade height found from the blades (connected components) × the same
+  occluders as the ground.
 - method "raytrace": Embree rays against every non-ignored triangle of the scene.
 
 The analytic rungs' composition is the native scene plan's (_core.ScenePlan, scene_plan.h),
@@ -128,21 +129,35 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "hybrid":
         if plan.grid is None:  # nothing to voxelise (a grass field alone): no far field
             return trace(plan, p, n, plan.settings.samples, own=own_ids(plan, grass_key, own))
-        return _grass(plan, role, grass_key, p, n,
-                      _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own)))
+        if role == "GRASS":  # a blade: the grass law (the whole layer) times the grid, as grid
+            return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
+        # The near rays see the blades around a ground point: a grass layer on top would count
+        # them twice (round tree on a grass field: ground bias -0.13 against rays, now +0.02).
+        return _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own))
     # The analytic rungs: the whole per-receiver composition, grass layers and forest
     # included, in one native call (docs/DESIGN.md, 'How each role is lit').
     lit = lights(plan)
-    grass = _blades(plan, grass_key, p) if role == "GRASS" else None
+    grass = None
+    if role == "GRASS":
+        ground, blade, layer = _blades(plan, grass_key, p)
+        grass = (ground, blade) if layer is None else (ground, blade, layer)
     return lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
                                grass=grass)
 
 
 def _blades(plan: Plan, grass_key, p):
-    """(ground height, blade height) of a grass item (its blades' lowest point and 1 when it
-    was not seen when the plan was made)."""
+    """(ground height, blade height, blade layer or None) of a grass item: its blades' lowest
+    point, their height and its field's measured layer (grass_layer.blade_layer); the points'
+    lowest point, 1 and None when it was not seen when the plan was made."""
     ground, blade = plan.grass.get(grass_key, (float(p[:, 2].min()), 1.0))
-    return float(ground), float(blade)
+    layer = next((g.layer for g in plan.grass_layers if g.name == grass_key), None)
+    return float(ground), float(blade), layer
+
+
+def _grass_law(plan: Plan, grass_key, p, n):
+    """float32 (N,): a blade's own AO (native ao_grass: its field's layer, else Eq. 9)."""
+    ground, blade, layer = _blades(plan, grass_key, p)
+    return _core.ao_grass(p, n, ground, blade, layer=layer)
 
 
 def _ground_layers(plan: Plan, role, p, ao):
@@ -157,11 +172,11 @@ def _ground_layers(plan: Plan, role, p, ao):
 
 
 def _grass(plan: Plan, role, grass_key, p, n, ao):
-    """ao times the grass, for the rungs the scene plan does not light: Hegeman Eq. 9 for a
+    """ao times the grass, for the rungs the scene plan does not light: the blade layer for a
     blade, the grass layers for a ground point. Returns a new float32 array in [0, 1]."""
     ao = np.array(ao, dtype=np.float32)
     if role == "GRASS":
-        ao *= _core.ao_grass(p, n, *_blades(plan, grass_key, p))
+        ao *= _grass_law(plan, grass_key, p, n)
     return np.clip(_ground_layers(plan, role, p, ao), 0.0, 1.0, out=ao)
 
 

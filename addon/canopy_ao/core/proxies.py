@@ -87,7 +87,8 @@ def fit_scene(plan: Plan, items) -> None:
                 plan.trunks.setdefault(it.tree, []).append(_core.fit_ellipsoid(b))
         if it.role == "GRASS":
             plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
-            layer = grass_layer(it.name, it.positions, it.triangles, *plan.grass[it.name])
+            layer = grass_layer(it.name, it.positions, it.triangles, *plan.grass[it.name],
+                                distance=plan.settings.distance)
             if layer is not None:
                 plan.grass_layers.append(layer)
 

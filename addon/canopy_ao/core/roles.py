@@ -4,7 +4,8 @@ Roles (docs/DESIGN.md, 'How each role is lit'):
 - ``CANOPY``: leaves; its points fit the proxies, and it receives.
 - ``TRUNK``: receives, and occludes the ground as a solid.
 - ``GROUND``: a flat, wide surface; receives only.
-- ``GRASS``: many small disconnected blades standing on one plane; receives (Hegeman Eq. 9).
+- ``GRASS``: many small disconnected blades standing on one plane; receives (its field's blade
+  layer, grass_layer.py).
 - ``IGNORE``: takes no part.
 
 Everything here works on whole numpy arrays; there is no per-vertex Python loop.

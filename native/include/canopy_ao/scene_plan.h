@@ -13,7 +13,8 @@
 //    is inside of are skipped there); a receiver inside no crown sees every tree's shells.
 //  - Trunks are solid occluders (opacity 1), except a CANOPY or TRUNK receiver's own tree's
 //    (which its leaves and bark sit inside or on).
-//  - GRASS receivers: times Hegeman's Eq. 9 (grass.h) with the given ground and blade height.
+//  - GRASS receivers: times the grass law (grass.h: the field's blade layer, or Hegeman's Eq. 9)
+//    with the given ground and blade height.
 //  - The product, clipped to [0, 1]. V = Π (1 − occ) over independent occluders, so the order
 //    of the factors only changes round-off.
 //  - GROUND receivers: times each grass field's cover over the ground (grass_cover.h), in the
@@ -70,7 +71,7 @@ struct PlanReceivers {
   std::int32_t tree = -1;
   /// Optional per-receiver tree (N entries, each −1 or a tree index); overrides `tree`.
   const std::int32_t* trees = nullptr;
-  /// Role Grass: Hegeman Eq. 9's ground level and blade height (required for that role).
+  /// Role Grass: the grass law's ground level, blade height and layer (required for that role).
   GrassOptions grass;
 };
 
