@@ -124,3 +124,22 @@ def test_a_bad_blade_layer_is_refused_by_name():
                      (np.full((2, 2), 2.0, np.float32), r"\[0, 1\]"), ([[0.1, 0.2]], "numpy")):
         with pytest.raises(ValueError, match=why):
             _core.ao_grass(p, n, 0.0, 1.0, layer=bad)
+
+
+def test_the_layers_honour_the_ao_distance():
+    """Occluders farther than the AO distance do not count (Cycles' hard cut-off): a distance
+    far below the blade height leaves the ground and the blades above it open; a long one gives
+    the layer's full visibility, V = 2 ∫ exp(−L Ḡ/μ) μ dμ for the ground."""
+    g, ground = _field(20000)
+    gh, bh = core.roles.blade_heights(g.positions, g.triangles)
+    far = grass_layer.grass_layer("grass", g.positions, g.triangles, gh, bh)
+    near = grass_layer.grass_layer("grass", g.positions, g.triangles, gh, bh,
+                                   distance=1e-4 * bh)
+    cr = 0.5 * np.cross(g.positions[g.triangles[:, 1]] - g.positions[g.triangles[:, 0]],
+                        g.positions[g.triangles[:, 2]] - g.positions[g.triangles[:, 0]])
+    x, w = np.polynomial.legendre.leggauss(24)
+    mu, w = 0.5 * (x + 1), 0.5 * w
+    gbar = grass_layer.projection_mean(cr[:: max(1, len(cr) // 20000)], mu)
+    want = 2 * np.sum(w * mu * np.exp(-far.lai * gbar / mu))
+    assert abs(far.visibility - want) < 1e-6 and far.visibility < 0.6
+    assert near.visibility > 0.99 and np.all(near.layer[1:] > 0.99)
