@@ -84,14 +84,14 @@ void ao_grass(PointsView positions, PointsView normals, const GrassOptions& o, f
   check_receivers(positions, normals);
   check_grass(o);
   const Vec3 up = normalize(o.up);
-  const float ground = o.ground_height, h = o.blade_height, inv_2h = 0.5f / o.blade_height,
-              floor = o.floor;
   if (!o.layer.empty()) {
     parallel_for_blocks(positions.size, 16384, [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) out[i] = layer_law(o, positions[i], normals[i], up);
     });
     return;
   }
+  const float ground = o.ground_height, h = o.blade_height, inv_2h = 0.5f / o.blade_height,
+              floor = o.floor;
   parallel_for_blocks(positions.size, 16384, [&](std::size_t b, std::size_t e) {
     const float* __restrict p = positions.data;
     const float* __restrict n = normals.data;

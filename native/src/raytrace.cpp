@@ -457,7 +457,6 @@ struct RayTracer::Impl {
   std::vector<float> vertex_normals;  // 3V unit (or zero) normals, or empty: no bake point
   std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
-  double corners_per_vertex = 1.0;  // mean corners of the vertices (bake point), else 1
   std::vector<std::uint32_t> corner_count;  // V: corners per vertex (≥ 1), or empty: 1 each
   float auto_offset = 0;
   float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
@@ -741,15 +740,12 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
       }
     }
     if (!m.vertex_normals.empty() && vertices.size > 0) {
-      std::size_t total = 0;
       std::vector<std::uint32_t> tris;
       m.corner_count.resize(vertices.size);
       for (std::size_t v = 0; v < vertices.size; ++v) {
         m.corner_triangles(static_cast<std::uint32_t>(v), &tris);
         m.corner_count[v] = static_cast<std::uint32_t>(std::max<std::size_t>(1, tris.size()));
-        total += m.corner_count[v];
       }
-      m.corners_per_vertex = static_cast<double>(total) / static_cast<double>(vertices.size);
     }
     // Both windings share primitive ids, so one filter on the original indices serves both.
     for (int w = 0; w < (culls ? 2 : 1); ++w) {
@@ -811,7 +807,12 @@ std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
 std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
 bool RayTracer::has_vertex_normals() const { return !impl_->vertex_normals.empty(); }
 
-double RayTracer::corners_per_vertex() const { return impl_->corners_per_vertex; }
+double RayTracer::corners_per_vertex() const {
+  const std::vector<std::uint32_t>& k = impl_->corner_count;
+  if (k.empty()) return 1.0;
+  return static_cast<double>(std::accumulate(k.begin(), k.end(), std::uint64_t{0})) /
+         static_cast<double>(k.size());
+}
 
 namespace {
 /// The rays one vertex with k corners casts at `samples` (RayTracer::ao's per-corner count).

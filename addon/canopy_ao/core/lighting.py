@@ -120,6 +120,12 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     trunk (which sit inside or on them)."""
     if len(p) == 0:
         return np.ones(0, np.float32)
+    # The hybrid: with nothing to voxelise (a grass field alone) no far field, so the exact
+    # rung; a blade takes the grass law (the whole layer) and the grid, as the grid rung.
+    if method == "hybrid" and plan.grid is None:
+        method = "raytrace"
+    elif method == "hybrid" and role == "GRASS":
+        method = "grid"
     if method == "raytrace":
         return trace(plan, p, n, plan.settings.samples, own=own_ids(plan, grass_key, own))
     if method == "grid":
@@ -127,10 +133,6 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "regression":
         return plan.regression.ao(role, tree, p, n, grass_key, own)
     if method == "hybrid":
-        if plan.grid is None:  # nothing to voxelise (a grass field alone): no far field
-            return trace(plan, p, n, plan.settings.samples, own=own_ids(plan, grass_key, own))
-        if role == "GRASS":  # a blade: the grass law (the whole layer) times the grid, as grid
-            return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
         # The near rays see the blades around a ground point: a grass layer on top would count
         # them twice (round tree on a grass field: ground bias -0.13 against rays, now +0.02).
         return _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own))
@@ -195,15 +197,20 @@ def own_ids(plan: Plan, name, own):
     return out or None
 
 
+def _tracer(plan: Plan):
+    """The plan's ray tracer, or CanopyAOError when the scene gave it no triangles."""
+    if plan.tracer is None:
+        raise CanopyAOError("ray tracing needs the scene's triangles; none were given")
+    return plan.tracer
+
+
 def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra):
     """Ray-traced AO of points p, n against the scene's triangles (the exact rung). own: the
     tracer-mesh ids of own_ids, so each ray skips only its receiver's own triangles, as Cycles'
     does (docs/DESIGN.md, 'The method ladder'). distance: the AO distance (default: the
     settings'; 0 = unlimited). extra: more RayTracer.ao arguments (bent_normals=True)."""
-    if plan.tracer is None:
-        raise CanopyAOError("ray tracing needs the scene's triangles; none were given")
     d = plan.settings.distance if distance is None else distance
-    return plan.tracer.ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
+    return _tracer(plan).ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
                           seed=plan.settings.seed if seed is None else int(seed), **(own or {}),
                           **extra)
 
@@ -228,12 +235,10 @@ def _hybrid_ao(plan, p, n, own=None):
     vertex at Cycles' bake point), times the density grid's transmittance beyond
     (docs/DESIGN.md, 'The near/far hybrid'). A scene with no leaves or branches has no grid:
     the caller traces the whole distance instead (the rays see the grass themselves)."""
-    if plan.tracer is None:
-        raise CanopyAOError("ray tracing needs the scene's triangles; none were given")
     d = plan.settings.distance
     far = float(d) if d > 0 else math.inf
     near = min(HYBRID_VOXELS * float(plan.grid.voxel_size), far)
-    return np.asarray(_core.ao_near_far(plan.tracer, plan.grid, p, n, near,
+    return np.asarray(_core.ao_near_far(_tracer(plan), plan.grid, p, n, near,
                                         samples=int(plan.settings.samples), distance=far,
                                         seed=int(plan.settings.seed), **(own or {})),
                       dtype=np.float32)
