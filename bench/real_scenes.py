@@ -24,7 +24,6 @@ sys.path.insert(0, os.path.join(REPO, "addon"))
 
 import numpy as np  # noqa: E402
 
-from canopy_ao import _core  # noqa: E402
 
 REAL = os.path.join(HERE, "out", "real")
 REF_SEED = 12345
@@ -62,15 +61,6 @@ class RealScene:
         self.tree = np.concatenate([np.full(b - a, self.parts[n]["tree"], dtype=object)
                                     for n, a, b in zip(self.names, offs[:-1], offs[1:])])
         self.object = np.repeat(np.arange(len(self.names)), np.diff(offs))
-        # Each triangle's face, numbered apart per object (exports older than the faces: None,
-        # every triangle its own corner).
-        self.P = None
-        if all(self.parts[n]["polygons"] is not None for n in self.names):
-            firsts = np.cumsum([0] + [int(self.parts[n]["polygons"].max()) + 1
-                                      if len(self.parts[n]["polygons"]) else 0
-                                      for n in self.names])
-            self.P = np.concatenate([self.parts[n]["polygons"] + f
-                                     for n, f in zip(self.names, firsts[:-1])]).astype(np.int32)
 
     @property
     def n_vertices(self):
@@ -143,9 +133,11 @@ def tracer_tag():
 
 
 def scene_tracer(sc: RealScene):
-    """The scene's ray tracer as the add-on builds it: with the vertex normals and, where the
-    export has them, Blender's faces, so every vertex starts at Cycles' bake point."""
-    return _core.RayTracer(sc.V, sc.T, normals=sc.N, polygons=sc.P)
+    """The scene's ray tracer, built by the add-on's own lighting.build_tracer from its items:
+    with the vertex normals and, where the export has them, Blender's faces, so every vertex
+    starts at Cycles' bake point (the items' vertices in the scene's order, as sc.V)."""
+    from canopy_ao.core import lighting
+    return lighting.build_tracer(sc.engine_items())
 
 
 def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None), per_corner=True):
