@@ -3,7 +3,8 @@
     /usr/bin/python3 bench/grass_styles.py
 
 The blade layer (core/grass_layer.py) was designed on examples/canopy_scenes.py's grass_field
-(two-segment tapered blades, uniformly scattered). This checks it on two other ways grass is
+(two-segment tapered blades, uniformly scattered; printed first at three densities on 8 m ×
+8 m, the figures docs/DESIGN.md quotes). This checks it on two other ways grass is
 built, each on a ground mesh, against Embree at 128 samples per face corner: clumped tufts of
 four-segment curved blades of mixed heights (0.4-1.2 x), and game-style grass cards (two or
 three crossed vertical quads per tuft, much wider than a blade), each at a sparse and a dense
@@ -105,7 +106,12 @@ def errors(items, ref, eq9=False):
 
 
 def main():
-    fields = [("tufts of curved blades, sparse", tufts(400)), ("tufts, dense", tufts(3000)),
+    def field(blades):
+        f = cs.grass_field(blades=blades, size=SIZE)[0]
+        return f.vertices, f.triangles
+
+    fields = [(f"design field, {b} blades", field(b)) for b in (8000, 20000, 60000)]
+    fields += [("tufts of curved blades, sparse", tufts(400)), ("tufts, dense", tufts(3000)),
               ("crossed grass cards, sparse", cards(300)), ("cards, dense", cards(2500))]
     print("field | blades: Eq. 9 MAE / bias -> layer MAE / bias | ground: Eq. 9 -> layer")
     for name, grass in fields:
