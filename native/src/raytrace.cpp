@@ -284,6 +284,16 @@ struct Corner {
   Vec3 ng;            // the face normal, on n's side
   Vec3 lift;          // Cycles' shadow_ray_smooth_surface_offset at `start` (full amount)
   std::int32_t tri;   // the corner's triangle, the one its rays skip
+  bool open = false;  // Cycles bakes it with a NaN face normal: every ray counts as unblocked
+};
+
+/// Where Blender's vertex bake evaluates one face corner of a vertex (raytrace.h, "Origins"):
+/// the tracer's triangle `tri` at its vertex `slot`, which is not always the corner's own
+/// vertex (see RayTracer::Impl::build_bake_corners).
+struct BakeCorner {
+  std::uint32_t tri;
+  std::uint8_t slot;
+  bool open;  // tri has a vertex on its first one (an edge from it of length 0): NaN normal
 };
 
 /// Cycles' shadow_ray_smooth_surface_offset: the point lifted by h along the interpolated
@@ -458,6 +468,10 @@ struct RayTracer::Impl {
   std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
   std::vector<std::uint32_t> corner_count;  // V: corners per vertex (≥ 1), or empty: 1 each
+  // Each vertex's corners where Cycles' bake evaluates them (CSR, vertex v's are
+  // bake_corners[corner_first[v] .. corner_first[v+1])), built with the vertex normals.
+  std::vector<std::uint32_t> corner_first;
+  std::vector<BakeCorner> bake_corners;
   float auto_offset = 0;
   float precision = 0;  // float spacing of the coordinates: 1e-6 × the largest |coordinate|
   DevicePtr device;
@@ -505,31 +519,123 @@ struct RayTracer::Impl {
     return length(cross(vertex(t[1]) - a, vertex(t[2]) - a)) > 0.0f;
   }
 
-  /// The triangles vertex v's corners are baked on (raytrace.h, "Origins"): each triangle with
-  /// area using v, in triangle order, or with polygons the first such triangle of each one.
-  void corner_triangles(std::uint32_t v, std::vector<std::uint32_t>* out) const {
-    out->clear();
-    for (std::uint32_t k = first_tri[v]; k < first_tri[v + 1]; ++k) {
-      const std::uint32_t tri = tris_of[k];
-      if (!has_area(tri)) continue;
-      bool seen = false;
-      if (!polygons.empty()) {  // one corner per polygon (Blender's rule)
-        for (const std::uint32_t u : *out) seen = seen || polygons[u] == polygons[tri];
+  /// The bake corners of every vertex (corner_first, bake_corners; raytrace.h, "Origins").
+  /// Blender bakes a POINT-domain colour per face corner, each on the first triangle of its
+  /// face that holds it, in the face's triangulation as the bake computes it
+  /// (bake_targets_populate_pixels_color_attributes: corner_tris_calc without face normals,
+  /// Blender 3.x–5.x), at that triangle's vertex slot j; Cycles then evaluates triangle i of
+  /// *its own* triangle list (the mesh's cached triangulation, which the tracer is given) at
+  /// slot j. The two triangulations of a quad differ where Blender's quad-flip test differs
+  /// with and without the face normal — on a quad with two coincident corners (a branch tip
+  /// Sapling collapses) — and then one corner is baked at the quad's fourth vertex instead of
+  /// its own. A triangle whose first vertex coincides with another has a zero edge from it:
+  /// Cycles' face normal there is NaN and so is every ray's direction, which Embree never
+  /// stops (the corner reads 1.0). Other triangles of zero area give no corner.
+  void build_bake_corners(std::size_t nverts) {
+    struct Entry {
+      std::uint32_t v, tri;
+      std::uint8_t slot;
+    };
+    std::vector<Entry> entries;
+    entries.reserve(3 * triangle_count);
+    auto corner_of = [&](std::uint32_t v, std::uint32_t tri, std::uint8_t slot) {
+      entries.push_back({v, tri, slot});
+    };
+    const std::uint32_t* ix = indices.data();
+    if (polygons.empty()) {  // every triangle is a face
+      for (std::uint32_t t = 0; t < triangle_count; ++t) {
+        for (std::uint8_t j = 0; j < 3; ++j) corner_of(ix[3 * t + j], t, j);
       }
-      if (!seen) out->push_back(tri);
+    } else {
+      // The triangles of each face, in triangle order.
+      std::vector<std::uint32_t> order(triangle_count);
+      for (std::uint32_t t = 0; t < triangle_count; ++t) order[t] = t;
+      std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return polygons[a] < polygons[b];
+      });
+      for (std::size_t s = 0; s < order.size();) {
+        std::size_t e = s + 1;
+        while (e < order.size() && polygons[order[e]] == polygons[order[s]]) ++e;
+        const std::uint32_t* X = ix + 3 * static_cast<std::size_t>(order[s]);
+        const std::uint32_t* Y = e - s == 2 ? ix + 3 * static_cast<std::size_t>(order[s + 1])
+                                            : nullptr;
+        std::uint32_t loops[4];
+        bool quad = false;
+        if (Y && X[0] == Y[0]) {  // split (0 1 2)(0 2 3)
+          loops[0] = X[0], loops[1] = X[1], loops[2] = X[2], loops[3] = Y[2];
+          quad = true;
+        } else if (Y && X[1] == Y[0] && X[2] == Y[2]) {  // split (0 1 3)(1 2 3)
+          loops[0] = X[0], loops[1] = X[1], loops[2] = Y[1], loops[3] = X[2];
+          quad = true;
+        }
+        if (quad) {
+          // Blender's is_quad_flip_v3_first_third_fast on the quad: the bake's split.
+          const Vec3 p0 = vertex(loops[0]), d12 = vertex(loops[1]) - p0,
+                     d13 = vertex(loops[2]) - p0, d14 = vertex(loops[3]) - p0;
+          const bool flip = dot(cross(d12, d13), cross(d14, d13)) > 0.0f;
+          static const std::uint8_t kSplit[2][2][3] = {{{0, 1, 2}, {0, 2, 3}},
+                                                       {{0, 1, 3}, {1, 2, 3}}};
+          bool seen[4] = {false, false, false, false};
+          for (int k = 0; k < 2; ++k) {
+            for (std::uint8_t j = 0; j < 3; ++j) {
+              const std::uint8_t l = kSplit[flip][k][j];
+              if (seen[l]) continue;
+              seen[l] = true;
+              corner_of(loops[l], order[s + static_cast<std::size_t>(k)], j);
+            }
+          }
+        } else {  // a triangle or an n-gon: the first of its triangles holding the vertex
+          for (std::size_t q = s; q < e; ++q) {
+            const std::uint32_t t = order[q];
+            for (std::uint8_t j = 0; j < 3; ++j) {
+              bool dup = false;
+              for (std::size_t r = s; r < q && !dup; ++r) {
+                const std::uint32_t* u = ix + 3 * static_cast<std::size_t>(order[r]);
+                dup = u[0] == ix[3 * t + j] || u[1] == ix[3 * t + j] || u[2] == ix[3 * t + j];
+              }
+              if (!dup) corner_of(ix[3 * t + j], t, j);
+            }
+          }
+        }
+        s = e;
+      }
     }
+    std::stable_sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+      return a.v != b.v ? a.v < b.v : a.tri < b.tri;
+    });
+    corner_first.assign(nverts + 1, 0);
+    bake_corners.clear();
+    bake_corners.reserve(entries.size());
+    for (const Entry& en : entries) {
+      const std::uint32_t* t = ix + 3 * static_cast<std::size_t>(en.tri);
+      const Vec3 e1 = vertex(t[1]) - vertex(t[0]), e2 = vertex(t[2]) - vertex(t[0]);
+      const bool nan_normal = (e1.x == 0.0f && e1.y == 0.0f && e1.z == 0.0f) ||
+                              (e2.x == 0.0f && e2.y == 0.0f && e2.z == 0.0f);
+      if (!nan_normal && !has_area(en.tri)) continue;  // no corner (see above)
+      bake_corners.push_back({en.tri, en.slot, nan_normal});
+      ++corner_first[en.v + 1];
+    }
+    for (std::size_t v = 0; v < nverts; ++v) corner_first[v + 1] += corner_first[v];
   }
 
-  /// Vertex v's corners at Cycles' bake point (raytrace.h, "Origins"), one per triangle of
-  /// corner_triangles (tris: its scratch); none when no triangle with area uses v.
-  void corners(std::uint32_t v, std::vector<Corner>* out, std::vector<std::uint32_t>* tris) const {
+  /// Vertex v's corners at Cycles' bake point (raytrace.h, "Origins"): one per bake corner,
+  /// each started at the vertex its triangle's slot names; none when v has no bake corner.
+  void corners(std::uint32_t v, std::vector<Corner>* out) const {
     out->clear();
-    const Vec3 P = vertex(v);
-    const float reach = bake_reach(P);
-    corner_triangles(v, tris);
-    for (const std::uint32_t tri : *tris) {
+    for (std::uint32_t k = corner_first[v]; k < corner_first[v + 1]; ++k) {
+      const BakeCorner& bc = bake_corners[k];
+      Corner cn;
+      if (bc.open) {
+        cn.open = true;
+        cn.tri = static_cast<std::int32_t>(bc.tri);
+        out->push_back(cn);
+        continue;
+      }
+      const std::uint32_t tri = bc.tri;
       const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
       const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
+      const Vec3 P = V[bc.slot];
+      const float reach = bake_reach(P);
       const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
       const float area2 = length(c);
       const Vec3 ng = c / area2;
@@ -543,7 +649,7 @@ struct RayTracer::Impl {
         w[2] = std::clamp(w[2], 1e-5f, 1.0f - 1e-5f);
         w[0] = std::clamp(1.0f - w[1] - w[2], 1e-5f, 1.0f - 1e-5f);
       } else {  // a sliver: stay at the vertex
-        for (int j = 0; j < 3; ++j) w[j] = t[j] == v ? 1.0f : 0.0f;
+        for (int j = 0; j < 3; ++j) w[j] = j == bc.slot ? 1.0f : 0.0f;
       }
       out->push_back(corner_at(tri, V, ng, w, nullptr));
     }
@@ -740,11 +846,11 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
       }
     }
     if (!m.vertex_normals.empty() && vertices.size > 0) {
-      std::vector<std::uint32_t> tris;
+      m.build_bake_corners(vertices.size);
       m.corner_count.resize(vertices.size);
       for (std::size_t v = 0; v < vertices.size; ++v) {
-        m.corner_triangles(static_cast<std::uint32_t>(v), &tris);
-        m.corner_count[v] = static_cast<std::uint32_t>(std::max<std::size_t>(1, tris.size()));
+        m.corner_count[v] =
+            std::max<std::uint32_t>(1, m.corner_first[v + 1] - m.corner_first[v]);
       }
     }
     // Both windings share primitive ids, so one filter on the original indices serves both.
@@ -913,7 +1019,6 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     std::size_t filled = 0;
     std::int32_t skip[kStream];  // bake-point mode: the triangle each batched ray skips
     std::vector<Corner> corners;
-    std::vector<std::uint32_t> corner_tris;  // corners()'s scratch
     TraceContext context;
     embree::init_context(&context.base);  // incoherent: AO rays go every way
     if (bake_point) {
@@ -948,7 +1053,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const std::int32_t ot = own.triangle_ids ? own.triangle_ids[i] : -1;
       corners.clear();
       if (bake_point && ov >= 0) {
-        m.corners(static_cast<std::uint32_t>(ov), &corners, &corner_tris);
+        m.corners(static_cast<std::uint32_t>(ov), &corners);
       } else if (bake_point && ot >= 0) {
         Corner c;
         if (m.texel_corner(points[i], static_cast<std::uint32_t>(ot), nn, &c)) corners.push_back(c);
@@ -1000,6 +1105,10 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
         std::int32_t sk = own_skip;
         if (k) {  // Cycles' bake point: this ray's corner, and its terminator lift
           const Corner& c = corners[static_cast<std::size_t>(s) % k];
+          if (c.open) {  // a NaN direction in Cycles: nothing stops it
+            ++open[local];
+            continue;
+          }
           d = c.t * x + c.b * y + c.n * z;
           const float ngl = dot(c.ng, d), nl = z;
           const float amount =

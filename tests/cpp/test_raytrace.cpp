@@ -946,6 +946,52 @@ TEST(BakePoint, AVertexWithOnlyZeroAreaFacesStartsOffItsPoint) {
   EXPECT_GT(vertex_ao(tracer, m, v, {0, 0, 1}), 0.95f);
 }
 
+TEST(BakePoint, ACornerOnAZeroEdgeIsOpenAndOneOnASliverIsNone) {
+  // Inside a closed cube every traced ray is blocked. Vertex p's second triangle starts with
+  // two coincident vertices (an edge of length 0 from its first one): Cycles' face normal there
+  // is NaN and so is every ray direction, which nothing stops; that corner reads 1.0, so p
+  // reads 1/2. Vertex q's second triangle has area 0 with a zero edge between its last two
+  // vertices only: no corner (the face normal Cycles computes there is rounding noise), so q
+  // reads its one traced corner, 0.
+  Mesh m = cube(1.0f);
+  const std::int32_t p = m.add({0, 0, 0}), a = m.add({0.1f, 0, 0}), b = m.add({0, 0.1f, 0});
+  const std::int32_t c = m.add({-0.1f, 0, 0}), c2 = m.add({-0.1f, 0, 0});
+  m.tri(p, a, b);
+  m.tri(c, c2, p);
+  const std::int32_t q = m.add({0.5f, 0.5f, 0}), e = m.add({0.6f, 0.5f, 0}),
+                     f = m.add({0.5f, 0.6f, 0}), g = m.add({0.4f, 0.5f, 0}),
+                     g2 = m.add({0.4f, 0.5f, 0});
+  m.tri(q, e, f);
+  m.tri(q, g, g2);
+  const RayTracer tracer = m.baking(same_normals(m, {0, 0, 1}));
+  EXPECT_EQ(vertex_ao(tracer, m, p, {0, 0, 1}), 0.5f);
+  EXPECT_EQ(vertex_ao(tracer, m, q, {0, 0, 1}), 0.0f);
+  EXPECT_EQ(vertex_ao(tracer, m, c, {0, 0, 1}), 1.0f);  // its one corner is the open one
+  EXPECT_EQ(tracer.vertex_rays(static_cast<std::size_t>(p), 1, 16), 2u * 16u);  // both cast
+  EXPECT_EQ(tracer.vertex_rays(static_cast<std::size_t>(q), 1, 16), 16u);
+}
+
+TEST(BakePoint, ACornerIsBakedOnTheTriangleBlendersBakeSplitsItsQuadInto) {
+  // A quad B T1 T0 A whose T1 and T0 coincide (a branch tip Sapling collapses), given as the
+  // mesh's cached triangulation splits it, (B T1 A)(T1 T0 A), which Blender's quad-flip test
+  // with the face normal chooses. The bake triangulates again without the normal: (B T1 T0)
+  // (B T0 A). Corner A is the bake's second triangle's slot 2, so Cycles bakes it on the
+  // tracer's second triangle, (T1 T0 A), which has a NaN face normal: A reads 1.0 inside a
+  // closed cube, where the first-triangle rule read 0. B stays on the first triangle: 0.
+  Mesh m = cube(1.0f);
+  const std::int32_t B = m.add({0, 0, 0}), T1 = m.add({0.1f, 0.05f, 0}),
+                     T0 = m.add({0.1f, 0.05f, 0}), A = m.add({0, 0.1f, 0});
+  m.tri(B, T1, A);
+  m.tri(T1, T0, A);
+  std::vector<std::int32_t> polys(m.triangles());
+  for (std::size_t k = 0; k < polys.size(); ++k) polys[k] = static_cast<std::int32_t>(k);
+  polys[polys.size() - 1] = polys[polys.size() - 2];  // the quad's two triangles: one face
+  const RayTracer tracer = m.baking(same_normals(m, {0, 0, 1}), &polys);
+  EXPECT_EQ(vertex_ao(tracer, m, A, {0, 0, 1}), 1.0f);
+  EXPECT_EQ(vertex_ao(tracer, m, B, {0, 0, 1}), 0.0f);
+  EXPECT_EQ(vertex_ao(tracer, m, T0, {0, 0, 1}), 0.0f);  // baked at A's point, traced: blocked
+}
+
 TEST(BakePoint, BadShadingThrowsInvalidArgument) {
   const Mesh m = horizontal(-1, 1, -1, 1, 0);
   std::vector<float> short_normals(3 * 3, 0.0f), nan_normals = same_normals(m, {0, 0, 1});

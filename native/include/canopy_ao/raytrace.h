@@ -27,11 +27,20 @@
 //
 // A vertex, when the tracer was built with vertex normals, is started where Cycles' own vertex
 // bake starts it ("Cycles' bake point"; Blender 3.x–5.x, kernel integrator_init_from_bake and
-// shadow_ray_offset). Every triangle using the vertex is one of its corners; its rays are dealt
-// to the corners in turn (ray s to corner s mod k; one corner per polygon when the polygons
-// are known, BakeShading) — k × samples rays in all, as Cycles bakes every corner with its full
-// sample count (RayTraceOptions::per_corner) — and for each corner:
-//  - the start is the vertex moved towards the corner triangle's centroid by
+// shadow_ray_offset). Every triangle using the vertex is one of its corners (one corner per
+// polygon when the polygons are known, BakeShading); its rays are dealt to the corners in turn
+// (ray s to corner s mod k) — k × samples rays in all, as Cycles bakes every corner with its
+// full sample count (RayTraceOptions::per_corner). A polygon's corner is baked where Blender's
+// bake puts it: on the first triangle holding it in the polygon's triangulation *as the bake
+// computes it* (without the face normal), at that triangle's vertex slot j, which Cycles then
+// evaluates on triangle i of its own list (the mesh's cached triangulation: the tracer's
+// triangles) at slot j. On a quad whose two triangulations differ (Blender's quad-flip test
+// with and without the face normal disagrees on a quad with two coincident corners, a branch
+// tip Sapling collapses) one corner is so baked at the quad's fourth vertex. A corner whose
+// triangle starts with a zero edge (its first vertex coincides with another) has a NaN face
+// normal in Cycles, and so has every ray direction, which nothing stops: it counts as open
+// (1.0). A corner on any other triangle of zero area is no corner. For each traced corner:
+//  - the start is the corner's vertex moved towards the corner triangle's centroid by
 //    min(distance to the centroid, 1e-4 × max(1, largest |coordinate| of the vertex)) — Cycles'
 //    bake_offset_towards_center; it depends on the distance from the world origin, as Cycles'
 //    does (1.2 mm for a vertex 12 m from it);
@@ -44,12 +53,13 @@
 //    the face keeps its own triangle as an occluder;
 //  - the scene is built ROBUST, as Cycles builds it: its hit test also counts a face through
 //    the ray's start (t = 0), so a start lying in another face's plane sees that face.
-// A vertex that no triangle with area uses (a branch tip Sapling collapses to a point: all its
-// faces have zero area, and every face meeting there would block every ray at t = 0) starts
-// 1e-4 × max(1, largest |coordinate|) off it along its normal and skips nothing. (Cycles gives
-// such a corner a NaN face normal, and what it then bakes depends on float rounding: 0.1–0.99,
-// mean 0.59 on the Douglas fir's 1,791 tips, where this start gives 0.69, MAE 0.15 to Cycles
-// against 0.59 from the point itself.)
+// A vertex with no corner (a branch tip Sapling collapses to a point: all its faces have zero
+// area, and every face meeting there would block every ray at t = 0) starts
+// 1e-4 × max(1, largest |coordinate|) off it along its normal and skips nothing. (Its faces'
+// zero edge lies between their last two vertices, where the face normal Cycles computes is the
+// rounding residue of a cross product — a direction at random — and what it bakes then depends
+// on float rounding: 0.1–0.99, mean 0.59 on the Douglas fir's 1,791 tips, where this start
+// gives 0.66, MAE 0.12 to Cycles, against 0.59 from the point itself.)
 // A texel (triangle_ids) on such a tracer starts at the texel itself with its own normal,
 // skips its triangle and gets the same terminator lift. Checked against Cycles
 // (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
