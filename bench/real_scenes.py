@@ -127,9 +127,10 @@ def load(scene, quick=True, out_dir=REAL):
 
 def tracer_tag():
     """Which ray tracer made a reference: each vertex starts at Cycles' bake point (native
-    raytrace.h, 'Origins') and casts its samples at every face corner, as the add-on's tracer
-    does."""
-    return "bake-point-per-corner"
+    raytrace.h, 'Origins') and casts its samples at every face corner, each baked where
+    Blender's bake puts it (its own triangulation; a NaN-normal corner open), as the add-on's
+    tracer does."""
+    return "bake-point-per-corner-bake-split"
 
 
 def scene_tracer(sc: RealScene):
