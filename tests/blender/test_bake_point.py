@@ -163,7 +163,8 @@ def test_a_branch_tip_collapsed_to_a_point_bakes_as_in_cycles(clean):
     whose tip quad the bake triangulates differently from the mesh (Blender's quad-flip test
     with and without the face normal), so one of their four corners is baked on a triangle with
     a NaN face normal, whose rays nothing stops (native raytrace.h, 'Origins'). The
-    first-triangle rule read 0 there."""
+    first-triangle rule read 0 there. Whether the mesh's cached triangulation flips these quads
+    depends on the Blender version (3.4 does, 4.3 does not); ours follows the one it is given."""
     base = np.array([-8.26, 2.16, 27.57])
     axis = np.array([-0.24, 0.63, -0.01])
     up = np.array([0.0, 0.0, 1.0])
@@ -187,5 +188,6 @@ def test_a_branch_tip_collapsed_to_a_point_bakes_as_in_cycles(clean):
                  (1, 3, 7, 5)]
     _quads_mesh("Box", box, box_faces)
     ours, cyc = _bake_both(["Twig"], 10.0)
-    assert cyc["Twig"].max() > 0.2, cyc["Twig"]  # the quirk is exercised
     assert np.all(np.abs(ours["Twig"] - cyc["Twig"]) < 0.03), (ours["Twig"], cyc["Twig"])
+    if bpy.app.version < (4, 0):  # measured: Blender 3.4 caches the flipped triangulation here
+        assert cyc["Twig"].max() > 0.2, cyc["Twig"]  # (4.3 does not: Cycles reads 0 there)
