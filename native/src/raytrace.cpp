@@ -467,9 +467,9 @@ struct RayTracer::Impl {
   std::vector<float> vertex_normals;  // 3V unit (or zero) normals, or empty: no bake point
   std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
-  std::vector<std::uint32_t> corner_count;  // V: corners per vertex (≥ 1), or empty: 1 each
   // Each vertex's corners where Cycles' bake evaluates them (CSR, vertex v's are
-  // bake_corners[corner_first[v] .. corner_first[v+1])), built with the vertex normals.
+  // bake_corners[corner_first[v] .. corner_first[v+1])), built with the vertex normals; both
+  // empty without them (no bake point: one start per receiver).
   std::vector<std::uint32_t> corner_first;
   std::vector<BakeCorner> bake_corners;
   float auto_offset = 0;
@@ -616,6 +616,12 @@ struct RayTracer::Impl {
       ++corner_first[en.v + 1];
     }
     for (std::size_t v = 0; v < nverts; ++v) corner_first[v + 1] += corner_first[v];
+  }
+
+  /// Vertex v's corner count as the cost model counts it: its bake corners, at least 1 (a
+  /// vertex with none casts one set from its fallback start). Needs corner_first.
+  std::uint32_t corner_total(std::size_t v) const {
+    return std::max<std::uint32_t>(1, corner_first[v + 1] - corner_first[v]);
   }
 
   /// Vertex v's corners at Cycles' bake point (raytrace.h, "Origins"): one per bake corner,
@@ -845,14 +851,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
         m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
     }
-    if (!m.vertex_normals.empty() && vertices.size > 0) {
-      m.build_bake_corners(vertices.size);
-      m.corner_count.resize(vertices.size);
-      for (std::size_t v = 0; v < vertices.size; ++v) {
-        m.corner_count[v] =
-            std::max<std::uint32_t>(1, m.corner_first[v + 1] - m.corner_first[v]);
-      }
-    }
+    if (!m.vertex_normals.empty() && vertices.size > 0) m.build_bake_corners(vertices.size);
     // Both windings share primitive ids, so one filter on the original indices serves both.
     for (int w = 0; w < (culls ? 2 : 1); ++w) {
       attach_triangles(m.device.get(), m.scene.get(), m.vertices.data(), vertices.size,
@@ -914,10 +913,11 @@ std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
 bool RayTracer::has_vertex_normals() const { return !impl_->vertex_normals.empty(); }
 
 double RayTracer::corners_per_vertex() const {
-  const std::vector<std::uint32_t>& k = impl_->corner_count;
-  if (k.empty()) return 1.0;
-  return static_cast<double>(std::accumulate(k.begin(), k.end(), std::uint64_t{0})) /
-         static_cast<double>(k.size());
+  const Impl& m = *impl_;
+  if (m.corner_first.empty()) return 1.0;
+  std::uint64_t total = 0;
+  for (std::size_t v = 0; v < m.vertex_count; ++v) total += m.corner_total(v);
+  return static_cast<double>(total) / static_cast<double>(m.vertex_count);
 }
 
 namespace {
@@ -939,10 +939,10 @@ std::uint64_t RayTracer::vertex_rays(std::size_t first, std::size_t count, int s
       << m.vertex_count;
     throw std::invalid_argument(s.str());
   }
-  if (m.corner_count.empty()) return static_cast<std::uint64_t>(count) * samples;
+  if (m.corner_first.empty()) return static_cast<std::uint64_t>(count) * samples;
   std::uint64_t total = 0;
   for (std::size_t v = first; v < first + count; ++v) {
-    total += static_cast<std::uint64_t>(vertex_ray_count(m.corner_count[v], samples, true));
+    total += static_cast<std::uint64_t>(vertex_ray_count(m.corner_total(v), samples, true));
   }
   return total;
 }
