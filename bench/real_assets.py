@@ -13,11 +13,13 @@ grids, fits and calibration included):
 
 - constant: the median reference AO of the unburied vertices for every vertex (an oracle
   baseline: a rung that does not beat it has learnt nothing);
-- sphere, ellipsoid, shells, medium, grid: the engine's rungs, τ calibrated by the engine;
+- sphere, ellipsoid, shells, medium, grid: the engine's rungs, τ calibrated by the engine
+  (each with the bake's buried test: leaf and branch receivers whose 8 short rays all stop
+  within 1 % of their object's size read 0, docs/DESIGN.md, 'Buried receivers');
 - rays N: Embree at N = 1, 4, 16, 64, 256 rays (BVH build included);
-- regression: the ray-free rung (addon/canopy_ao/core/regression.py, occlusion_features.h):
-  a traced calibration sample sized to the scene (at most 1024 points × 128 rays and 8 rays
-  per receiver), then no rays;
+- regression: the ray-free rung (addon/canopy_ao/core/regression.py, occlusion_features.h),
+  as `--method regression` bakes it: a traced calibration sample sized to the scene (at most
+  1024 points × 128 rays and 8 rays per receiver), then no rays but the bake's buried test;
 - hybrid 2v/N: the engine's hybrid at N samples (N rays per face corner out to 2 voxels of
   its density grid, the grid beyond: what `--method hybrid --samples N` bakes; other near
   distances in bench/hybrid_study.py);
@@ -44,7 +46,6 @@ import numpy as np  # noqa: E402
 
 import real_scenes as rs  # noqa: E402
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import regression  # noqa: E402
 from canopy_ao.core.metrics import compare  # noqa: E402
 
 DESIGN = ("sap_callistemon", "sap_white_birch", "sap_small_maple")
@@ -83,10 +84,13 @@ def methods(sc):
     for n in RAYS:
         ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0))
         yield f"rays {n}", ao, dt + t_bvh, ""
-    (per, rep), dt = timed(lambda: regression.bake(items, distance=D))
-    yield "regression", np.concatenate([per[n] for n in sc.names]), dt, \
-        (f"sample {rep['calibration_points']} x {rep['calibration_samples']} rays; " +
-         " ".join(f"{k}:{v['source']}" for k, v in rep["groups"].items()))
+    (res, rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
+        method="regression", distance=D)))
+    cal = rep["calibration"]
+    yield "regression", np.concatenate([r.ao for r in res]), dt, \
+        (f"sample {cal['calibration_points']} x {cal['calibration_samples']} rays; "
+         f"buried set to 0: {sum(o['buried_set_to_0'] for o in rep['objects'].values())}; " +
+         " ".join(f"{k}:{v['source']}" for k, v in cal["groups"].items()))
     for n in HYBRID_SAMPLES:
         (res, _rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
             method="hybrid", samples=n, distance=D)))

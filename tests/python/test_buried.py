@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from canopy_ao import core
-from canopy_ao.core import ladder
+from canopy_ao.core import cost, ladder, live
 from real_shapes import cubes
 
 cs = pytest.importorskip("canopy_scenes")
@@ -47,7 +47,8 @@ def test_buried_points_are_kept_out_of_the_fit(monkeypatch):
     assert cal["buried_points_left_out"] >= 100, cal
     assert abs(bias) < 0.08, bias
     # Fitted to them too (what calibration did before), τ darkens every open leaf.
-    monkeypatch.setattr(ladder, "buried", lambda plan, it, p, n, own=None: np.zeros(len(p), bool))
+    monkeypatch.setattr(ladder, "buried",
+                        lambda plan, it, p, n, own=None, **kw: np.zeros(len(p), bool))
     bias_all, rep_all = _bias_on_open(items, buried, s)
     assert bias_all < bias - 0.05, (bias_all, bias)
     assert rep_all["tau"] > rep["tau"]
@@ -64,3 +65,50 @@ def test_an_open_crevice_is_not_buried():
     ref = np.asarray(plan.tracer.ao(it.positions, it.normals, samples=256, seed=3))
     extra = got & ~buried
     assert extra.sum() < 0.005 * len(got) and (ref[extra] < 0.05).all()
+
+
+@pytest.mark.parametrize("method", ["sphere", "shells", "medium", "grid", "regression"])
+def test_buried_receivers_read_0_under_every_approximate_rung(method):
+    """The approximate rungs model a buried leaf base like any point; the bake's own test sets
+    it to 0, as rays and Cycles read it, and leaves the open points alone."""
+    items, buried = _scene()
+    res, rep = core.bake(items, core.BakeSettings(method=method, calibration_points=1000))
+    ao = res[0].ao
+    assert (ao[buried] == 0).all(), (ao[buried] > 0).sum()
+    zeroed = (ao == 0) & ~buried
+    assert zeroed.sum() < 0.005 * len(ao), zeroed.sum()
+    assert ao[~buried].mean() > 0.2
+    assert buried.sum() <= rep["objects"]["Leaves"]["buried_set_to_0"] <= (ao == 0).sum()
+
+
+def test_a_given_tau_traces_nothing_and_live_frames_keep_what_the_bake_found():
+    """A given τ builds no tracer, so nothing is tested (the documented fallback: no rays at
+    all); a live frame (no tracer either) keeps the buried vertices its first bake found."""
+    items, buried = _scene()
+    res, rep = core.bake(items, core.BakeSettings(method="sphere", tau=1.0))
+    assert (res[0].ao[buried] > 0).all() and rep["objects"]["Leaves"]["buried_set_to_0"] == 0
+    plan = core.prepare(items, core.BakeSettings(method="sphere", calibration_points=1000))
+    first = core.evaluate_item(plan, items[0]).ao
+    frame = live.refit(plan, items)
+    assert frame.tracer is None
+    again = core.evaluate_receivers(frame, items[0], items[0].positions, items[0].normals,
+                                    vertices=slice(None))
+    assert (again[buried] == 0).all()
+    np.testing.assert_array_equal(again == 0, first == 0)
+
+
+def test_the_cost_model_counts_the_buried_test():
+    """8 rays per leaf or branch receiver, log2(triangles) BVH steps each, in the rung's unit;
+    none for the exact rung (its rays find them) or without a tracer."""
+    items, _ = _scene()
+    plan = core.prepare(items, core.BakeSettings(method="sphere", calibration_points=1000))
+    n = len(items[0].positions) + len(items[1].positions)
+    unit, with_test = cost.work(plan, "sphere", n)
+    _u, without = cost._work(plan, "sphere", n)
+    depth = np.log2(plan.tracer.triangle_count)
+    rays = n * ladder.BURIED_RECEIVER_RAYS  # both items are leaves or branches
+    expect = rays * depth * cost.SECONDS_PER_UNIT["bvh_step"] / cost.SECONDS_PER_UNIT[unit]
+    assert with_test - without == pytest.approx(expect, rel=1e-9)
+    assert cost.work(plan, "raytrace", n) == cost._work(plan, "raytrace", n)
+    plan.tracer = None
+    assert cost.buried_test_rays(plan, n) == 0.0

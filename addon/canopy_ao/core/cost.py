@@ -13,7 +13,11 @@ Work per receiver, counted from the plan:
   (RayTracer.vertex_rays; a texel has one corner), each ~log2(triangles) BVH steps;
 - regression: one trilinear look-up of the swept optical depth per feature direction
   (occlusion_features.h), counted as a voxel step each;
-- hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps.
+- hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps;
+- every rung but raytrace and hybrid, when the plan has a tracer: its buried test
+  (bake._zero_buried), ladder.BURIED_RECEIVER_RAYS short rays per leaf or branch receiver,
+  each counted as a full ray's log2(triangles) BVH steps (an upper bound: they stop within 1 %
+  of the object's size).
 Predicted seconds = Σ work × the unit's constant / threads; the constants are seconds per
 unit on one core of the machine that measured them, fixed here (machine speed scales them all
 alike; the choice depends on their ratios and on the time budget).
@@ -49,7 +53,8 @@ FORMULA = ("seconds = work × seconds_per_unit / threads; work per receiver: ana
            "occluders (shells of every tree + trunks), shells/medium k + occluders, grid "
            "directions × (exact voxels + 2 log2 resolution), regression feature directions, raytrace "
            "samples × the receivers' face corners per vertex (1 per texel) × log2 triangles, "
-           "hybrid raytrace + grid")
+           "hybrid raytrace + grid; the approximate rungs add their buried test, 8 rays per "
+           "leaf or branch receiver × log2 triangles in BVH steps")
 GRID_DIRECTIONS = 32         # DensityAOOptions.directions (the add-on's default)
 GRID_RESOLUTION = 48         # DensityGridOptions.resolution (the add-on's default)
 GRID_EXACT_VOXELS = 4        # DensityGrid::kExactVoxels
@@ -89,9 +94,42 @@ def corners(plan, names=None) -> float:
     return rays / (count * samples)
 
 
+def buried_test_rays(plan, receivers: int, names=None) -> float:
+    """The rays the bake's buried test casts for ``receivers`` points of a rung that does not
+    find buried points itself (ladder.BURIED_METHODS; bake._zero_buried): BURIED_RECEIVER_RAYS
+    per receiver on a leaf or branch item (their share of the targets, or of the tracer's
+    receiver items), none without a tracer."""
+    from .ladder import BURIED_RECEIVER_RAYS, BURIED_ROLES
+    if plan.tracer is None or receivers <= 0:
+        return 0.0
+    tested = total = 0
+    for it in plan.tracer_items:
+        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
+            continue
+        if plan.targets and it.name not in plan.targets:
+            continue
+        n = int(plan.targets[it.name][1]) if plan.targets else len(it.positions)
+        total += n
+        tested += n if it.role in BURIED_ROLES else 0
+    return float(receivers) * (tested / total if total else 0.0) * BURIED_RECEIVER_RAYS
+
+
 def work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
     """(unit, count) of the work ``method`` does for ``receivers`` points of this plan (names:
-    the items they are on, for the rays' corner count; None = every receiver)."""
+    the items they are on, for the rays' corner count; None = every receiver), the buried
+    test's rays included (converted to the method's unit by the constants' ratio)."""
+    from .ladder import BURIED_METHODS
+    unit, count = _work(plan, method, receivers, names)
+    if method in BURIED_METHODS:
+        rays = buried_test_rays(plan, receivers, names)
+        if rays:
+            depth = math.log2(max(int(plan.tracer.triangle_count), 2))
+            count += rays * depth * SECONDS_PER_UNIT["bvh_step"] / SECONDS_PER_UNIT[unit]
+    return unit, count
+
+
+def _work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
+    """work() without the buried test."""
     from .proxies import own_shells
     solids = sum(len(es) for es in plan.trunks.values())
     shells = {t: len(own_shells(plan, t, method)) for t in plan.fits} if method in (
@@ -114,8 +152,8 @@ def work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
         return "bvh_step", (receivers * float(plan.settings.samples) * corners(plan, names)
                             * depth)
     if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
-        _u, rays = work(plan, "raytrace", receivers, names)
-        _u, steps = work(plan, "grid", receivers)
+        _u, rays = _work(plan, "raytrace", receivers, names)
+        _u, steps = _work(plan, "grid", receivers)
         ratio = SECONDS_PER_UNIT["voxel_step"] / SECONDS_PER_UNIT["bvh_step"]
         return "bvh_step", rays + steps * ratio
     raise ValueError(f"no cost model for method {method!r}")

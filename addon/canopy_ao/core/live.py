@@ -61,7 +61,7 @@ def refit(base: Plan, items) -> Plan:
     check_method(base.method)
     plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
                 tau_by_tree=dict(base.tau_by_tree), forest=base.forest,
-                shell_labels=dict(base.shell_labels))
+                shell_labels=dict(base.shell_labels), buried=base.buried)
     proxies.fit_scene(plan, split_trees(items))
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     return plan

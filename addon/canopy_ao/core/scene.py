@@ -88,6 +88,10 @@ class Plan:
     # item name -> ("vertex" | "texel", count): the receivers the bake evaluates (its
     # targets), or empty: every receiver item at its vertices (what the cost model counts)
     targets: dict = field(default_factory=dict)
+    # item name -> bool (V,): its vertices found buried (bake.BURIED_METHODS; kept for live
+    # frames, which have no tracer), and -> how many receivers a bake set to 0 so
+    buried: dict = field(default_factory=dict)
+    buried_count: dict = field(default_factory=dict)
 
     def taus(self):
         """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""
