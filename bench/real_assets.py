@@ -46,6 +46,7 @@ import numpy as np  # noqa: E402
 
 import real_scenes as rs  # noqa: E402
 from canopy_ao import core  # noqa: E402
+from canopy_ao.core import ladder  # noqa: E402
 from canopy_ao.core.metrics import compare  # noqa: E402
 
 DESIGN = ("sap_callistemon", "sap_white_birch", "sap_small_maple")
@@ -99,6 +100,31 @@ def methods(sc):
         yield f"cycles {s}", ao, dt, "Cycles bake"
 
 
+def receiver_test(sc):
+    """bool (N,): the vertices the bake's buried test sets to 0 under an approximate rung
+    (bake._zero_buried): leaf and branch vertices whose ladder.BURIED_RECEIVER_RAYS rays,
+    dealt out to their corners, all stop within ladder.BURIED_SCALE of their object's size."""
+    tracer = rs.scene_tracer(sc)
+    out = np.zeros(sc.n_vertices, bool)
+    ids = np.arange(sc.n_vertices, dtype=np.int32)
+    for k, n in enumerate(sc.names):
+        p = sc.parts[n]
+        a, b = sc.offsets[k], sc.offsets[k + 1]
+        if p["role"] not in ("canopy", "trunk") or b == a:
+            continue
+        size = float(np.linalg.norm(np.ptp(p["positions"], axis=0)))
+        near = tracer.ao(sc.V[a:b], sc.N[a:b], samples=ladder.BURIED_RECEIVER_RAYS,
+                         distance=max(ladder.BURIED_SCALE * size, 1e-9),
+                         seed=sc_seed(), vertex_ids=ids[a:b], per_corner=False)
+        out[a:b] = np.asarray(near) <= 0.0
+    return out
+
+
+def sc_seed():
+    """The bake's default seed (BakeSettings.seed): the test's rays are the bake's."""
+    return core.BakeSettings().seed
+
+
 def run_scene(name, quick, writer):
     sc = rs.load(name, quick)
     ref, _ = rs.reference(sc)
@@ -108,6 +134,12 @@ def run_scene(name, quick, writer):
     print(f"\n== {name}{star}: {sc.n_vertices} vertices, {len(sc.T)} triangles, buried "
           f"{bur.sum()} ({bur.sum() / max(1, np.isin(sc.role, ('canopy', 'trunk')).sum()):.0%} "
           f"of leaf+branch vertices), mean AO {ref.mean():.3f}, AO distance {sc.distance:.3g}")
+    found = receiver_test(sc)
+    extra = found & keep
+    print(f"buried test of the bake (bake._zero_buried: {ladder.BURIED_RECEIVER_RAYS} rays per "
+          f"leaf or branch vertex): finds {(found & bur).sum()} of the {bur.sum()} buried, and "
+          f"{extra.sum()} others (reference AO there "
+          f"{ref[extra].mean() if extra.any() else 0:.3f} on average)")
     cyc = rs.cycles_runs(sc)
     cref = cyc[max(cyc)][0] if cyc else None  # the highest-sample Cycles bake: 2nd reference
     ctitle = f"vs cy{max(cyc)}" if cyc else ""

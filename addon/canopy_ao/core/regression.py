@@ -10,7 +10,7 @@ occlusion_features.h); here are the sample, the fit and the bookkeeping.
 Cost: grids O(triangles), one Embree BVH (the bake's, when it has one) and ``points`` ×
 ``samples`` calibration rays (calibration_size: at most 1024 × 128, fewer on a small scene),
 then a fixed number of grid lookups per vertex, whatever the leaf count. No rays beyond the
-sample.
+sample (a bake's buried test adds its own: bake._zero_buried).
 
 Fit, per (tree, role) group with enough sample points (else per role, else scene-wide):
 standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ
