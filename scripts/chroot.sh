@@ -72,10 +72,20 @@ enter() {
 
 setup() {
   [[ $(id -u) -eq 0 ]] || die "must run as root (debootstrap, mount, chroot)"
+  # test.sh sets up every chroot at once, and on a fresh machine each would install debootstrap:
+  # one apt at a time on the host (a second apt-get fails on dpkg's lock instead of waiting).
   command -v debootstrap >/dev/null || {
-    echo "canopy-ao chroot: installing debootstrap"
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq debootstrap >/dev/null \
-      || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq debootstrap >/dev/null; }
+    if exec 9>>/tmp/canopy-ao-apt.lock 2>/dev/null; then flock 9; fi  # no lock file: go on
+    if ! command -v debootstrap >/dev/null; then
+      echo "canopy-ao chroot: installing debootstrap"
+      DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
+        debootstrap >/dev/null \
+        || { apt-get -o DPkg::Lock::Timeout=600 update -qq \
+             && DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y \
+               -qq debootstrap >/dev/null; } \
+        || die "could not install debootstrap on the host"
+    fi
+    exec 9>&-
   }
   local url
   url=$(archive_url)

@@ -30,6 +30,9 @@ if ((${#missing[@]})); then
   SUDO=""
   [[ $(id -u) -eq 0 ]] || SUDO="sudo"
   export DEBIAN_FRONTEND=noninteractive
-  $SUDO apt-get update -qq
-  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  # Wait for another apt (a chroot's set-up installing debootstrap: scripts/chroot.sh takes the
+  # same lock) instead of failing on dpkg's.
+  if exec 9>>/tmp/canopy-ao-apt.lock 2>/dev/null; then flock 9; fi  # no lock file: go on
+  $SUDO apt-get -o DPkg::Lock::Timeout=600 update -qq
+  $SUDO apt-get -o DPkg::Lock::Timeout=600 install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
