@@ -122,8 +122,9 @@ Acquire::Check-Valid-Until "false";
 APT::Install-Recommends "false";
 EOF
   printf '#!/bin/sh\nexit 101\n' >"$dir/usr/sbin/policy-rc.d"
-  # Blender lists the mounted file systems through /etc/mtab.
-  [[ -e $dir/etc/mtab ]] || ln -s /proc/self/mounts "$dir/etc/mtab"
+  # Blender lists the mounted file systems through /etc/mtab. (-L too: outside a run /proc is not
+  # mounted, so the link made by an earlier set-up dangles, and a second ln failed on it.)
+  [[ -e $dir/etc/mtab || -L $dir/etc/mtab ]] || ln -s /proc/self/mounts "$dir/etc/mtab"
   chmod +x "$dir/usr/sbin/policy-rc.d"
 
   if ! enter /bin/bash -c 'apt-get update -qq && /canopy-ao/scripts/install_deps.sh && apt-get clean'; then
