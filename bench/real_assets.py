@@ -67,8 +67,9 @@ def timed(fn):
     return r, time.perf_counter() - t0
 
 
-def methods(sc):
-    """Yield (method, ao over all vertices, seconds, note)."""
+def methods(sc, seen=None):
+    """Yield (method, ao over all vertices, seconds, note). seen, a dict, gets the regression
+    bake's buried test: "buried" (bool over all vertices: what it set to 0) and "seconds"."""
     items = sc.engine_items()
     D = sc.distance
     if not _WARM:  # the first bake of a process builds the medium table and thread pools
@@ -85,8 +86,15 @@ def methods(sc):
     for n in RAYS:
         ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0))
         yield f"rays {n}", ao, dt + t_bvh, ""
-    (res, rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
-        method="regression", distance=D)))
+    def regression_bake():  # core.bake's steps, keeping the plan: what its buried test found
+        plan = core.prepare(items, core.BakeSettings(method="regression", distance=D))
+        res = [core.evaluate_item(plan, it) for it in items]
+        return plan, res, core.report(plan, res)
+    (plan, res, rep), dt = timed(regression_bake)
+    if seen is not None:
+        seen["buried"] = np.concatenate([plan.buried.get(n, np.zeros(len(sc.parts[n]["positions"]),
+                                                                     bool)) for n in sc.names])
+        seen["seconds"] = rep["timings"].get("buried_test", 0.0)
     cal = rep["calibration"]
     yield "regression", np.concatenate([r.ao for r in res]), dt, \
         (f"sample {cal['calibration_points']} x {cal['calibration_samples']} rays; "
@@ -100,31 +108,6 @@ def methods(sc):
         yield f"cycles {s}", ao, dt, "Cycles bake"
 
 
-def receiver_test(sc):
-    """bool (N,): the vertices the bake's buried test sets to 0 under an approximate rung
-    (bake._zero_buried): leaf and branch vertices whose ladder.BURIED_RECEIVER_RAYS rays,
-    dealt out to their corners, all stop within ladder.BURIED_SCALE of their object's size."""
-    tracer = rs.scene_tracer(sc)
-    out = np.zeros(sc.n_vertices, bool)
-    ids = np.arange(sc.n_vertices, dtype=np.int32)
-    for k, n in enumerate(sc.names):
-        p = sc.parts[n]
-        a, b = sc.offsets[k], sc.offsets[k + 1]
-        if p["role"] not in ("canopy", "trunk") or b == a:
-            continue
-        size = float(np.linalg.norm(np.ptp(p["positions"], axis=0)))
-        near = tracer.ao(sc.V[a:b], sc.N[a:b], samples=ladder.BURIED_RECEIVER_RAYS,
-                         distance=max(ladder.BURIED_SCALE * size, 1e-9),
-                         seed=sc_seed(), vertex_ids=ids[a:b], per_corner=False)
-        out[a:b] = np.asarray(near) <= 0.0
-    return out
-
-
-def sc_seed():
-    """The bake's default seed (BakeSettings.seed): the test's rays are the bake's."""
-    return core.BakeSettings().seed
-
-
 def run_scene(name, quick, writer):
     sc = rs.load(name, quick)
     ref, _ = rs.reference(sc)
@@ -134,12 +117,6 @@ def run_scene(name, quick, writer):
     print(f"\n== {name}{star}: {sc.n_vertices} vertices, {len(sc.T)} triangles, buried "
           f"{bur.sum()} ({bur.sum() / max(1, np.isin(sc.role, ('canopy', 'trunk')).sum()):.0%} "
           f"of leaf+branch vertices), mean AO {ref.mean():.3f}, AO distance {sc.distance:.3g}")
-    found = receiver_test(sc)
-    extra = found & keep
-    print(f"buried test of the bake (bake._zero_buried: {ladder.BURIED_RECEIVER_RAYS} rays per "
-          f"leaf or branch vertex): finds {(found & bur).sum()} of the {bur.sum()} buried, and "
-          f"{extra.sum()} others (reference AO there "
-          f"{ref[extra].mean() if extra.any() else 0:.3f} on average)")
     cyc = rs.cycles_runs(sc)
     cref = cyc[max(cyc)][0] if cyc else None  # the highest-sample Cycles bake: 2nd reference
     ctitle = f"vs cy{max(cyc)}" if cyc else ""
@@ -148,7 +125,8 @@ def run_scene(name, quick, writer):
     const = np.full_like(ref, np.median(ref[keep]))
     rows = [("constant", const, 0.0, "median reference AO (oracle)")]
     t64 = None
-    for row in [*rows, *methods(sc)]:
+    seen = {}
+    for row in [*rows, *methods(sc, seen)]:
         m, ao, dt, note = row
         if ao is None:
             print(f"{m:16s} {'-':>8s} {'-':>8s} {'-':>6s} {'-':>8s}  {note}")
@@ -166,6 +144,15 @@ def run_scene(name, quick, writer):
                                  mae_vs_cycles=compare(ao, cref, keep)["mae"]
                                  if cref is not None else "",
                                  t64=t64 if t64 else "", note=note))
+        if m == "regression" and "buried" in seen:
+            found = seen["buried"]
+            extra = found & keep
+            print(f"  its buried test (bake._zero_buried, {ladder.BURIED_RECEIVER_RAYS} rays per "
+                  f"leaf or branch vertex, {seen['seconds']:.3f} s"
+                  + (f" = {seen['seconds'] / t64:.3f}x rays 64" if t64 else "")
+                  + f"): {(found & bur).sum()} of the {bur.sum()} buried, and {extra.sum()} "
+                  f"others (reference AO there {ref[extra].mean() if extra.any() else 0:.3f} "
+                  "on average)")
         if m == "regression":
             for role in ("canopy", "trunk", "ground", "grass"):
                 r = compare(ao, ref, keep & (sc.role == role))

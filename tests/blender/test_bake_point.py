@@ -1,7 +1,8 @@
 """The exact rung against Cycles' own vertex bake where it used to disagree: each vertex starts
 at Cycles' bake point (native raytrace.h, 'Origins'; docs/DESIGN.md, 'Rays against Cycles'
 samples'). Both bakes run here, on small scenes built in the test; the margins are 1024-sample
-noise (a few 0.01) far below what the rule before got wrong (0.5–1.0 at these vertices)."""
+noise (a few 0.01) far below what the rule before got wrong (0.5–1.0 at these vertices).
+Last, the bake job's buried test: what the approximate rungs read where rays stop at once."""
 
 import bpy
 import numpy as np
@@ -191,3 +192,30 @@ def test_a_branch_tip_collapsed_to_a_point_bakes_as_in_cycles(clean):
     assert np.all(np.abs(ours["Twig"] - cyc["Twig"]) < 0.03), (ours["Twig"], cyc["Twig"])
     if bpy.app.version < (4, 0):  # measured: Blender 3.4 caches the flipped triangulation here
         assert cyc["Twig"].max() > 0.2, cyc["Twig"]  # (4.3 does not: Cycles reads 0 there)
+
+
+def test_a_leaf_base_inside_its_twig_reads_0_through_the_bake_job(clean):
+    """The add-on's bake job (the CLI's and the panel's path), an approximate rung with τ
+    calibrated: leaf corners inside a closed twig read 0, as rays and Cycles read them; the
+    leaf's open corners keep the model's value, and the report counts what was set to 0."""
+    rng = np.random.default_rng(3)
+    n = 300
+    base = np.float32([0, 0, 3]) + rng.normal(0, 0.8, (n, 3)).astype(np.float32)
+    kite = np.float32([[0, 0, 0], [0.01, 0, 0], [0.12, 0.2, 0], [-0.1, 0.2, 0]])
+    leaves = (base[:, None, :] + kite[None]).reshape(-1, 3)
+    quads = np.arange(n)[:, None, None] * 4 + np.int32([[0, 1, 2], [0, 2, 3]])[None]
+    add_mesh("Leaves", leaves, quads.reshape(-1, 3))
+    corner = np.float32([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)])
+    cube = np.int32([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                     [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    knots = (base[:, None, :] + [0.005, 0, 0] + 0.012 * corner[None]).reshape(-1, 3)
+    add_mesh("Twigs", knots, (np.arange(n)[:, None, None] * 8 + cube[None]).reshape(-1, 3))
+    bpy.data.objects["Leaves"].canopy_ao.role = "CANOPY"
+    bpy.data.objects["Twigs"].canopy_ao.role = "TRUNK"
+    opts = properties.scene_options(bpy.context.scene)
+    opts.update(method="sphere", tau=None, distance=10.0, use_world_distance=False)
+    _job, rep = run_bake(bpy.context, ["Leaves", "Twigs"], opts)
+    ao = mesh_io.read_ao_attribute(bpy.data.objects["Leaves"], "CanopyAO").reshape(n, 4)
+    assert (ao[:, :2] == 0).all(), (ao[:, :2] > 0).sum()  # both base corners sit in the knot
+    assert (ao[:, 2:] > 0).mean() > 0.99
+    assert rep["objects"]["Leaves"]["buried_set_to_0"] == int((ao == 0).sum())

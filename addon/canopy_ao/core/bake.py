@@ -183,22 +183,23 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
 # where rays (and Cycles) read 0: on Sapling trees 5-23 % of leaf and branch vertices, which
 # doubled their MAE over all vertices. Their receivers on leaves and branches are tested as
 # auto's calibration tests its sample (ladder.buried: every ray stops within 1 % of the
-# object's size), with BURIED_RECEIVER_RAYS short rays per vertex dealt out to its corners,
+# object's size), with a few short rays per vertex dealt out to its corners,
 # and read 0 (docs/DESIGN.md, 'Buried receivers'). The exact rung and the hybrid's near rays
-# find them by themselves.
-BURIED_METHODS, BURIED_ROLES = ladder.BURIED_METHODS, ladder.BURIED_ROLES
-BURIED_RECEIVER_RAYS = ladder.BURIED_RECEIVER_RAYS
-
-
+# find them by themselves. (Which rungs, roles and rays: ladder.BURIED_METHODS, BURIED_ROLES,
+# BURIED_RECEIVER_RAYS, beside the calibration's own test.)
 def _zero_buried(plan: Plan, item: SceneItem, p, n, own, vertices, ao) -> None:
     """Set ao to 0 at receivers buried inside the surface they sit on (above), traced with the
     plan's tracer; without one (a given τ builds none; a live frame), a vertex keeps what an
     earlier bake with this plan found (plan.buried), else nothing is tested."""
-    if plan.method not in BURIED_METHODS or item.role not in BURIED_ROLES or not len(p):
+    if (plan.method not in ladder.BURIED_METHODS or item.role not in ladder.BURIED_ROLES
+            or not len(p)):
         return
     if plan.tracer is not None:
+        t0 = time.perf_counter()
         mask = ladder.buried(plan, item, p, n, lighting.own_ids(plan, item.name, own),
-                             rays=BURIED_RECEIVER_RAYS, per_corner=False)
+                             rays=ladder.BURIED_RECEIVER_RAYS, per_corner=False)
+        plan.timings["buried_test"] = (plan.timings.get("buried_test", 0.0)
+                                       + time.perf_counter() - t0)
         if vertices is not None:  # kept for the frames of a live bake
             whole = plan.buried.setdefault(item.name, np.zeros(len(item.positions), bool))
             whole[vertices] = mask

@@ -84,8 +84,8 @@ BURIED_SCALE = 1e-2
 # points by themselves, on leaves and branches, 8 rays per vertex (dealt out to its corners).
 # On the nine Sapling tree scenes (bench/real_assets.py prints it) it finds 97.3-99.7 % of the
 # vertices the benchmark's test (32 rays at every corner) finds, and 5-80 % more besides, all
-# but closed in (their reference AO 0.001-0.026 on average); its rays cost 0.02-0.06x those of
-# a 64-sample bake.
+# but closed in (their reference AO 0.001-0.026 on average); it takes 0.017-0.056x the time of
+# a 64-sample bake (its printed figures, 2026-12-02).
 BURIED_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid",
                   "regression")
 BURIED_ROLES = ("CANOPY", "TRUNK")
