@@ -69,6 +69,19 @@ def receiver_count(plan, items) -> int:
     return sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
 
 
+def _receiver_items(plan, names=None):
+    """(item, kind, count) of each receiver item the tracer holds that a bake with this plan
+    evaluates: named in ``names`` (None: every one) and, when the plan has targets, one of them
+    (its kind, "vertex" or "texel", and count from the target; else every vertex)."""
+    for it in plan.tracer_items:
+        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
+            continue
+        if plan.targets and it.name not in plan.targets:
+            continue
+        kind, n = plan.targets.get(it.name, ("vertex", len(it.positions)))
+        yield it, kind, int(n)
+
+
 def corners(plan, names=None) -> float:
     """Rays per sample a receiver of this plan casts with the exact rung: the mean face corners
     per receiver over the items named ``names`` (None: the plan's targets, else every receiver
@@ -77,18 +90,13 @@ def corners(plan, names=None) -> float:
     tracer = plan.tracer
     if tracer is None:
         return 1.0
-    if names is None and plan.targets:
-        names = plan.targets
     samples = int(plan.settings.samples)
     rays = count = 0
-    for it in plan.tracer_items:
-        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
-            continue
-        kind, n = plan.targets.get(it.name, ("vertex", len(it.positions)))
+    for it, kind, n in _receiver_items(plan, names):
         base = plan.tracer_bases.get(it.name)
         rays += (int(tracer.vertex_rays(base[0], n, samples))
-                 if base is not None and kind == "vertex" else int(n) * samples)
-        count += int(n)
+                 if base is not None and kind == "vertex" else n * samples)
+        count += n
     if count == 0:  # no receiver held by name: the mesh's mean
         return float(tracer.corners_per_vertex)
     return rays / (count * samples)
@@ -103,12 +111,7 @@ def buried_test_rays(plan, receivers: int, names=None) -> float:
     if plan.tracer is None or receivers <= 0:
         return 0.0
     tested = total = 0
-    for it in plan.tracer_items:
-        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
-            continue
-        if plan.targets and it.name not in plan.targets:
-            continue
-        n = int(plan.targets[it.name][1]) if plan.targets else len(it.positions)
+    for it, _kind, n in _receiver_items(plan, names):
         total += n
         tested += n if it.role in BURIED_ROLES else 0
     return float(receivers) * (tested / total if total else 0.0) * BURIED_RECEIVER_RAYS
