@@ -4,6 +4,9 @@
         [--quick] [--out-dir bench/out/real] [--bake-cycles N ...] [--cycles-seed K] [--blend DIR]
         [--force] [--list]
 
+``--scenes`` also takes held-out scenes no benchmark lists: ``sap_<preset>_s<seed>`` (any
+bundled preset, any seed ≥ 1) and ``sap_grove_s<seed>`` (four presets in one collection).
+
 Each tree is built the way a user builds one: ``bpy.ops.curve.tree_add`` (the add-on
 ``add_curve_sapling`` bundled with Blender 3.4) with one of its bundled presets, a fixed seed and
 leaves on; the branch curve is then converted to a mesh beside the leaves mesh (many
@@ -70,6 +73,38 @@ TREES = {
 }
 DESIGN_SCENES = ("sap_callistemon", "sap_white_birch", "sap_small_maple")
 SCENES = tuple(TREES) + ("grass_field_real",)
+# Beside those, a held-out check on any bundled preset and seed: ``sap_<preset>_s<seed>`` is
+# that tree alone, ``sap_grove_s<seed>`` a grove of four presets (the bundled list rotated by the
+# seed) with seeds seed..seed+3, at the grove's offsets.
+PRESETS = ("callistemon", "douglas_fir", "japanese_maple", "quaking_aspen", "small_maple",
+           "small_pine", "weeping_willow", "white_birch", "willow")
+GROVE_OFFSETS = tuple(o for _, _, o in TREES["sap_grove"])
+
+
+def scene_trees(scene):
+    """[(preset, seed, (x, y)), ...] of a Sapling scene, or None if the name is not one."""
+    if scene in TREES:
+        return TREES[scene]
+    if not scene.startswith("sap_") or "_s" not in scene:
+        return None
+    head, _, tail = scene[len("sap_"):].rpartition("_s")
+    if not tail.isdigit() or int(tail) < 1:
+        return None
+    seed = int(tail)
+    if head == "grove":
+        k = seed % len(PRESETS)
+        picked = (PRESETS[k:] + PRESETS[:k])[:len(GROVE_OFFSETS)]
+        return [(p, seed + i, o) for i, (p, o) in enumerate(zip(picked, GROVE_OFFSETS))]
+    return [(head, seed, (0, 0))] if head in PRESETS else None
+
+
+def scene_name(value):
+    """argparse type: a listed scene or a held-out one (see scene_trees)."""
+    if value in SCENES or scene_trees(value) is not None:
+        return value
+    raise argparse.ArgumentTypeError(
+        f"unknown scene {value!r}: one of {', '.join(SCENES)}, or sap_<preset>_s<seed> / "
+        f"sap_grove_s<seed> with a preset of {', '.join(PRESETS)}")
 
 
 def cache_path(out_dir, scene, quick, suffix=""):
@@ -87,7 +122,18 @@ def load_preset(preset):
             break
     with open(path) as f:
         text = f.read()
-    return ast.literal_eval(text[text.index("{"):])
+    settings = ast.literal_eval(text[text.index("{"):])
+    # An older preset (willow) as Sapling's own preset menu reads it (ImportData): a scalar
+    # attractUp, leaf angles taken from the last level's. (The menu also zeroes the leaf bend:
+    # the operator's default, and no bundled preset sets another.)
+    if isinstance(settings.get("attractUp"), float):
+        settings["attractUp"] = [0, 0, settings["attractUp"], settings["attractUp"]]
+    if "leafDownAngle" not in settings and "levels" in settings:
+        level = min(int(settings["levels"]), 3)
+        for leaf, branch in (("leafDownAngle", "downAngle"), ("leafDownAngleV", "downAngleV"),
+                             ("leafRotate", "rotate"), ("leafRotateV", "rotateV")):
+            settings[leaf] = settings[branch][level]
+    return settings
 
 
 # === Building in Blender =====================================================================
@@ -182,7 +228,7 @@ def build(scene, quick):
     addon_utils.enable("add_curve_sapling", default_set=False)
     info.update(generator="Sapling Tree Gen (add_curve_sapling)", trees=[],
                 leaf_factor=LEAF_FACTOR[quick])
-    for i, (preset, seed, offset) in enumerate(TREES[scene]):
+    for i, (preset, seed, offset) in enumerate(scene_trees(scene)):
         tree = f"{preset}_{seed}"
         b, l = sapling_tree(preset, seed, offset, tree, LEAF_FACTOR[quick], col, coarse=quick)
         objs += [(b, "trunk", tree), (l, "canopy", tree)]
@@ -254,7 +300,9 @@ def export(path, objs, info):
 def main(argv):
     import bpy
     ap = argparse.ArgumentParser(prog="sapling_scenes.py")
-    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), type=scene_name,
+                    help="the listed scenes (--list), or held-out trees sap_<preset>_s<seed> "
+                         "and groves sap_grove_s<seed>")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out-dir", default=DEFAULT_OUT)
     ap.add_argument("--bake-cycles", type=int, nargs="*", default=[], dest="cycles")
