@@ -21,7 +21,9 @@ corner as the add-on casts them (and as Cycles does: the same rays per vertex), 
 seeds; their ratio (docs/DESIGN.md, 'Rays against Cycles' samples': the target is ours ≤ 0.85 ×
 Cycles); the rule before (S rays per vertex dealt out to its corners) and its ratio; and the
 contact share (vertices with a ray blocked within 1e-4 of the AO distance) with the MAE there;
-where faces of zero area exist, how many vertices touch one or have only such faces, and the
+the same ratio over vertices with one corner and with more (stratifying across corners is
+where ours gains; one corner against one is a stratified set against another); where faces
+of zero area exist, how many vertices touch one or have only such faces, and the
 error at both (and at the other vertices).
 """
 from __future__ import annotations
@@ -52,6 +54,11 @@ def zero_area(sc):
     on_flat = np.bincount(t[flat].ravel(), minlength=n) > 0
     on_area = np.bincount(t[~flat].ravel(), minlength=n) > 0
     return on_flat, on_flat & ~on_area
+
+
+def corner_counts(tracer, n):
+    """int (N,): each vertex's corners as the tracer bakes them (its rays at 1 sample)."""
+    return np.array([tracer.vertex_rays(v, 1, 1) for v in range(n)], np.int64)
 
 
 def main():
@@ -88,6 +95,7 @@ def main():
         print(f"\n{name}: {sc.n_vertices} vertices ({(~keep).sum()} buried, {contact.sum()} "
               f"contact, {rays:.2f} face corners per vertex), reference Cycles "
               f"{args.reference} samples, seed {ref_seed}")
+        one = corner_counts(tracer, sc.n_vertices) == 1
         print("   S | Cycles all / unburied | ours all / unburied | ours / Cycles all / "
               "unburied | before (S per vertex): all, ratio | contact: Cycles / ours")
         for s in args.samples:
@@ -113,6 +121,13 @@ def main():
             else:
                 line += f"            —          | {e_old.mean():.4f}, —                 |    —"
             print(line)
+            if e_c is not None and one.any() and (~one).any():
+                # Stratifying across a vertex's corners is where ours wins; one corner is one
+                # stratified set against another.
+                print(f"       one-corner vertices ({one.mean():.0%} of them, "
+                      f"{e_c[one].sum() / e_c.sum():.0%} of Cycles' error): ours / Cycles "
+                      f"{e_ours[one].mean() / e_c[one].mean():.3f}; two or more: "
+                      f"{e_ours[~one].mean() / e_c[~one].mean():.3f}")
             r0 = None  # the ratio against seed 0's reference, when that is not the one above
             if e_c is not None and ref_seed != 0 and same is not None:
                 r0 = (np.mean([np.abs(o - same).mean() for o in ours])
