@@ -23,10 +23,13 @@ grids, fits and calibration included):
 - hybrid 2v/N: the engine's hybrid at N samples (N rays per face corner out to 2 voxels of
   its density grid, the grid beyond: what `--method hybrid --samples N` bakes; other near
   distances in bench/hybrid_study.py);
+- auto: what `--method auto` bakes (its choice per role in the note: counted work against the
+  time budget, tested on traced points, docs/DESIGN.md, 'Auto mode');
 - cycles N: Cycles' bake at N samples, when cached (time: the bake call).
 
 Designed on sap_callistemon, sap_white_birch, sap_small_maple (marked *); every other scene is
-held out. Times are wall-clock on a shared 2-core machine: compare ratios within one run.
+held out, and so is any scene --scenes names beyond the list (examples/sapling_scenes.py builds
+sap_<preset>_s<seed> and sap_grove_s<seed> for any bundled preset and seed). Times are wall-clock on a shared 2-core machine: compare ratios within one run.
 """
 from __future__ import annotations
 
@@ -67,6 +70,14 @@ def timed(fn):
     return r, time.perf_counter() - t0
 
 
+def auto_choice(report):
+    """What auto chose, per role, from a bake's report: "CANOPY regression, GROUND raytrace"."""
+    chosen = {}
+    for o in report["objects"].values():
+        chosen.setdefault(o["role"], set()).add(o["method"])
+    return ", ".join(f"{role} {'/'.join(sorted(m))}" for role, m in sorted(chosen.items()))
+
+
 def methods(sc, seen=None):
     """Yield (method, ao over all vertices, seconds, note). seen, a dict, gets the regression
     bake's buried test: "buried" (bool over all vertices: what it set to 0) and "seconds"."""
@@ -100,6 +111,9 @@ def methods(sc, seen=None):
         (f"sample {cal['calibration_points']} x {cal['calibration_samples']} rays; "
          f"buried set to 0: {sum(o['buried_set_to_0'] for o in rep['objects'].values())}; " +
          " ".join(f"{k}:{v['source']}" for k, v in cal["groups"].items()))
+    (res, rep), dt = timed(lambda: core.bake(items, core.BakeSettings(method="auto",
+                                                                     distance=D)))
+    yield "auto", np.concatenate([r.ao for r in res]), dt, "chose " + auto_choice(rep)
     for n in HYBRID_SAMPLES:
         (res, _rep), dt = timed(lambda: core.bake(items, core.BakeSettings(
             method="hybrid", samples=n, distance=D)))
@@ -161,11 +175,21 @@ def run_scene(name, quick, writer):
                           f"{'':8s}  bias {r['bias']:+.3f}")
 
 
+def auto_note(row):
+    """The auto cell's choice, shortened: "; rays" when every role took one method."""
+    if row is None or not row["note"].startswith("chose "):
+        return ""
+    picked = {part.split(" ", 1)[1] for part in row["note"][len("chose "):].split(", ")}
+    short = {"raytrace": "rays"}
+    return "; " + ("/".join(short.get(p, p) for p in sorted(picked)) if len(picked) == 1
+                   else row["note"][len("chose "):].replace("raytrace", "rays").lower())
+
+
 def markdown(rows):
     """The README's table from the CSV rows: per scene, the rungs that matter for the targets."""
     out = ["| scene | vertices | constant | best proxy rung | grid | rays 16 | rays 64 | "
-           "regression (ray-free) | hybrid 2 voxels / 64 rays |",
-           "|---|---|---|---|---|---|---|---|---|"]
+           "regression (ray-free) | hybrid 2 voxels / 64 rays | auto (its choice) |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
     scenes = []
     for r in rows:
         if r["scene"] not in scenes:
@@ -189,13 +213,16 @@ def markdown(rows):
                    f"{float(m['constant']['mae_unburied']):.3f} | "
                    f"{best + ': ' + cell(best, False) if best else '–'} | {cell('grid', False)} | "
                    f"{cell('rays 16', False)} | {cell('rays 64', False)} | {cell('regression')} | "
-                   f"{cell('hybrid 2v/64')} |")
+                   f"{cell('hybrid 2v/64')} | {cell('auto')}{auto_note(m.get('auto'))} |")
     return "\n".join(out)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="real_assets.py", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=SCENES)
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES),
+                    help="scenes exported to bench/out/real: the listed ones, or held-out "
+                         "ones (examples/sapling_scenes.py sap_<preset>_s<seed>, "
+                         "sap_grove_s<seed>)")
     ap.add_argument("--full", action="store_true", help="full-size exports instead of quick")
     ap.add_argument("--csv", help="also write every row to this CSV file")
     ap.add_argument("--markdown", metavar="FILE.md",
