@@ -29,7 +29,8 @@ grids, fits and calibration included):
 
 Designed on sap_callistemon, sap_white_birch, sap_small_maple (marked *); every other scene is
 held out, and so is any scene --scenes names beyond the list (examples/sapling_scenes.py builds
-sap_<preset>_s<seed> and sap_grove_s<seed> for any bundled preset and seed). Times are wall-clock on a shared 2-core machine: compare ratios within one run.
+sap_<preset>_s<seed> and sap_grove_s<seed> for any bundled preset and seed). Times are
+wall-clock on a shared 2-core machine: compare ratios within one run.
 """
 from __future__ import annotations
 
@@ -179,10 +180,9 @@ def auto_note(row):
     """The auto cell's choice, shortened: "; rays" when every role took one method."""
     if row is None or not row["note"].startswith("chose "):
         return ""
-    picked = {part.split(" ", 1)[1] for part in row["note"][len("chose "):].split(", ")}
-    short = {"raytrace": "rays"}
-    return "; " + ("/".join(short.get(p, p) for p in sorted(picked)) if len(picked) == 1
-                   else row["note"][len("chose "):].replace("raytrace", "rays").lower())
+    choice = row["note"][len("chose "):].replace("raytrace", "rays")
+    picked = {part.split(" ", 1)[1] for part in choice.split(", ")}
+    return "; " + (picked.pop() if len(picked) == 1 else choice.lower())
 
 
 def markdown(rows):

@@ -85,7 +85,7 @@ def scene_trees(scene):
     """[(preset, seed, (x, y)), ...] of a Sapling scene, or None if the name is not one."""
     if scene in TREES:
         return TREES[scene]
-    if not scene.startswith("sap_") or "_s" not in scene:
+    if not scene.startswith("sap_"):
         return None
     head, _, tail = scene[len("sap_"):].rpartition("_s")
     if not tail.isdigit() or int(tail) < 1:
