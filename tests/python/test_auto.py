@@ -111,6 +111,31 @@ def test_auto_falls_back_to_the_ray_free_rung_where_rays_are_over_budget():
     assert rep2["method"] == "regression" and cands["regression"]["rmse"] < 0.81 * proxies
 
 
+def test_auto_halves_the_rays_to_fit_the_time_budget():
+    """Where rays at the asked samples are predicted over the budget, auto weighs them at the
+    largest halving that fits (never below cost.AUTO_MIN_RAYS), bakes exactly what the exact
+    rung bakes at that count, and leaves the caller's settings as given."""
+    scene = cs.round_tree(leaves=3000)
+    full, _data = _bake_bytes(scene, time_budget=0.0)
+    rays = full["calibration"]["candidates"]["raytrace"]["predicted_seconds"]
+    settings = core.BakeSettings(method="auto", tau=None, samples=64, target_rmse=0.0,
+                                 time_budget=rays / 2 * 1.01)
+    res, rep = core.bake(items(scene), settings)
+    cal = rep["calibration"]
+    assert rep["method"] == "raytrace" and rep["samples"] == 32, cal["why"]
+    assert settings.samples == 64
+    assert cal["candidates"]["raytrace"]["samples"] == 32
+    assert cal["candidates"]["raytrace"]["predicted_seconds"] <= settings.time_budget
+    assert "at 32 rays per corner, not the 64 asked" in cal["why"]
+    assert any("32 per corner" in n for n in rep["notes"])
+    exact, _rep = core.bake(items(scene), core.BakeSettings(method="raytrace", samples=32))
+    assert b"".join(r.ao.tobytes() for r in res) == b"".join(r.ao.tobytes() for r in exact)
+    # Under the floor nothing fits: the rung is weighed at the asked count and skipped.
+    rep8, _data = _bake_bytes(scene, time_budget=rays / 8, target_rmse=0.0)
+    assert rep8["method"] != "raytrace" and rep8["samples"] == 64
+    assert rep8["calibration"]["candidates"]["raytrace"]["samples"] == 64
+
+
 def test_auto_gives_the_same_bytes_under_load():
     """Bake, start processes that burn every core, bake again: same choice, same bytes."""
     import os

@@ -82,15 +82,16 @@ def _receiver_items(plan, names=None):
         yield it, kind, int(n)
 
 
-def corners(plan, names=None) -> float:
-    """Rays per sample a receiver of this plan casts with the exact rung: the mean face corners
-    per receiver over the items named ``names`` (None: the plan's targets, else every receiver
-    the tracer holds), counted by the tracer (RayTracer.vertex_rays, its per-vertex cap
-    included); a texel has one corner, and so has a vertex the tracer does not hold by name."""
+def corners(plan, names=None, samples=None) -> float:
+    """Rays per sample a receiver of this plan casts with the exact rung at ``samples`` rays
+    per corner (None: the settings'): the mean face corners per receiver over the items named
+    ``names`` (None: the plan's targets, else every receiver the tracer holds), counted by the
+    tracer (RayTracer.vertex_rays, its per-vertex cap included); a texel has one corner, and
+    so has a vertex the tracer does not hold by name."""
     tracer = plan.tracer
     if tracer is None:
         return 1.0
-    samples = int(plan.settings.samples)
+    samples = int(plan.settings.samples if samples is None else samples)
     rays = count = 0
     for it, kind, n in _receiver_items(plan, names):
         base = plan.tracer_bases.get(it.name)
@@ -117,12 +118,13 @@ def buried_test_rays(plan, receivers: int, names=None) -> float:
     return float(receivers) * (tested / total if total else 0.0) * BURIED_RECEIVER_RAYS
 
 
-def work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
+def work(plan, method: str, receivers: int, names=None, samples=None) -> tuple[str, float]:
     """(unit, count) of the work ``method`` does for ``receivers`` points of this plan (names:
-    the items they are on, for the rays' corner count; None = every receiver), the buried
-    test's rays included (converted to the method's unit by the constants' ratio)."""
+    the items they are on, for the rays' corner count; None = every receiver; samples: the
+    exact rung's rays per corner, None = the settings'), the buried test's rays included
+    (converted to the method's unit by the constants' ratio)."""
     from .ladder import BURIED_METHODS
-    unit, count = _work(plan, method, receivers, names)
+    unit, count = _work(plan, method, receivers, names, samples)
     if method in BURIED_METHODS:
         rays = buried_test_rays(plan, receivers, names)
         if rays:
@@ -131,7 +133,7 @@ def work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
     return unit, count
 
 
-def _work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
+def _work(plan, method: str, receivers: int, names=None, samples=None) -> tuple[str, float]:
     """work() without the buried test."""
     from .proxies import own_shells
     solids = sum(len(es) for es in plan.trunks.values())
@@ -152,10 +154,10 @@ def _work(plan, method: str, receivers: int, names=None) -> tuple[str, float]:
         tracer = plan.tracer
         m = tracer.triangle_count if tracer is not None else 1
         depth = math.log2(max(int(m), 2))
-        return "bvh_step", (receivers * float(plan.settings.samples) * corners(plan, names)
-                            * depth)
+        k = plan.settings.samples if samples is None else samples
+        return "bvh_step", receivers * float(k) * corners(plan, names, k) * depth
     if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
-        _u, rays = _work(plan, "raytrace", receivers, names)
+        _u, rays = _work(plan, "raytrace", receivers, names, samples)
         _u, steps = _work(plan, "grid", receivers)
         ratio = SECONDS_PER_UNIT["voxel_step"] / SECONDS_PER_UNIT["bvh_step"]
         return "bvh_step", rays + steps * ratio
@@ -167,12 +169,37 @@ def threads() -> int:
     return max(1, int(_core.max_threads())) if _core is not None else 1
 
 
-def predict(plan, method: str, receivers: int, names=None) -> dict:
+def predict(plan, method: str, receivers: int, names=None, samples=None) -> dict:
     """{"unit", "work", "seconds_per_unit", "threads", "seconds"} for ``method`` on
-    ``receivers`` points (on the items named ``names``; None = every receiver): the cost model
-    above, no timing."""
-    unit, count = work(plan, method, receivers, names)
+    ``receivers`` points (on the items named ``names``; None = every receiver) at ``samples``
+    rays per corner for the rays' rungs (None: the settings'): the cost model above, no
+    timing."""
+    unit, count = work(plan, method, receivers, names, samples)
     c = SECONDS_PER_UNIT[unit]
     n = threads()
     return {"unit": unit, "work": count, "seconds_per_unit": c, "threads": n,
             "seconds": count * c / n}
+
+
+# Auto may bake the exact rung at fewer rays per corner than settings.samples when those are
+# predicted over the time budget: the samples halved until they fit, never below AUTO_MIN_RAYS
+# (16 rays are 2-3x 64 rays' error on real trees, about the ray-free rung's; fewer rarely beat
+# it). The halved rung is scored on the sample like any other, so it is taken only where it
+# cuts the error (docs/DESIGN.md, 'Auto mode').
+AUTO_MIN_RAYS = 16
+
+
+def affordable_samples(plan, receivers: int) -> int:
+    """Rays per corner auto weighs the exact rung at: settings.samples when predicted within
+    the time budget (or there is none), else the largest halving of it, at least
+    AUTO_MIN_RAYS, predicted within it; settings.samples if none is (then the walk skips the
+    rung). Counted work × fixed constants: no clock."""
+    s = plan.settings
+    k = int(s.samples)
+    if s.time_budget <= 0:
+        return k
+    while predict(plan, "raytrace", receivers, samples=k)["seconds"] > s.time_budget:
+        if k // 2 < AUTO_MIN_RAYS:
+            return int(s.samples)
+        k //= 2
+    return k

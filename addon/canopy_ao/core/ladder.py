@@ -8,6 +8,7 @@ baseline and ray tracing the reference.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -180,10 +181,14 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
 
     batches = _batches(groups)
 
+    n_receivers = cost.receiver_count(plan, items)
+    rays = cost.affordable_samples(plan, n_receivers) if "raytrace" in candidates \
+        else s.samples
+
     def err(method, tau):
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
-            got = [trace(plan, p, n, s.samples, seed=s.seed + 7919, own=own)
+            got = [trace(plan, p, n, rays, seed=s.seed + 7919, own=own)
                    for _it, p, n, own, _ in groups]
         elif method in TAU_METHODS:  # the scene plan: one call per role, a tree per point
             got = [np.empty(len(ref), np.float32)]
@@ -195,7 +200,6 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
         return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
 
-    n_receivers = cost.receiver_count(plan, items)
     results, predicted = {}, {}
     for m in candidates:
         if m not in TAU_METHODS:  # physical density / exact: no τ to fit
@@ -209,7 +213,8 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
                 tau = tau_per_tree(plan, m, tau, err)
         results[m] = (tau, err(m, tau))
         # Counted work × fixed constants (cost.py): the same prediction whatever the load.
-        predicted[m] = cost.predict(plan, m, n_receivers)
+        predicted[m] = cost.predict(plan, m, n_receivers,
+                                    samples=rays if m == "raytrace" else None)
     # Walk up the ladder: a richer rung only if it cuts the error by > 10 %, the current one
     # misses the target, and the richer one fits the time budget.
     chosen, skipped = candidates[0], []
@@ -227,6 +232,10 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
            f"{s.target_rmse}")
     if skipped:
         why += f" within the {s.time_budget:g} s budget (over it: {', '.join(skipped)})"
+    if chosen == "raytrace" and rays != s.samples:
+        full = cost.predict(plan, "raytrace", n_receivers)["seconds"]
+        why += (f"; at {rays} rays per corner, not the {s.samples} asked ({full:.2g} s "
+                f"predicted, over the {s.time_budget:g} s budget)")
     info = {
         "points": int(keep.sum()),
         "buried_points_left_out": int(len(ref) - keep.sum()),
@@ -239,9 +248,12 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         "seconds": time.perf_counter() - t0,
         "candidates": {m: {"tau": _scene_tau(t), "tau_by_tree": _tree_taus(t),
                            "rmse": math.sqrt(e), "predicted_seconds": predicted[m]["seconds"],
-                           "cost": predicted[m]}
+                           "cost": predicted[m], **({"samples": rays} if m == "raytrace"
+                                                    else {})}
                        for m, (t, e) in results.items()},
         "chosen": chosen,
+        # The rays per corner the bake casts if the exact rung is chosen (cost.affordable_samples).
+        "samples": int(rays) if chosen == "raytrace" else int(s.samples),
         "why": why,
         "cost_model": {"seconds_per_unit": dict(cost.SECONDS_PER_UNIT),
                        "threads": cost.threads(), "receivers": n_receivers,
@@ -276,6 +288,17 @@ def _scene_tau(tau):
 def _tree_taus(tau):
     return {t: float(v) for t, v in tau.items() if t is not None} if isinstance(tau, dict) \
         else {}
+
+
+def _bake_samples(plan: Plan) -> None:
+    """Bake with the rays per corner calibrate() weighed the chosen exact rung at (fewer than
+    asked where the asked ones are over the time budget): plan.settings becomes a copy, the
+    caller's settings stay as given."""
+    k = (plan.calibration or {}).get("samples")
+    if plan.method == "raytrace" and k is not None and int(k) != int(plan.settings.samples):
+        plan.notes.append(f"auto: rays at {int(k)} per corner, not the "
+                          f"{plan.settings.samples} asked (those are over the time budget)")
+        plan.settings = dataclasses.replace(plan.settings, samples=int(k))
 
 
 def choose(plan: Plan, items, proxyless_auto: bool) -> None:
@@ -315,3 +338,4 @@ def choose(plan: Plan, items, proxyless_auto: bool) -> None:
             # (whose tracer holds the instances), on the same sample.
             plan.method, plan.tau, plan.calibration = calibrate(
                 plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)
+    _bake_samples(plan)

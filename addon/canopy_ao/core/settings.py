@@ -140,7 +140,8 @@ OPTIONS = (
            "texel one)", min=1, max=65536, soft_max=1024),
     Option("time_budget", "float", 2.0, "Time Budget",
            "Auto: seconds the bake may take; richer models predicted to take longer are not "
-           "chosen (0 = no limit)", min=0.0, unit='TIME'),
+           "chosen, and rays over it are weighed at half the samples, halved again down to 16 "
+           "(0 = no limit)", min=0.0, unit='TIME'),
     Option("target_rmse", "float", 0.06, "Target Error",
            "Auto: stop climbing the ladder once a rung's RMSE on the ray-traced sample is below "
            "this (0.06 is about an MAE of 0.05, an error an artist does not see)",
