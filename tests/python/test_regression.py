@@ -185,6 +185,35 @@ def test_ridge_recovers_a_linear_law():
     assert cv < 5e-3
 
 
+def test_piece_columns_are_kept_only_where_they_cut_the_cv_error():
+    """A fit reads its piece columns (LeafTable: where on its leaf or branch piece a point is)
+    when the sample's AO depends on them, and drops them when they are noise (they cost more
+    than they help on broadleaf limbs and on a grove's small per-tree samples)."""
+    rng = np.random.default_rng(3)
+    n, k = 600, regression_fit.NATIVE + leaf_features.LeafTable.COUNT
+    F = rng.uniform(0.0, 1.0, (n, k)).astype(np.float32)
+    base = 0.3 + 0.4 * F[:, 1]
+    noise = rng.normal(scale=0.03, size=n)
+    along = regression._fit(F, base + 0.25 * F[:, regression_fit.NATIVE] + noise)
+    beside = regression._fit(F, base + noise)
+    assert along.pieces and not beside.pieces
+    assert along.predict(F).shape == (n,) and beside.predict(F[:, :regression_fit.NATIVE]).shape == (n,)
+    # No piece columns at all (ground, grass): the one model, nothing chosen.
+    G = F.copy()
+    G[:, regression_fit.NATIVE:] = 0.0
+    assert not regression._fit(G, base + noise).pieces
+
+
+def test_the_rung_reports_which_fits_read_the_piece_columns(scene):
+    its, _ref = scene
+    plan = core.prepare(its, core.BakeSettings(method="regression"))
+    fits = plan.regression.fits
+    assert all(isinstance(f["piece_features"], bool) for f in fits.values())
+    assert not any(f["piece_features"] for k, f in fits.items() if k.endswith("/GROUND"))
+    ao = core.evaluate_item(plan, its[0]).ao
+    assert np.isfinite(ao).all() and ((ao >= 0) & (ao <= 1)).all()
+
+
 @pytest.mark.parametrize("method", ["hybrid", "regression"])
 def test_command_line_offers_and_documents_the_rung(method):
     from canopy_ao import cli

@@ -4,33 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-LEAF_ITERATIONS = 32     # label-propagation rounds of _components
-
-
-def _components(n, triangles):
-    """Connected pieces of a mesh (int64 labels 0..L-1 per vertex) by min-label propagation
-    over the triangles, at most LEAF_ITERATIONS rounds (a leaf card settles in one or two; a
-    long branch mesh that does not settle stays split into pieces, deterministically)."""
-    lab = np.arange(n)
-    if len(triangles):
-        tris = np.asarray(triangles, np.int64)
-        for _ in range(LEAF_ITERATIONS):
-            low = lab[tris].min(axis=1)
-            new = lab.copy()
-            for c in range(3):
-                np.minimum.at(new, tris[:, c], low)
-            new = new[new]
-            if np.array_equal(new, lab):
-                break
-            lab = new
-    return np.unique(lab, return_inverse=True)[1].reshape(-1)
+from .roles import connected_components
 
 
 class LeafTable:
     """Where a receiver sits on its own leaf (docs/DESIGN.md, 'The ray-free rung'): each
-    connected piece of a CANOPY mesh (a leaf card), its centroid and mean radius. Most of a real
-    leaf's AO varies within the leaf (its base by the twig, its inner half toward the crown),
-    below any voxel; the features say where on the leaf a point is, in the leaf's own size:
+    connected piece of a CANOPY or TRUNK mesh (a leaf card, a branch tube), its centroid and
+    mean radius. Most of a real leaf's AO varies within the leaf (its base by the twig, its
+    inner half toward the crown), below any voxel; the features say where on the leaf a point
+    is, in the leaf's own size:
     its offset from the centroid, over the mean radius, along up, along the horizontal
     direction out of the tree's axis and toward the crown's middle, and its length. Scale-free;
     O(vertices) to build, O(1) per receiver."""
@@ -39,7 +21,7 @@ class LeafTable:
 
     def __init__(self, positions, triangles):
         P = np.asarray(positions, np.float64)
-        lab = _components(len(P), triangles)
+        lab = connected_components(len(P), triangles)
         cnt = np.maximum(np.bincount(lab), 1).astype(np.float64)
         self.centroid = np.stack([np.bincount(lab, P[:, a]) for a in range(3)], 1) / cnt[:, None]
         d = np.linalg.norm(P - self.centroid[lab], axis=1)

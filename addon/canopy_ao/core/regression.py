@@ -14,7 +14,8 @@ sample (a bake's buried test adds its own: bake._zero_buried).
 
 Fit, per (tree, role) group with enough sample points (else per role, else scene-wide):
 standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ
-chosen by 5-fold cross-validation on the sample (ties to the larger λ). Buried sample points
+chosen by 5-fold cross-validation on the sample (ties to the larger λ); the piece columns
+(LeafTable) only where they cut that CV error by more than PIECES_GAIN (_fit). Buried sample points
 (every ray stops within ``BURIED_FRACTION`` of the object's size: a leaf base inside its branch)
 are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
 predicts them like any vertex.
@@ -33,6 +34,9 @@ from .regression_fit import NATIVE, Model
 from .scene import RECEIVER_ROLES
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
+# Meshes whose connected pieces (a leaf card, a branch tube) give a receiver piece features.
+LEAF_TABLE_ROLES = ("CANOPY", "TRUNK")
+PIECES_GAIN = 0.02       # the piece columns must cut a fit's CV MAE by more than this (_fit)
 # Buried: every one of BURIED_RAYS rays stops within BURIED_FRACTION of the receiver's object
 # bounding-box diagonal (auto's test, ladder.py, with twice its rays: with 16 rays more of the
 # darkest unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046).
@@ -144,12 +148,12 @@ class RegressionRung:
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
 
-        # Leaf tables of the CANOPY meshes, by name over the whole mesh (meshes: the unsplit
-        # items of a scene whose items are split per tree; a name seen twice gets none).
+        # Piece tables of the CANOPY and TRUNK meshes, by name over the whole mesh (meshes: the
+        # unsplit items of a scene whose items are split per tree; a name seen twice gets none).
         whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
         self._leaves = {}
         for it in whole:
-            if it.role == "CANOPY":
+            if it.role in LEAF_TABLE_ROLES:
                 self._leaves[it.name] = None if it.name in self._leaves else LeafTable(
                     it.positions, it.triangles)
         t_leaves = time.perf_counter()
@@ -228,11 +232,11 @@ class RegressionRung:
                                     "points (is every receiver buried inside geometry?)")
             ck = g if src == "own" else src
             if ck not in cache:
-                cache[ck] = Model(F, y)
+                cache[ck] = _fit(F, y)
             m = self._models[g] = cache[ck]
             self.fits[f"{g[0] or '-'}/{g[1]}"] = dict(
                 source=src, points=int(m.n), lam=float(m.lam), cv_mae=round(float(m.cv_mae), 4),
-                buried=int(s_["buried"]) if s_ else 0)
+                piece_features=m.pieces, buried=int(s_["buried"]) if s_ else 0)
         self._fallback = cache[next(iter(cache))] if cache else None
         t_fit = time.perf_counter()
         self.report = dict(method="regression", groups=self.fits, resolution=resolution,
@@ -265,7 +269,8 @@ class RegressionRung:
         model = self._models.get((tree, role))
         if model is None:  # an item the sample did not see: its role's fit, else any
             model = next((m for (t, r), m in self._models.items() if r == role), self._fallback)
-        return model.predict(self._compute(tree, p, n, name, own))
+        f = self._compute(tree, p, n, name, own)
+        return model.predict(f if model.pieces else f[:, :NATIVE])
 
 
 def bake(items, distance=0.0, **options):
@@ -279,6 +284,22 @@ def bake(items, distance=0.0, **options):
            for it in items}
     rung.report["timings"]["total"] = time.perf_counter() - t0
     return out, rung.report
+
+
+def _fit(F, y):
+    """The group's Model, with the piece columns (LeafTable) only if they cut its
+    cross-validated MAE on the sample by more than PIECES_GAIN, else the simpler model without
+    them (a tie is the folds' noise); ``.pieces`` says which. The columns say where on its
+    piece — a leaf card, a branch tube — a point is: on one tree's leaves they win by 5-10 %,
+    on a conifer's twigs by 12 %, on broadleaf limbs and on the small per-tree samples of a
+    grove not at all (docs/DESIGN.md, 'The ray-free rung'), so each sample decides."""
+    plain = Model(F[:, :NATIVE], y)
+    plain.pieces = False
+    if not np.any(F[:, NATIVE:]):  # no piece columns (ground, grass): nothing to choose
+        return plain
+    full = Model(F, y)
+    full.pieces = True
+    return full if full.cv_mae < (1.0 - PIECES_GAIN) * plain.cv_mae else plain
 
 
 def _diag(p):
