@@ -372,6 +372,26 @@ def test_cli_bakes_the_ray_free_and_hybrid_rungs(tree_scene_objects, capsys, tmp
             assert ao[0::4].std() > 0.01
 
 
+def test_cli_auto_halves_the_rays_to_its_time_budget(tree_scene_objects, capsys, tmp_path):
+    """Through the documented entry: where 64 rays are predicted over --time-budget, auto bakes
+    rays at 32 and the report and its notes say so (core: test_auto.py)."""
+    from canopy_ao import cli
+
+    def bake(*extra):
+        report = tmp_path / "r.json"
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["--objects", "Leaves", "Ground", "--no-proxies", "--overwrite",
+                      "--method", "auto", "--samples", "64", "--target-error", "0",
+                      "--report", str(report), *extra])
+        assert exc.value.code == 0, capsys.readouterr().err
+        return json.loads(report.read_text())
+    free = bake("--time-budget", "0")
+    rays = free["calibration"]["candidates"]["raytrace"]["predicted_seconds"]
+    rep = bake("--time-budget", repr(rays / 2 * 1.01))
+    assert rep["method"] == "raytrace" and rep["samples"] == 32, rep["calibration"]["why"]
+    assert any("32 per corner" in n for n in rep["notes"])
+
+
 def test_cli_threads_caps_the_native_core_and_leaves_the_result_alone(tree_scene_objects,
                                                                         capsys):
     """--threads N (what the batch passes per bake) caps the core's worker threads; the AO

@@ -252,8 +252,6 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
                                                     else {})}
                        for m, (t, e) in results.items()},
         "chosen": chosen,
-        # The rays per corner the bake casts if the exact rung is chosen (cost.affordable_samples).
-        "samples": int(rays) if chosen == "raytrace" else int(s.samples),
         "why": why,
         "cost_model": {"seconds_per_unit": dict(cost.SECONDS_PER_UNIT),
                        "threads": cost.threads(), "receivers": n_receivers,
@@ -294,7 +292,7 @@ def _bake_samples(plan: Plan) -> None:
     """Bake with the rays per corner calibrate() weighed the chosen exact rung at (fewer than
     asked where the asked ones are over the time budget): plan.settings becomes a copy, the
     caller's settings stay as given."""
-    k = (plan.calibration or {}).get("samples")
+    k = (plan.calibration or {}).get("candidates", {}).get("raytrace", {}).get("samples")
     if plan.method == "raytrace" and k is not None and int(k) != int(plan.settings.samples):
         plan.notes.append(f"auto: rays at {int(k)} per corner, not the "
                           f"{plan.settings.samples} asked (those are over the time budget)")
