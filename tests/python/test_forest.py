@@ -257,3 +257,52 @@ def test_auto_with_own_tree_and_instances_scores_against_traced_instances():
     assert {"sphere", "ellipsoid", "raytrace"} <= set(cal["candidates"])
     assert cal["candidates"]["raytrace"]["rmse"] < 0.06  # both see the same triangles
     assert plan.tracer.instance_count == len(FOREST)
+
+
+def _blade_item(name="Blade"):
+    p = np.float32([[-0.01, 0, 0], [0.01, 0, 0], [-0.005, 0, 0.2], [0.005, 0, 0.2]])
+    n = np.tile(np.float32([0, -1, 0]), (4, 1))
+    return core.SceneItem(name, "TRUNK", "proto", p, n, np.int32([[0, 1, 3], [0, 3, 2]]),
+                          polygons=np.int32([0, 0]))
+
+
+def test_realize_is_every_instance_moved_exactly():
+    """Positions by each matrix, normals by its inverse transpose (unit), a mirrored copy's
+    triangles wound the other way, polygon ids per copy, a zero-scaled instance dropped, and
+    spans that find each copy again."""
+    it = _blade_item()
+    a = rot_z(0.7) @ np.diag([2.0, 1.0, 0.5])
+    mats = np.stack([affine(), affine(a, (3, 1, 0)), affine(np.diag([-1.0, 1, 1]), (0, 5, 0)),
+                     affine(np.zeros((3, 3)), (9, 9, 9))])
+    real = forest.realize([it], [mats], "field", "GRASS", "proto")
+    r = real.item
+    assert (r.name, r.role) == ("field", "GRASS")
+    assert len(r.positions) == 12 and len(r.triangles) == 6  # the singular one is gone
+    assert real.spans == [("Blade", 0, 3, 4)]
+    for k, m in enumerate(mats[:3]):
+        np.testing.assert_allclose(r.positions[4 * k:4 * k + 4],
+                                   it.positions @ m[:3, :3].T + m[:3, 3], atol=1e-6)
+        want = it.normals @ np.linalg.inv(m[:3, :3])  # (A⁻ᵀ n)ᵀ = nᵀ A⁻¹
+        want /= np.linalg.norm(want, axis=1, keepdims=True)
+        np.testing.assert_allclose(r.normals[4 * k:4 * k + 4], want, atol=1e-6)
+    # Each copy's face normal agrees with its vertex normals, the mirrored one's too.
+    t = r.triangles
+    face = np.cross(r.positions[t[:, 1]] - r.positions[t[:, 0]],
+                    r.positions[t[:, 2]] - r.positions[t[:, 0]])
+    assert np.all(np.einsum("ij,ij->i", face, r.normals[t[:, 0]]) > 0)
+    assert list(r.polygons) == [0, 0, 1, 1, 2, 2]
+    assert forest.realize([it], [mats[3:]], "none", "GRASS", "proto") is None
+
+
+def test_sample_vertices_spreads_over_the_instances():
+    it = _blade_item()
+    mats = np.stack([affine(t=(i, 0, 0)) for i in range(10)])
+    real = forest.realize([it], [mats], "field", "GRASS", "proto")
+    [(name, idx, k, v)] = real.sample_vertices(4)
+    assert (name, k, v) == ("Blade", 4, 4)
+    # instances 0, 3, 6, 9: their vertices, instance-major
+    np.testing.assert_allclose(real.item.positions[idx][::4, 0], [-0.01 + i for i in (0, 3, 6, 9)],
+                               atol=1e-6)
+    [(_n, idx_all, k_all, _v)] = real.sample_vertices(100)
+    assert k_all == 10 and list(idx_all) == list(range(40))
+    assert real.sample_vertices(4, names={"Other"}) == []

@@ -18,11 +18,17 @@ ground or neighbouring instances (the mesh is shared, so one value per vertex mu
 instance).
 """
 
+import time
+
 import numpy as np
 
 from . import gather, materials, mesh_io
 from .. import core
-from ..core import forest
+from ..core import forest, roles
+
+# A blade's AO per vertex is its mean over this many of its instances at most (evenly spread
+# over the field): the mean of 2000 is within ~0.005 of all of them, at a bounded cost.
+MEAN_INSTANCES = 2000
 
 
 def instance_matrices(depsgraph):
@@ -60,6 +66,7 @@ class Prototypes:
         self.how = {}
         self.results = []
         self.plans = {}
+        self.means = {}  # prototype object name -> its vertices' mean AO over the instances
         for name, (obj, mats) in instance_matrices(depsgraph).items():
             try:
                 pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=True)
@@ -76,25 +83,80 @@ class Prototypes:
             self.matrices.setdefault(tree, []).append(mats)
             self.objects[name] = obj
             self.how[name] = how
-        # Only trees with leaves are fitted (instanced rocks have no shells to occlude with).
+        # Instances without leaves: grass (a blade or a clump scattered by a particle system or
+        # geometry nodes) is realised as one field, so that every rung sees it as it sees the
+        # same field made real; anything else (rocks, bare trees) stays instanced, its mesh
+        # traced at every instance by the exact rung, its trunks solid occluders of the rest.
+        self.realized = []  # forest.Realized: instanced grass as one world-space GRASS item
+        self.realized_objects = {}  # prototype object name -> original object
+        self.mesh_only = set()  # trees too big to realise: traced by the exact rung alone
+        self.notes = []
         leafless = [t for t, its in self.items.items() if not any(i.role == "CANOPY" for i in its)]
         for tree in leafless:
+            grass = self._grass_field(tree)
+            if grass is None:
+                continue
+            self.realized.append(grass)
             for it in self.items.pop(tree):
-                self.objects.pop(it.name)
-                self.writable.discard(it.name)
+                self.realized_objects[it.name] = self.objects.pop(it.name)
             self.matrices.pop(tree)
 
+    def _grass_field(self, tree):
+        """forest.Realized of a leafless tree's instances when they are grass (declared on a
+        prototype, or guessed on the realised field: a single blade alone looks like anything),
+        else None."""
+        items, mats = self.items[tree], self.matrices[tree]
+        declared = [gather.declared_role(self.objects[it.name]) for it in items]
+        if any(d is not None and d[0] not in ("GRASS", "IGNORE") for d in declared):
+            return None
+        size = sum(len(it.positions) * len(m) for it, m in zip(items, mats))
+        names = ", ".join(it.name for it in items)
+        if size > forest.MAX_REALIZED_VERTICES:
+            self.mesh_only.add(tree)
+            self.notes.append(
+                f"instances of {names}: {size:,} vertices in all, over the "
+                f"{forest.MAX_REALIZED_VERTICES:,} realised as a grass field; they stay "
+                "instances (the exact rung traces them, the other rungs do not see them)")
+            return None
+        count = max(len(m) for m in mats)
+        real = forest.realize(items, mats, f"{names} (×{count} instances)", "GRASS", tree)
+        if real is None:
+            return None
+        it = real.item
+        if any(d is not None and d[0] == "GRASS" for d in declared):
+            how = "declared Grass on the prototype"
+        else:
+            role, why = roles.guess_role(it.positions, it.triangles)
+            if role != "GRASS":
+                return None
+            how = f"guessed on its {count} instances: {why}"
+        for i in items:
+            self.how[i.name] = how
+        self.how[it.name] = how
+        return real
+
     def __bool__(self):
-        return bool(self.items)
+        return bool(self.items or self.realized)
 
     @property
     def count(self) -> int:
-        return sum(len(forest.unique_matrices(np.concatenate(m))) for m in self.matrices.values())
+        return (sum(len(forest.unique_matrices(np.concatenate(m)))
+                    for m in self.matrices.values())
+                + sum(max(k for _n, _a, k, _v in r.spans) for r in self.realized))
+
+    def _object(self, name):
+        return self.objects[name] if name in self.objects else self.realized_objects[name]
+
+    @property
+    def realized_items(self):
+        """The instanced grass fields as world-space SceneItems: occluders of the main bake
+        (never its targets), lit as a mesh field is."""
+        return [r.item for r in self.realized]
 
     def check(self, attribute, overwrite, skip=()):
         """None, or why a prototype's attribute may not be written (nothing changed)."""
         for name in sorted(self.writable - set(skip)):
-            why = mesh_io.check_attribute(self.objects[name], attribute, overwrite)
+            why = mesh_io.check_attribute(self._object(name), attribute, overwrite)
             if why:
                 return why
         return None
@@ -105,27 +167,68 @@ class Prototypes:
         Items named in ``skip`` (also baked by the main bake) are fitted but not evaluated."""
         protos = []
         for tree, items in self.items.items():
+            mats = forest.unique_matrices(np.concatenate(self.matrices[tree]))
+            if tree in self.mesh_only:  # no solids: a fitted ellipsoid per blade is no trunk
+                protos.append(forest.Prototype(tree, [], 1.0, mats,
+                                               mesh=forest.prototype_mesh(items)))
+                continue
             plan = core.prepare(items, settings)
             self.plans[tree] = plan
-            mats = forest.unique_matrices(np.concatenate(self.matrices[tree]))
             protos.append(forest.prototype_from_plan(plan, tree, mats, items=items))
             for it in items:
                 if it.name in self.writable and it.name not in skip:
                     self.results.append(core.evaluate_item(plan, it))
         return protos
 
-    def commit(self, txn, opts):
-        """Write each prototype's attribute (and wiring), recorded in txn (commit.Transaction)."""
+    def bake_realized(self, plan):
+        """Bake each instanced grass field with the main bake's plan (which lit it as an
+        occluder) and give every prototype vertex its mean over the instances (the mesh is
+        shared: one value per vertex must do for the whole field). Returns {object name:
+        float32 (V,)} for every writable prototype; those that are not targets of the main
+        bake also go into self.results (written at commit)."""
+        self.means = {}
+        for real in self.realized:
+            names = [n for n, _a, _k, _v in real.spans if n in self.writable]
+            if not names:
+                continue
+            t0 = time.perf_counter()
+            for name, idx, k, v in real.sample_vertices(MEAN_INSTANCES, names):
+                it = real.item
+                ao = core.evaluate_receivers(plan, it, it.positions[idx], it.normals[idx],
+                                             vertices=idx)
+                self.means[name] = ao.reshape(k, v).mean(axis=0).astype(np.float32)
+                self.results.append(core.ItemResult(name, "GRASS", it.tree, plan.method,
+                                                    self.means[name],
+                                                    time.perf_counter() - t0))
+        return self.means
+
+    def commit(self, txn, opts, skip=()):
+        """Write each prototype's attribute (and wiring), recorded in txn (commit.Transaction).
+        Objects named in ``skip`` are the main bake's targets, written by it."""
         from .targets import wire_undo
         for r in self.results:
-            obj = self.objects[r.name]
+            if r.name in skip:
+                continue
+            obj = self._object(r.name)
             txn.attribute(obj, opts["attribute"])
             mesh_io.write_ao_attribute(obj, opts["attribute"], r.ao, overwrite=opts["overwrite"])
             if opts["wire_material"]:
                 wire_undo(txn, obj)
                 materials.wire_vertex_ao(obj, opts["attribute"], opts["aov_name"])
 
+    def grass_lines(self):
+        """What became of instances without leaves (also the bake report's notes)."""
+        out = list(self.notes)
+        for real in self.realized:
+            k = max(k for _n, _a, k, _v in real.spans)
+            out.append(f"instanced grass {real.item.tree}: {k} instance(s) of "
+                       f"{', '.join(n for n, _a, _k, _v in real.spans)} baked as one field of "
+                       f"{len(real.item.positions):,} vertices "
+                       f"({self.how.get(real.item.name, '')})")
+        return out
+
     def lines(self):
+        """One line per instanced tree (what the operator reports)."""
         out = []
         for tree, items in self.items.items():
             n = len(forest.unique_matrices(np.concatenate(self.matrices[tree])))

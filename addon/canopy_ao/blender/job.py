@@ -88,6 +88,10 @@ class BakeJob:
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
+        # Instanced grass, realised: it occludes like a mesh field (never a target itself).
+        self.items = self.items + self.prototypes.realized_items
+        self.how.update({it.name: self.prototypes.how[it.name]
+                         for it in self.prototypes.realized_items})
         self.plan = None
         self._lap("instances", t0)
         self._lap("gather (total)", t_start)
@@ -121,6 +125,10 @@ class BakeJob:
         targets = {t.item.name: (t.kind, t.count) for t in self.targets}
         self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
         t0 = self._lap("prepare (fit, calibrate)", t0)
+        if self.prototypes.realized:
+            self.prototypes.bake_realized(self.plan)
+            t0 = self._lap("instances", t0)
+        self.plan.notes.extend(self.prototypes.grass_lines())
         if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)
@@ -135,7 +143,11 @@ class BakeJob:
         t0 = time.perf_counter()
         bent = self.opts["bent_normals"] != "OFF"
         try:
-            if bent and maps.rung_is_the_trace(self.plan, t.item):  # one trace gives both
+            if t.item.name in self.prototypes.means and t.kind == "vertex":
+                # A grass blade instanced over a field: what its instances see, not the lone
+                # prototype (instances.Prototypes.bake_realized).
+                t.ao[a:b] = self.prototypes.means[t.item.name][a:b]
+            elif bent and maps.rung_is_the_trace(self.plan, t.item):  # one trace gives both
                 t.ao[a:b] = self._bent_step(t, a, b)
             else:
                 t.ao[a:b] = core.evaluate_receivers(
@@ -209,7 +221,7 @@ class BakeJob:
                     else:  # a modal bake yields to the UI: the user may have painted since
                         t.write(txn, o, last=vertex_only and i == len(self.targets) - 1,
                                 checked=self.blocking)
-            self.prototypes.commit(txn, o)
+            self.prototypes.commit(txn, o, skip={t.item.name for t in self.targets})
             if o["add_aov"]:
                 if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
                            for a in vl.aovs):
@@ -262,7 +274,12 @@ class BakeJob:
             "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
                                     "seconds": r.seconds, "ao_mean": float(r.ao.mean())
                                     if r.vertices else None}
-                           for r in self.prototypes.results}}
+                           for r in self.prototypes.results},
+            "grass_fields": {r.item.name: {"objects": [n for n, _a, _k, _v in r.spans],
+                                           "instances": max(k for _n, _a, k, _v in r.spans),
+                                           "vertices": len(r.item.positions),
+                                           "role_source": self.how.get(r.item.name, "")}
+                             for r in self.prototypes.realized} if self.prototypes else {}}
         for t in self.targets:
             e = rep["objects"][t.item.name]
             e["role_source"] = self.how[t.item.name]

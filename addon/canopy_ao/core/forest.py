@@ -190,6 +190,81 @@ def prototype_from_plan(plan, tree, matrices, name=None, items=None):
                      prototype_mesh(items) if items is not None else None)
 
 
+# Realising instances costs memory in proportion to their vertices (positions, normals,
+# triangles: ~40 bytes a vertex); above this many a prototype stays instanced (traced by the
+# exact rung, not a grass layer: instances.Prototypes says so in a note).
+MAX_REALIZED_VERTICES = 3_000_000
+
+
+@dataclass
+class Realized:
+    """Every instance of a prototype's objects as one world-space SceneItem (``item``), and
+    where each object's copies lie in it: ``spans`` [(object name, first vertex, instances,
+    vertices per instance)], so a per-vertex result maps back to the shared mesh
+    (:meth:`sample_vertices`)."""
+
+    item: object  # scene.SceneItem
+    spans: list
+
+    def sample_vertices(self, at_most, names=None):
+        """[(object name, vertex indices into item, instances k, vertices v)]: the vertices of
+        at most ``at_most`` of each object's instances, evenly spread over them (every one when
+        there are no more), instance-major, so AO at them reshapes to (k, v)."""
+        out = []
+        for name, a, k, v in self.spans:
+            if names is not None and name not in names:
+                continue
+            pick = np.unique(np.linspace(0, k - 1, min(k, int(at_most))).round().astype(np.int64))
+            idx = (a + v * pick[:, None] + np.arange(v)[None, :]).reshape(-1)
+            out.append((name, idx, len(pick), v))
+        return out
+
+
+def realize(items, matrices, name, role, tree):
+    """The instances of ``items`` (SceneItems in the prototype's space) under ``matrices`` (one
+    (N, 4, 4) array per item, as instances.Prototypes keeps them) as one world-space SceneItem
+    named ``name``: positions moved by each matrix, normals by its inverse transpose, a mirrored
+    instance's triangles wound the other way (its faces keep facing out), polygon ids kept
+    per copy. Singular matrices (a zero-scaled instance) are dropped. Returns a Realized, or
+    None when nothing is left."""
+    from .scene import SceneItem
+    pos, nor, tri, poly, spans = [], [], [], [], []
+    base = npoly = 0
+    for it, mats in zip(items, matrices):
+        m = np.asarray(mats, np.float64).reshape(-1, 4, 4)
+        a, t = m[:, :3, :3], m[:, :3, 3]
+        det = np.linalg.det(a)
+        keep = np.abs(det) > 1e-12
+        a, t, det = a[keep], t[keep], det[keep]
+        k, v = len(a), len(it.positions)
+        if not k or not v:
+            continue
+        p = np.einsum("nij,vj->nvi", a, it.positions.astype(np.float64)) + t[:, None, :]
+        inv_t = np.transpose(np.linalg.inv(a), (0, 2, 1))
+        q = np.einsum("nij,vj->nvi", inv_t, it.normals.astype(np.float64))
+        q /= np.maximum(np.linalg.norm(q, axis=2, keepdims=True), 1e-30)
+        tris = np.broadcast_to(it.triangles, (k,) + it.triangles.shape).copy()
+        tris[det < 0] = tris[det < 0][:, :, ::-1]
+        tris += (base + v * np.arange(k))[:, None, None].astype(np.int32)
+        pos.append(p.reshape(-1, 3))
+        nor.append(q.reshape(-1, 3))
+        tri.append(tris.reshape(-1, 3))
+        if it.polygons is not None and len(it.polygons):
+            per = int(it.polygons.max()) + 1
+            poly.append((it.polygons[None, :] + npoly + per * np.arange(k)[:, None]).reshape(-1))
+            npoly += per * k
+        else:
+            poly.append(None)
+        spans.append((it.name, base, k, v))
+        base += k * v
+    if not spans:
+        return None
+    polygons = None if any(x is None for x in poly) else np.concatenate(poly)
+    item = SceneItem(name, role, tree, np.concatenate(pos), np.concatenate(nor),
+                     np.concatenate(tri), polygons=polygons)
+    return Realized(item, spans)
+
+
 def tracer_instances(prototypes):
     """The RayTracer's instance arguments for prototypes that carry a mesh: {"prototypes":
     [(vertices, triangles)], "instance_prototypes": int32 (K,), "instance_matrices": float32
