@@ -85,9 +85,9 @@ def realize_field():
     bpy.context.view_layer.update()
 
 
-def bake_ground(method, **kw):
+def bake_ground(method, distance=0.5, **kw):
     opts = properties.scene_options(bpy.context.scene)
-    opts.update(method=method, distance=0.5, samples=64, tau=None if method == "auto" else 2.0,
+    opts.update(method=method, distance=distance, samples=64, tau=None if method == "auto" else 2.0,
                 show_proxies=False, **kw)
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
     return mesh_io.read_ao_attribute(bpy.data.objects["Ground"], ATTR), rep
@@ -100,14 +100,14 @@ def test_instanced_grass_occludes_the_ground_as_the_same_field_made_real(field):
     got = {}
     for m in METHODS:
         got[m], rep = bake_ground(m)
-        fields = rep["instances"]["grass_fields"]
+        fields = rep["instances"]["realized"]
         assert len(fields) == 1 and next(iter(fields.values()))["instances"] == 1500, fields
         assert any("instanced grass" in n and "1500 instance(s) of Blade" in n
                    for n in rep["notes"]), rep["notes"]
     realize_field()
     for m in METHODS:
         want, rep = bake_ground(m)
-        assert not rep["instances"]["grass_fields"]
+        assert not rep["instances"]["realized"]
         # The field shades its ground (its mean reads 0.85 on Blender 3.4).
         assert want.mean() < 0.9, (m, want.mean())
         # The same arrays, to float rounding: the same bake (0.0 on Blender 3.4; before, the
@@ -137,3 +137,110 @@ def test_a_visible_blade_target_takes_the_field_not_its_lone_value(field):
     run_bake(bpy.context, ["Ground", "Blade"], opts)
     a = mesh_io.read_ao_attribute(bpy.data.objects["Blade"], ATTR)
     assert a[:2].mean() < 0.5, a  # alone on no ground it would read ~1.0 at the root
+
+
+def test_meshes_left_out_of_renders_do_not_occlude(field):
+    """Cycles' rays see only what it renders: a mesh disabled in renders, or an emitter whose
+    own mesh is not shown in renders (Show Emitter off, as for a crown volume scattering
+    leaves), occludes nothing in our bake either (before, any visible mesh did)."""
+    ground = field
+    ground.modifiers.remove(ground.modifiers["Grass"])
+    p = np.float32([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (0.3, 0.6)])
+    t = np.int32([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    box = add_mesh("Box", p, t)
+    under = np.linalg.norm(field_xy(ground), axis=1) < 0.5
+    shaded, _rep = bake_ground("raytrace")
+    assert shaded[under].mean() < 0.6
+    box.hide_render = True
+    open_, _rep = bake_ground("raytrace")
+    assert open_.min() == 1.0
+    box.hide_render = False
+    mod = box.modifiers.new("Leaves", 'PARTICLE_SYSTEM')
+    mod.particle_system.settings.count = 1
+    mod.particle_system.settings.render_type = 'OBJECT'
+    mod.particle_system.settings.instance_object = bpy.data.objects["Blade"]
+    box.show_instancer_for_render = False
+    bpy.context.view_layer.update()
+    emitter, _rep = bake_ground("raytrace")
+    assert emitter[under].mean() > 0.95, emitter[under].mean()  # one blade is left
+
+
+def field_xy(obj):
+    me = obj.data
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)[:, :2]
+
+
+def leaf():
+    """A leaf quad, 0.12 m, modelled along +Y (a hair particle's axis)."""
+    return (np.float32([[-0.04, 0, 0], [0.04, 0, 0], [0.04, 0.12, 0], [-0.04, 0.12, 0]]),
+            np.int32([[0, 1, 2], [0, 2, 3]]))
+
+
+def test_leaves_scattered_by_a_crown_volume_are_its_trees_canopy():
+    """A stylised tree: a trunk, and a crown volume (an icosphere, Show Emitter off) scattering
+    800 leaf instances through its volume. The leaves are that tree's canopy under every rung,
+    as the same leaves made real: the ground under the crown reads what it reads then. Before,
+    a lone leaf was guessed GROUND and its instances dropped: the ground under the crown saw
+    the trunk alone."""
+    _clear_scene()
+    scene = bpy.context.scene
+    scene.canopy_ao.calibrate_tau = True
+    gp, gt = tree_scene.plane(size=8.0, cuts=32)
+    add_mesh("Ground", gp, gt)
+    parts = tree_scene.scene(False)
+    add_mesh("Trunk", *parts["Trunk"])
+    coll = bpy.data.collections.new("LeafProto")
+    scene.collection.children.link(coll)
+    add_mesh("Leaf", *leaf(), collection=coll)
+    bpy.context.view_layer.layer_collection.children["LeafProto"].exclude = True
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2, radius=1.3, location=(0, 0, 2.6))
+    crown = bpy.context.active_object
+    crown.name = "Crown"
+    mod = crown.modifiers.new("Leaves", 'PARTICLE_SYSTEM')
+    ps = mod.particle_system.settings
+    ps.type = 'HAIR'
+    ps.count = 800
+    ps.emit_from = 'VOLUME'
+    ps.use_advanced_hair = True
+    ps.hair_length = 1.0
+    ps.render_type = 'OBJECT'
+    ps.instance_object = bpy.data.objects["Leaf"]
+    ps.particle_size = 1.0
+    ps.use_rotations = True
+    ps.rotation_mode = 'NOR'
+    ps.phase_factor_random = 2.0
+    mod.particle_system.seed = 3
+    crown.show_instancer_for_render = False
+    bpy.context.view_layer.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    lp, lt = leaf()
+    verts, tris = [], []
+    for inst in dg.object_instances:
+        if inst.is_instance and inst.instance_object.original.name == "Leaf":
+            m = np.array(inst.matrix_world, np.float64)
+            tris.append(lt + len(verts) * len(lp))
+            verts.append((lp @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+    assert len(verts) == 800
+    try:
+        got, reps = {}, {}
+        for m in ("raytrace", "sphere", "shells", "regression"):
+            got[m], reps[m] = bake_ground(m, distance=6.0)
+            [real] = reps[m]["instances"]["realized"].values()
+            assert real["role"] == "CANOPY" and real["instances"] == 800, real
+        bpy.data.objects.remove(crown, do_unlink=True)
+        add_mesh("RealLeaves", np.concatenate(verts), np.concatenate(tris))
+        bpy.context.view_layer.update()
+        under = np.linalg.norm(gp[:, :2], axis=1) < 1.0
+        for m in got:
+            want, rep = bake_ground(m, distance=6.0)
+            assert not rep["instances"]["realized"]
+            assert want[under].mean() < 0.85, (m, want[under].mean())
+            err = np.abs(got[m] - want).mean()
+            assert err < 0.002, (m, err)
+        a = mesh_io.read_ao_attribute(bpy.data.objects["Leaf"], ATTR)
+        assert a.shape == (4,) and 0.05 < a.mean() < 0.95, a
+    finally:
+        _clear_scene()

@@ -86,7 +86,7 @@ def is_candidate(obj):
 
 def bake_targets(context, object_names):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
-    mesh. Raises CanopyAOError when there are none or a name is wrong."""
+    mesh that renders (renders()). Raises CanopyAOError when there are none or a name is wrong."""
     scene = context.scene
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
@@ -101,7 +101,8 @@ def bake_targets(context, object_names):
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
             targets = [o for o in scene.objects
-                       if is_candidate(o) and o.visible_get(view_layer=context.view_layer)]
+                       if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
+                       and renders(o)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets)
@@ -133,13 +134,25 @@ def check_writable(targets):
                             " (nothing was changed)")
 
 
+def renders(obj):
+    """False for a mesh Cycles leaves out of the render, so out of its AO rays too: disabled
+    in renders, or an instancer (a particle emitter, a dupli-face parent) whose own mesh is
+    not shown in renders (Show Emitter off)."""
+    if obj.hide_render:
+        return False
+    return not (getattr(obj, "is_instancer", False)
+                and not getattr(obj, "show_instancer_for_render", True))
+
+
 def scene_items(context, depsgraph, targets, opts, timings):
-    """Every visible mesh (trees shade a selected ground) and every target as SceneItems.
+    """Every visible mesh that renders (trees shade a selected ground) and every target as
+    SceneItems.
 
     Returns (items, objects {name: object}, how {name: why this role}); IGNORE objects are left
     out. Triangles are fetched only where the bake or a role guess needs them."""
     members = {o.name: o for o in context.scene.objects
-               if is_candidate(o) and o.visible_get(view_layer=context.view_layer)}
+               if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
+               and renders(o)}
     for o in targets:
         members.setdefault(o.name, o)
     target_names = {o.name for o in targets}

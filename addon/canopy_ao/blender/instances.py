@@ -20,6 +20,7 @@ instance).
 
 import time
 
+import bpy
 import numpy as np
 
 from . import gather, materials, mesh_io
@@ -32,8 +33,9 @@ MEAN_INSTANCES = 2000
 
 
 def instance_matrices(depsgraph):
-    """{original object name: (object, matrices float64 (N, 4, 4))} for every mesh instance,
-    M mapping the object as it stands in the scene onto the instance."""
+    """{original object name: (object, matrices float64 (N, 4, 4), instancer names)} for every
+    mesh instance, M mapping the object as it stands in the scene onto the instance; the
+    instancers are the objects whose particles or node tree made the instances (None: none)."""
     found = {}
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -45,12 +47,13 @@ def instance_matrices(depsgraph):
         parent = inst.parent.original if inst.parent is not None else None
         if orig is None or orig == parent or orig.get(mesh_io.PROXY_PROP):
             continue  # no prototype object of its own (geometry made by the node tree)
-        found.setdefault(orig.name, (orig, []))[1].append(
-            np.array(inst.matrix_world, dtype=np.float64))
+        entry = found.setdefault(orig.name, (orig, [], set()))
+        entry[1].append(np.array(inst.matrix_world, dtype=np.float64))
+        entry[2].add(parent.name if parent is not None else None)
     out = {}
-    for name, (orig, mats) in found.items():
+    for name, (orig, mats, parents) in found.items():
         inv = np.linalg.pinv(np.array(orig.matrix_world, dtype=np.float64))
-        out[name] = (orig, np.stack(mats) @ inv)
+        out[name] = (orig, np.stack(mats) @ inv, parents)
     return out
 
 
@@ -67,7 +70,9 @@ class Prototypes:
         self.results = []
         self.plans = {}
         self.means = {}  # prototype object name -> its vertices' mean AO over the instances
-        for name, (obj, mats) in instance_matrices(depsgraph).items():
+        self.instancers = {}  # item name -> names of the objects that instance it
+        for name, (obj, mats, parents) in instance_matrices(depsgraph).items():
+            self.instancers[name] = parents
             try:
                 pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=True)
                 if vertex_mode:
@@ -83,17 +88,18 @@ class Prototypes:
             self.matrices.setdefault(tree, []).append(mats)
             self.objects[name] = obj
             self.how[name] = how
-        # Instances without leaves: grass (a blade or a clump scattered by a particle system or
-        # geometry nodes) is realised as one field, so that every rung sees it as it sees the
-        # same field made real; anything else (rocks, bare trees) stays instanced, its mesh
-        # traced at every instance by the exact rung, its trunks solid occluders of the rest.
-        self.realized = []  # forest.Realized: instanced grass as one world-space GRASS item
+        # Instances without leaves of their own tree: grass (a blade or a clump scattered by a
+        # particle system or geometry nodes), or leaves one object scatters (a crown volume's
+        # particles), is realised as one item, so that every rung sees it as it sees the same
+        # made real; anything else (rocks, bare trees) stays instanced, its mesh traced at
+        # every instance by the exact rung, its trunks solid occluders of the rest.
+        self.realized = []  # forest.Realized: one world-space GRASS or CANOPY item each
         self.realized_objects = {}  # prototype object name -> original object
         self.mesh_only = set()  # trees too big to realise: traced by the exact rung alone
         self.notes = []
         leafless = [t for t, its in self.items.items() if not any(i.role == "CANOPY" for i in its)]
         for tree in leafless:
-            grass = self._grass_field(tree)
+            grass = self._realized_field(tree)
             if grass is None:
                 continue
             self.realized.append(grass)
@@ -101,10 +107,10 @@ class Prototypes:
                 self.realized_objects[it.name] = self.objects.pop(it.name)
             self.matrices.pop(tree)
 
-    def _grass_field(self, tree):
+    def _realized_field(self, tree):
         """forest.Realized of a leafless tree's instances when they are grass (declared on a
-        prototype, or guessed on the realised field: a single blade alone looks like anything),
-        else None."""
+        prototype, or guessed on the realised field: a single blade alone looks like anything)
+        or the leaves of the one object that scatters them, else None."""
         items, mats = self.items[tree], self.matrices[tree]
         declared = [gather.declared_role(self.objects[it.name]) for it in items]
         if any(d is not None and d[0] not in ("GRASS", "IGNORE") for d in declared):
@@ -127,9 +133,19 @@ class Prototypes:
             how = "declared Grass on the prototype"
         else:
             role, why = roles.guess_role(it.positions, it.triangles)
-            if role != "GRASS":
-                return None
             how = f"guessed on its {count} instances: {why}"
+            if role == "CANOPY":
+                # Leaves scattered by one object (a crown volume's or a trunk's particles):
+                # that object's tree's canopy, realised as the same leaves made real would be.
+                parents = set().union(*(self.instancers[i.name] for i in items))
+                if len(parents) != 1 or None in parents:
+                    return None
+                (parent,) = parents
+                it.role = "CANOPY"
+                it.tree, it.tree_source = gather.tree_and_source(bpy.data.objects[parent])
+                how += f", the leaves of {parent}'s tree"
+            elif role != "GRASS":
+                return None
         for i in items:
             self.how[i.name] = how
         self.how[it.name] = how
@@ -149,7 +165,8 @@ class Prototypes:
 
     @property
     def realized_items(self):
-        """The instanced grass fields as world-space SceneItems: occluders of the main bake
+        """The realised instances (grass fields, scattered leaves) as world-space SceneItems:
+        occluders of the main bake
         (never its targets), lit as a mesh field is."""
         return [r.item for r in self.realized]
 
@@ -181,9 +198,9 @@ class Prototypes:
         return protos
 
     def bake_realized(self, plan):
-        """Bake each instanced grass field with the main bake's plan (which lit it as an
-        occluder) and give every prototype vertex its mean over the instances (the mesh is
-        shared: one value per vertex must do for the whole field). Returns {object name:
+        """Bake each realised field (grass, scattered leaves) with the main bake's plan (which
+        lit it as an occluder) and give every prototype vertex its mean over the instances (the
+        mesh is shared: one value per vertex must do for the whole field). Returns {object name:
         float32 (V,)} for every writable prototype; those that are not targets of the main
         bake also go into self.results (written at commit)."""
         self.means = {}
@@ -197,7 +214,7 @@ class Prototypes:
                 ao = core.evaluate_receivers(plan, it, it.positions[idx], it.normals[idx],
                                              vertices=idx)
                 self.means[name] = ao.reshape(k, v).mean(axis=0).astype(np.float32)
-                self.results.append(core.ItemResult(name, "GRASS", it.tree, plan.method,
+                self.results.append(core.ItemResult(name, it.role, it.tree, plan.method,
                                                     self.means[name],
                                                     time.perf_counter() - t0))
         return self.means
@@ -221,7 +238,8 @@ class Prototypes:
         out = list(self.notes)
         for real in self.realized:
             k = max(k for _n, _a, k, _v in real.spans)
-            out.append(f"instanced grass {real.item.tree}: {k} instance(s) of "
+            out.append(f"instanced {real.item.role.lower()} {real.item.tree}: {k} "
+                       f"instance(s) of "
                        f"{', '.join(n for n, _a, _k, _v in real.spans)} baked as one field of "
                        f"{len(real.item.positions):,} vertices "
                        f"({self.how.get(real.item.name, '')})")
@@ -237,3 +255,22 @@ class Prototypes:
                        f"{', '.join(i.name for i in items)}"
                        + (f", {plan.method}, τ {plan.tau:.3g}" if plan else ""))
         return out
+
+
+def report(prototypes, how):
+    """The report's "instances" entry: how many instances, each baked prototype's figures, and
+    each realised field (role, tree, the objects it was made of; how: name -> role source)."""
+    if not prototypes:
+        return {"instances": 0, "prototypes": {}, "realized": {}}
+    return {
+        "instances": prototypes.count,
+        "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
+                                "seconds": r.seconds,
+                                "ao_mean": float(r.ao.mean()) if r.vertices else None}
+                       for r in prototypes.results},
+        "realized": {r.item.name: {"role": r.item.role, "tree": r.item.tree,
+                                   "objects": [n for n, _a, _k, _v in r.spans],
+                                   "instances": max(k for _n, _a, k, _v in r.spans),
+                                   "vertices": len(r.item.positions),
+                                   "role_source": how.get(r.item.name, "")}
+                     for r in prototypes.realized}}

@@ -88,7 +88,8 @@ class BakeJob:
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
-        # Instanced grass, realised: it occludes like a mesh field (never a target itself).
+        # Instanced grass or scattered leaves, realised: they occlude as the same made real
+        # (never a target themselves).
         self.items = self.items + self.prototypes.realized_items
         self.how.update({it.name: self.prototypes.how[it.name]
                          for it in self.prototypes.realized_items})
@@ -269,17 +270,7 @@ class BakeJob:
         if o["channel"] != "RGBA" and o["wire_material"]:
             rep["notes"].append(f"the AO went into channel {o['channel']} only, so it was not "
                                 "multiplied into the materials (a packed map is for engines)")
-        rep["instances"] = {
-            "instances": self.prototypes.count if self.prototypes else 0,
-            "prototypes": {r.name: {"tree": r.tree, "method": r.method, "vertices": r.vertices,
-                                    "seconds": r.seconds, "ao_mean": float(r.ao.mean())
-                                    if r.vertices else None}
-                           for r in self.prototypes.results},
-            "grass_fields": {r.item.name: {"objects": [n for n, _a, _k, _v in r.spans],
-                                           "instances": max(k for _n, _a, k, _v in r.spans),
-                                           "vertices": len(r.item.positions),
-                                           "role_source": self.how.get(r.item.name, "")}
-                             for r in self.prototypes.realized} if self.prototypes else {}}
+        rep["instances"] = instances.report(self.prototypes, self.how)
         for t in self.targets:
             e = rep["objects"][t.item.name]
             e["role_source"] = self.how[t.item.name]
