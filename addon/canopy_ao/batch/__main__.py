@@ -13,6 +13,7 @@ arguments.
 import argparse
 import os
 import shlex
+import signal
 import subprocess
 import sys
 import time
@@ -155,20 +156,29 @@ def run_local(p, args):
         print(f"canopy_ao.batch: task {i + 1}/{len(p['tasks'])} done"
               + (f", {len(failed)} failed" if failed else ""), flush=True)
 
+    # Ctrl-C only raises a flag here; the loop below raises KeyboardInterrupt from our own
+    # code. Raised where Python's handler would run it — inside concurrent.futures.wait, between
+    # the release of one future's lock and the next — it would leave a future's lock held by
+    # this thread, and the worker finishing that future would then block for ever in
+    # set_result while shutdown() waits for it (the batch hung, once in many cancels).
+    interrupted = []
+    previous = signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     pool = ThreadPoolExecutor(max_workers=args.jobs)
     try:
         pending = {pool.submit(one, i) for i in range(len(p["tasks"]))}
-        while pending:
+        while pending and not interrupted:
             # Wake up now and then: the kernel may hand Ctrl-C's SIGINT to a worker thread,
-            # and then nothing interrupts a main thread blocked on a future (the run would
-            # wait for every Blender to finish).
+            # and then nothing interrupts a main thread blocked on a future.
             done, pending = wait(pending, timeout=0.25)
             for f in done:
                 f.result()  # a worker's error stops the run as Ctrl-C does
+        if interrupted:
+            raise KeyboardInterrupt
     except BaseException:  # Ctrl-C: stop every Blender, start no other
         runner.stop_all()
         raise
     finally:
+        signal.signal(signal.SIGINT, previous)
         pool.shutdown(wait=True, cancel_futures=True)
 
 
