@@ -67,17 +67,23 @@ def field():
     _clear_scene()
 
 
+def instances_made_real(name, points, triangles):
+    """(vertex blocks, triangle blocks): the mesh (points, triangles) of prototype `name` moved
+    by each of its instances' matrices, as a script making the instances real would."""
+    dg = bpy.context.evaluated_depsgraph_get()
+    verts, tris = [], []
+    for inst in dg.object_instances:
+        if inst.is_instance and inst.instance_object.original.name == name:
+            m = np.array(inst.matrix_world, np.float64)
+            tris.append(triangles + len(verts) * len(points))
+            verts.append((points @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+    return verts, tris
+
+
 def realize_field():
     """The field made real, as a script would: every instance's blade, moved by its matrix,
     joined into one mesh 'RealGrass'; the particle system removed."""
-    dg = bpy.context.evaluated_depsgraph_get()
-    bp, bt = blade()
-    verts, tris = [], []
-    for inst in dg.object_instances:
-        if inst.is_instance and inst.instance_object.original.name == "Blade":
-            m = np.array(inst.matrix_world, np.float64)
-            tris.append(bt + len(verts) * len(bp))
-            verts.append((bp @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+    verts, tris = instances_made_real("Blade", *blade())
     assert len(verts) == 1500
     ground = bpy.data.objects["Ground"]
     ground.modifiers.remove(ground.modifiers["Grass"])
@@ -215,14 +221,7 @@ def test_leaves_scattered_by_a_crown_volume_are_its_trees_canopy():
     mod.particle_system.seed = 3
     crown.show_instancer_for_render = False
     bpy.context.view_layer.update()
-    dg = bpy.context.evaluated_depsgraph_get()
-    lp, lt = leaf()
-    verts, tris = [], []
-    for inst in dg.object_instances:
-        if inst.is_instance and inst.instance_object.original.name == "Leaf":
-            m = np.array(inst.matrix_world, np.float64)
-            tris.append(lt + len(verts) * len(lp))
-            verts.append((lp @ m[:3, :3].T + m[:3, 3]).astype(np.float32))
+    verts, tris = instances_made_real("Leaf", *leaf())
     assert len(verts) == 800
     try:
         got, reps = {}, {}
