@@ -138,10 +138,7 @@ def renders(obj):
     """False for a mesh Cycles leaves out of the render, so out of its AO rays too: disabled
     in renders, or an instancer (a particle emitter, a dupli-face parent) whose own mesh is
     not shown in renders (Show Emitter off)."""
-    if obj.hide_render:
-        return False
-    return not (getattr(obj, "is_instancer", False)
-                and not getattr(obj, "show_instancer_for_render", True))
+    return not obj.hide_render and (not obj.is_instancer or obj.show_instancer_for_render)
 
 
 def scene_items(context, depsgraph, targets, opts, timings):

@@ -158,7 +158,7 @@ class Prototypes:
     def count(self) -> int:
         return (sum(len(forest.unique_matrices(np.concatenate(m)))
                     for m in self.matrices.values())
-                + sum(max(k for _n, _a, k, _v in r.spans) for r in self.realized))
+                + sum(r.instances for r in self.realized))
 
     def _object(self, name):
         return self.objects[name] if name in self.objects else self.realized_objects[name]
@@ -166,8 +166,7 @@ class Prototypes:
     @property
     def realized_items(self):
         """The realised instances (grass fields, scattered leaves) as world-space SceneItems:
-        occluders of the main bake
-        (never its targets), lit as a mesh field is."""
+        occluders of the main bake (never its targets), lit as the same made real."""
         return [r.item for r in self.realized]
 
     def check(self, attribute, overwrite, skip=()):
@@ -205,7 +204,7 @@ class Prototypes:
         bake also go into self.results (written at commit)."""
         self.means = {}
         for real in self.realized:
-            names = [n for n, _a, _k, _v in real.spans if n in self.writable]
+            names = [n for n in real.objects if n in self.writable]
             if not names:
                 continue
             t0 = time.perf_counter()
@@ -237,11 +236,9 @@ class Prototypes:
         """What became of instances without leaves (also the bake report's notes)."""
         out = list(self.notes)
         for real in self.realized:
-            k = max(k for _n, _a, k, _v in real.spans)
-            out.append(f"instanced {real.item.role.lower()} {real.item.tree}: {k} "
-                       f"instance(s) of "
-                       f"{', '.join(n for n, _a, _k, _v in real.spans)} baked as one field of "
-                       f"{len(real.item.positions):,} vertices "
+            out.append(f"instanced {real.item.role.lower()} {real.item.tree}: "
+                       f"{real.instances} instance(s) of {', '.join(real.objects)} baked as "
+                       f"one field of {len(real.item.positions):,} vertices "
                        f"({self.how.get(real.item.name, '')})")
         return out
 
@@ -269,8 +266,7 @@ def report(prototypes, how):
                                 "ao_mean": float(r.ao.mean()) if r.vertices else None}
                        for r in prototypes.results},
         "realized": {r.item.name: {"role": r.item.role, "tree": r.item.tree,
-                                   "objects": [n for n, _a, _k, _v in r.spans],
-                                   "instances": max(k for _n, _a, k, _v in r.spans),
+                                   "objects": r.objects, "instances": r.instances,
                                    "vertices": len(r.item.positions),
                                    "role_source": how.get(r.item.name, "")}
                      for r in prototypes.realized}}

@@ -206,6 +206,16 @@ class Realized:
     item: object  # scene.SceneItem
     spans: list
 
+    @property
+    def instances(self) -> int:
+        """Instances of the prototype (its objects' copies: the most any object has)."""
+        return max(k for _n, _a, k, _v in self.spans)
+
+    @property
+    def objects(self) -> list:
+        """The prototype's object names, in the item's order."""
+        return [n for n, _a, _k, _v in self.spans]
+
     def sample_vertices(self, at_most, names=None):
         """[(object name, vertex indices into item, instances k, vertices v)]: the vertices of
         at most ``at_most`` of each object's instances, evenly spread over them (every one when
