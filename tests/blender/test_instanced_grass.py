@@ -122,6 +122,21 @@ def test_instanced_grass_occludes_the_ground_as_the_same_field_made_real(field):
         assert err < 0.002, (m, err)
 
 
+def test_a_field_too_big_to_realise_stays_instances_traced_by_rays(field, monkeypatch):
+    """Over forest.MAX_REALIZED_VERTICES (3 M; here lowered below the field's 15,000) the
+    instances stay instances: the exact rung still traces them, and the note says that the
+    other rungs do not see them (a field that size would not fit in memory made real)."""
+    from canopy_ao.core import forest
+    monkeypatch.setattr(forest, "MAX_REALIZED_VERTICES", 10_000)
+    rays, rep = bake_ground("raytrace")
+    assert not rep["instances"]["realized"]
+    assert any("15,000 vertices in all, over the 10,000" in n and "stay instances" in n
+               for n in rep["notes"]), rep["notes"]
+    assert rays.mean() < 0.9, rays.mean()  # traced: the field still shades its ground
+    sphere, _rep = bake_ground("sphere")
+    assert sphere.min() == 1.0  # as the note says: the analytic rungs do not see it
+
+
 def test_the_blade_gets_its_instances_mean(field):
     _ao, rep = bake_ground("raytrace")
     a = mesh_io.read_ao_attribute(bpy.data.objects["Blade"], ATTR)

@@ -121,8 +121,8 @@ class Prototypes:
             self.mesh_only.add(tree)
             self.notes.append(
                 f"instances of {names}: {size:,} vertices in all, over the "
-                f"{forest.MAX_REALIZED_VERTICES:,} realised as a grass field; they stay "
-                "instances (the exact rung traces them, the other rungs do not see them)")
+                f"{forest.MAX_REALIZED_VERTICES:,} that are realised into one field; they "
+                "stay instances (the exact rung traces them, the other rungs do not see them)")
             return None
         count = max(len(m) for m in mats)
         real = forest.realize(items, mats, f"{names} (×{count} instances)", "GRASS", tree)
