@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import cost, ladder, lighting, native, proxies, regression, trees
+from . import cost, forest_tau, ladder, lighting, native, proxies, regression, trees
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, own_primitives, split_trees
 from .ladder import DEFAULT_TAU
@@ -60,7 +60,8 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
                       and (any(it.role == "GRASS" for it in items)
                            or bool(forest_meshes(prototypes))))
     needs_tracer = settings.method in ("raytrace", "hybrid") or proxyless_auto or (
-        settings.method == "auto" or settings.tau is None) and bool(plan.fits)
+        settings.method == "auto" or settings.tau is None) and bool(plan.fits) or (
+        settings.tau is None and settings.method != "hybrid" and bool(forest_meshes(prototypes)))
     if needs_tracer:
         t0 = time.perf_counter()
         try:
@@ -82,10 +83,15 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
             shared = {} if plan.tracer is None else dict(  # one BVH for the bake
                 tracer=plan.tracer,
                 ids=lambda it, idx: (ladder.sample_ids(plan, it, idx) or {}).get("vertex_ids"))
-            plan.regression = regression.RegressionRung(
-                items, settings.distance, points=regression.POINTS,
-                samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
-                **shared)
+            if plan.forest is not None and not regression.occludes(items):
+                plan.regression = regression.OpenSky()
+                plan.notes.append("regression: the only occluders are instanced trees, "
+                                  "which light the ground by their shells")
+            else:
+                plan.regression = regression.RegressionRung(
+                    items, settings.distance, points=regression.POINTS,
+                    samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
+                    **shared)
         except CanopyAOError as exc:
             if settings.method == "regression":
                 raise
@@ -106,6 +112,12 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
         plan.timings["grid"] = time.perf_counter() - t0
 
     ladder.choose(plan, items, proxyless_auto)
+    if forest_tau.wanted(plan):  # the instances' τ, fitted on the receivers they shade
+        t0 = time.perf_counter()
+        got = forest_tau.calibrate(plan, items)
+        if got is not None:
+            plan.calibration = {**(plan.calibration or {}), "forest": got}
+        plan.timings["forest_tau"] = time.perf_counter() - t0
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     plan.timings["prepare"] = time.perf_counter() - t_start
     return plan

@@ -136,14 +136,29 @@ class Forest:
         self.epsilon = float(epsilon)
         self.distance = float(distance)  # the AO distance (0 = unlimited)
         self.prototypes = list(prototypes)
-        crowns, solids = [], []
+        self.tau_scale = 1.0  # every prototype's τ times this (forest_tau: fitted on receivers)
+        self._crowns, self._solids = [], []  # world-space shells, kept for scaled()
         for p in self.prototypes:
-            crowns.append((instance_shells(p.shells, p.matrices), float(p.tau)))
-            solids += instance_shells(p.solids, p.matrices)
+            self._crowns.append(instance_shells(p.shells, p.matrices))
+            self._solids += instance_shells(p.solids, p.matrices)
+        self._build()
+
+    def _build(self):
+        crowns = [(c, float(p.tau) * self.tau_scale)
+                  for c, p in zip(self._crowns, self.prototypes)]
         # No instance beyond the AO distance along a ray occludes.
-        self.native = _core.ForestOccluders(crowns, solids, epsilon=self.epsilon,
-                                            distance=float(distance) if distance > 0
+        self.native = _core.ForestOccluders(crowns, self._solids, epsilon=self.epsilon,
+                                            distance=self.distance if self.distance > 0
                                             else math.inf)
+
+    def scaled(self, scale: float) -> "Forest":
+        """The same instances with every prototype's τ times ``scale`` (the shells are not
+        transformed again: only the occluder index is rebuilt, its cut-off depends on τ)."""
+        out = object.__new__(Forest)
+        out.__dict__.update(self.__dict__)
+        out.tau_scale = self.tau_scale * float(scale)
+        out._build()
+        return out
 
     @property
     def instances(self) -> int:

@@ -275,6 +275,24 @@ class RegressionRung:
         return model.predict(self._compute(tree, p, n, name, own, pieces=model.pieces))
 
 
+class OpenSky:
+    """The ray-free rung of a scene whose own objects occlude nothing, its trees all instanced
+    (a ground under a forest): 1 for every receiver, which the forest's shells then darken as
+    they do every rung's but the exact one (lighting.evaluate_points)."""
+
+    def __init__(self):
+        self.report = dict(method="regression", groups={},
+                           note="no occluder but instanced trees")
+
+    def ao(self, role, tree, p, n, name=None, own=None):
+        return np.ones(len(p), np.float32)
+
+
+def occludes(items) -> bool:
+    """Whether any item is a CANOPY, TRUNK or GRASS one the rung's grid would voxelise."""
+    return any(it.role in OCCLUDER_ROLES for it in items)
+
+
 def bake(items, distance=0.0, **options):
     """({item name: float32 AO}, report) for every item by the regression rung (a one-off
     RegressionRung; IGNORE items get 1)."""
