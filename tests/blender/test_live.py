@@ -74,8 +74,8 @@ def _full(method, tau, attribute="Full"):
     return {n: _ao(n, attribute) for n in NAMES}
 
 
-def _assert_equal(got, want):
-    for n in NAMES:
+def _assert_equal(got, want, names=NAMES):
+    for n in names:
         np.testing.assert_allclose(got[n], want[n], atol=2e-6, err_msg=n)
 
 
@@ -105,13 +105,16 @@ def test_live_keeps_the_first_bakes_calibrated_tau(animated):
     animated.frame_set(5)
     session = live.session_of(animated)
     assert session.frames == 1 and session.plan.tau == rep["tau"]  # ... and kept at frame 5
+    assert session.plan.role_scale == rep["tau_role_scale"]  # the ground's own factor too
     taus = set(rep["tau_by_tree"].values()) | {rep["tau"]}
     if len(taus) == 1:  # one τ for every tree: a full bake given it is the same bake ...
         want = _full("ellipsoid", rep["tau"])
         # ... but for the receivers frame 1's buried test set to 0 (a given τ traces nothing)
         for name, mask in session.plan.buried.items():
             want[name][mask] = 0.0
-        _assert_equal({n: _ao(n) for n in NAMES}, want)
+        # ... and the ground and grass, lit with τ × their factor (a given τ has none)
+        scaled = {"Ground", "Grass"} if rep["tau_role_scale"] else set()
+        _assert_equal({n: _ao(n) for n in NAMES}, want, [n for n in NAMES if n not in scaled])
 
 
 @pytest.mark.parametrize("kw, words", [

@@ -95,11 +95,13 @@ def test_shells_keep_their_leaves_and_move_smoothly(method):
 def test_a_frame_keeps_the_first_bakes_tau_per_tree():
     first = core.prepare(scene_items(0.0), core.BakeSettings(method="ellipsoid", tau=1.7))
     first.tau_by_tree = {"Oak": 3.0}
+    first.role_scale = {"GROUND": 0.4}  # the ground's factor (ladder.calibrate)
     frame = scene_items(0.2)
     plan = live.refit(first, live.frame_items(live.template_items(frame),
                                               {i.name: i.positions for i in frame},
                                               {i.name: i.normals for i in frame}))
     assert plan.tau == 1.7 and plan.tau_by_tree == {"Oak": 3.0} and plan.method == "ellipsoid"
+    assert plan.role_scale == {"GROUND": 0.4}
 
 
 @pytest.mark.parametrize("method", ["raytrace", "grid", "auto"])

@@ -123,6 +123,7 @@ class FrameBake:
         ms = 1000.0 * sum(self.seconds) / max(len(self.seconds), 1)
         self.report = {"frames": [self.frames[0], self.frames[-1]], "method": plan.method,
                        "tau": plan.tau, "tau_by_tree": dict(plan.tau_by_tree),
+                       "tau_role_scale": dict(plan.role_scale),
                        "objects": list(self.session.targets), "attribute": attribute,
                        "cache": [cache_name(attribute, f) for f in (self.frames[0],
                                                                       self.frames[-1])],

@@ -87,6 +87,7 @@ class Session:
         self.shell_trees = sorted(job.plan.shell_labels)
         self.record = json.dumps({
             "objects": self.targets, "tau_by_tree": dict(job.plan.tau_by_tree),
+            "role_scale": dict(job.plan.role_scale),
             "shell_trees": self.shell_trees,
             "opts": dict(job.opts, method=job.plan.method, tau=job.plan.tau, live=True)})
 
@@ -160,6 +161,7 @@ def _rebuild(scene, depsgraph):
         job = BakeJob(ctx, rec["objects"], dict(rec["opts"], live=True))
         job.prepare()
         job.plan.tau_by_tree = {k: float(v) for k, v in rec["tau_by_tree"].items()}
+        job.plan.role_scale = {k: float(v) for k, v in rec.get("role_scale", {}).items()}
         # The first bake's partition, not this frame's clustering: a file re-armed on load (a
         # farm task's first frame) shades as the session that saved it did.
         stored = scene.get(SHELLS) or {}

@@ -304,6 +304,7 @@ def report(plan: Plan, results) -> dict:
         "requested_method": plan.settings.method,
         "tau": plan.tau,
         "tau_by_tree": dict(plan.tau_by_tree),
+        "tau_role_scale": dict(plan.role_scale),
         "distance": plan.settings.distance,
         "samples": plan.settings.samples,
         "proxies": proxies.proxy_dicts(plan),

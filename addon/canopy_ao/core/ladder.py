@@ -16,7 +16,8 @@ import numpy as np
 
 from . import cost, native
 from .lighting import evaluate_points, own_ids, trace, traces_instances
-from .scene import RECEIVER_ROLES, Plan
+from .scene import RECEIVER_ROLES, SCALED_ROLES, Plan
+from .taufit import MIN_SPLIT_POINTS, TAU_RANGE, golden_min, tau_per_tree  # noqa: F401
 
 # (name, label, help) of each rung; settings.OPTIONS offers them in this order.
 RUNGS = (
@@ -115,41 +116,6 @@ def buried(plan: Plan, item, p, n, own=None, rays=BURIED_RAYS, per_corner=True) 
     return np.asarray(short) <= 0.0
 
 
-def golden_min(f, lo, hi, iters=16):
-    """Minimise a unimodal f on [lo, hi] by golden-section search; returns (x, f(x))."""
-    g = (math.sqrt(5) - 1) / 2
-    a, b = lo, hi
-    c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd = f(c), f(d)
-    for _ in range(iters):
-        if fc < fd:
-            b, d, fd = d, c, fc
-            c = b - g * (b - a)
-            fc = f(c)
-        else:
-            a, c, fc = c, d, fd
-            d = a + g * (b - a)
-            fd = f(d)
-    return (c, fc) if fc < fd else (d, fd)
-
-
-def tau_per_tree(plan: Plan, method, tau, err):
-    """{tree: τ, None: tau}: one golden-section pass per tree (others held) from the scene-wide
-    τ. A sparse tree and a dense one have different optical depths; one τ for both darkens
-    the sparse one's leaves. A tree keeps the scene-wide τ unless its own cuts the sample's
-    squared error by more than 1 %."""
-    taus = {t: tau for t in plan.fits}
-    taus[None] = tau
-    base = err(method, taus)
-    for t in sorted(plan.fits):
-        def f(x, t=t):
-            return err(method, {**taus, t: math.exp(x)})
-        lt, e = golden_min(f, math.log(0.02), math.log(50.0))
-        if e < 0.99 * base:
-            taus[t], base = math.exp(lt), e
-    return taus
-
-
 def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     """Pick τ (unless fixed) and a method among ``candidates`` against ray-traced samples.
 
@@ -177,6 +143,16 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     # darken everything else to match (docs/DESIGN.md, 'Auto mode').
     keep = ~np.concatenate([buried(plan, it, p, n, own) for it, p, n, own, _ in groups]) \
         if groups else np.zeros(0, bool)
+    # The ground sees the crowns from outside, the leaves from inside: one τ for both left the
+    # ground 0.06-0.2 too dark. τ is fitted on the leaves' and branches' points, then each
+    # SCALED_ROLES group its own factor on theirs, where both sides have enough points.
+    role_of = np.concatenate([np.full(len(p), it.role, object)
+                              for it, p, _n, _o, _l in groups]) if groups else np.zeros(0, object)
+    leaves = keep & ~np.isin(role_of, sum(SCALED_ROLES, ()))
+    scaled = [(roles, keep & np.isin(role_of, roles)) for roles in SCALED_ROLES]
+    scaled = [(r, w) for r, w in scaled if w.sum() >= MIN_SPLIT_POINTS]
+    if leaves.sum() < MIN_SPLIT_POINTS:
+        scaled = []
     t_trace = time.perf_counter() - t0
 
     batches = _batches(groups)
@@ -185,7 +161,9 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     rays = cost.affordable_samples(plan, n_receivers) if "raytrace" in candidates \
         else s.samples
 
-    def err(method, tau):
+    def err(method, tau, scale=None, where=None):
+        plan.role_scale = scale or {}
+        sel = keep if where is None else where
         if method == "raytrace":
             # Its own noise, not the reference's: another seed than the reference traced with.
             got = [trace(plan, p, n, rays, seed=s.seed + 7919, own=own)
@@ -198,20 +176,26 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
             got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau, local)
                    for it, p, n, _own, local in groups]
         got = np.concatenate(got) if got else np.zeros(0, np.float32)
-        return float(np.mean((got[keep] - ref[keep]) ** 2)) if keep.any() else 0.0
+        return float(np.mean((got[sel] - ref[sel]) ** 2)) if sel.any() else 0.0
 
-    results, predicted = {}, {}
+    results, predicted, scales = {}, {}, {}
     for m in candidates:
         if m not in TAU_METHODS:  # physical density / exact: no τ to fit
             tau = float(tau_fixed or DEFAULT_TAU)
         elif tau_fixed is not None:
             tau = float(tau_fixed)
         else:
-            lt, _e = golden_min(lambda x: err(m, math.exp(x)), math.log(0.02), math.log(50.0))
+            fit = leaves if scaled else keep
+            lt, _e = golden_min(lambda x: err(m, math.exp(x), None, fit), *TAU_RANGE)
             tau = math.exp(lt)
             if len(plan.fits) > 1:
-                tau = tau_per_tree(plan, m, tau, err)
-        results[m] = (tau, err(m, tau))
+                tau = tau_per_tree(plan, m, tau, lambda mm, t: err(mm, t, None, fit))
+            scales[m] = {}
+            for roles, where in scaled:  # a group's receivers see no other group's τ
+                ls, _e = golden_min(lambda x: err(m, tau, dict.fromkeys(roles, math.exp(x)),
+                                                  where), *TAU_RANGE)
+                scales[m].update(dict.fromkeys(roles, math.exp(ls)))
+        results[m] = (tau, err(m, tau, scales.get(m)))
         # Counted work × fixed constants (cost.py): the same prediction whatever the load.
         predicted[m] = cost.predict(plan, m, n_receivers,
                                     samples=rays if m == "raytrace" else None)
@@ -226,6 +210,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
                 skipped.append(m)
                 continue
             chosen = m
+    plan.role_scale = dict(scales.get(chosen) or {})
     rmse = math.sqrt(results[chosen][1])
     why = (f"{chosen}: sample RMSE {rmse:.3f}; no richer rung cut it by more than 10 %"
            if rmse > s.target_rmse else f"{chosen}: sample RMSE {rmse:.3f} meets the target "
@@ -248,6 +233,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         "seconds": time.perf_counter() - t0,
         "candidates": {m: {"tau": _scene_tau(t), "tau_by_tree": _tree_taus(t),
                            "rmse": math.sqrt(e), "predicted_seconds": predicted[m]["seconds"],
+                           **({"role_scale": scales[m]} if scales.get(m) else {}),
                            "cost": predicted[m], **({"samples": rays} if m == "raytrace"
                                                     else {})}
                        for m, (t, e) in results.items()},

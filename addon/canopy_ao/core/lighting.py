@@ -38,6 +38,13 @@ def tau_of(tau, tree):
     return float(tau)
 
 
+def scaled_tau(tau, scale):
+    """``tau`` (one number, or {tree: τ} with None for the rest) with every τ times scale."""
+    if isinstance(tau, dict):
+        return {t: float(v) * scale for t, v in tau.items()}
+    return float(tau) * scale
+
+
 class Lights:
     """The scene's lighting as data: the native ScenePlan (every tree's crown proxies and solid
     trunks with their occluder grids, and the grass layers over the ground, built once per
@@ -138,6 +145,8 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         return _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own))
     # The analytic rungs: the whole per-receiver composition, grass layers and forest
     # included, in one native call (docs/DESIGN.md, 'How each role is lit').
+    if plan.role_scale.get(role, 1.0) != 1.0:
+        tau = scaled_tau(tau, plan.role_scale[role])
     lit = lights(plan)
     grass = None
     if role == "GRASS":

@@ -60,7 +60,8 @@ def refit(base: Plan, items) -> Plan:
     """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted."""
     check_method(base.method)
     plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
-                tau_by_tree=dict(base.tau_by_tree), forest=base.forest,
+                tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
+                forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried)
     proxies.fit_scene(plan, split_trees(items))
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}

@@ -10,6 +10,11 @@ from . import roles as _roles
 from .native import CanopyAOError
 
 RECEIVER_ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS")
+# Receivers whose τ calibration fits apart from the leaves' (ladder.calibrate), each group one
+# factor on every tree's τ (Plan.role_scale): the ground and grass see the crowns from outside,
+# through their whole depth. (The branches as a group of their own moved the Sapling trees'
+# MAE by -0.004 to +0.002: they stay with the leaves.)
+SCALED_ROLES = (("GROUND", "GRASS"),)
 
 
 @dataclass
@@ -81,6 +86,9 @@ class Plan:
     notes: list = field(default_factory=list)
     forest: object = None  # forest.Forest: instanced trees occluding every receiver (attach_forest)
     tau_by_tree: dict = field(default_factory=dict)  # τ calibrated per tree (else plan.tau)
+    # role -> factor on every tree's τ with which the analytic rungs light that role's
+    # receivers (SCALED_ROLES; calibrated apart from the leaves: ladder.calibrate); absent = 1
+    role_scale: dict = field(default_factory=dict)
     # tree -> int32 (N,): the k-means shell of each of its canopy points (kept by live AO)
     shell_labels: dict = field(default_factory=dict)
     # lighting.Lights: the native scene plan of fits and trunks, built once (lighting.lights)
