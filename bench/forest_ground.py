@@ -25,31 +25,9 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(REPO, "examples"))
 
-import canopy_scenes as cs  # noqa: E402
 import forest_scene as fs  # noqa: E402
 
 RUNGS = ["sphere", "ellipsoid", "shells", "medium", "grid", "regression", "auto"]
-
-
-def build(trees, ground_vertices, side):
-    """examples/forest_scene.py's scene: (ground object)."""
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob, do_unlink=True)
-    protos = [fs.prototype(cs.round_tree(seed=1, leaves=8000, ground=False), "RoundTree"),
-              fs.prototype(cs.conifer(seed=2, leaves=8000, ground=False), "Conifer")]
-    g = fs.ground(ground_vertices, side)
-    s = side / 2
-    emitter = bpy.data.objects.new("Emitter", fs.mesh_from_arrays(
-        "Emitter", np.float32([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]]),
-        np.int32([[0, 1, 2], [0, 2, 3]])))
-    emitter.canopy_ao.role = 'IGNORE'
-    emitter.show_instancer_for_render = emitter.show_instancer_for_viewport = False
-    bpy.context.scene.collection.objects.link(emitter)
-    half = trees // 2
-    fs.scatter(emitter, protos[0], trees - half, 1)
-    fs.scatter(emitter, protos[1], half, 2)
-    bpy.context.view_layer.update()
-    return g
 
 
 def main(argv):
@@ -65,7 +43,7 @@ def main(argv):
     from canopy_ao.blender import mesh_io, properties
     from canopy_ao.blender.job import run_bake
 
-    g = build(args.trees, args.ground_vertices, args.side)
+    g = fs.build(args.trees, args.ground_vertices, args.side)
 
     def bake(method, samples=64):
         opts = properties.scene_options(bpy.context.scene)
@@ -88,14 +66,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    try:
-        main(argv)
-    except SystemExit as e:
-        if e.code not in (None, 0):
-            print(e.code if isinstance(e.code, str) else f"exit {e.code}", file=sys.stderr)
-            sys.exit(1)
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        sys.exit(1)
+    fs.run(main)

@@ -82,6 +82,44 @@ def scatter(emitter, coll, count, seed):
     ps.use_even_distribution = True
 
 
+def build(trees, ground_vertices, side):
+    """The scene (module docstring) in the current file, replacing every object; returns the
+    ground object."""
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob, do_unlink=True)
+    protos = [prototype(cs.round_tree(seed=1, leaves=8000, ground=False), "RoundTree"),
+              prototype(cs.conifer(seed=2, leaves=8000, ground=False), "Conifer")]
+    g = ground(ground_vertices, side)
+    s = side / 2
+    emitter = bpy.data.objects.new("Emitter", mesh_from_arrays(
+        "Emitter", np.float32([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]]),
+        np.int32([[0, 1, 2], [0, 2, 3]])))
+    emitter.canopy_ao.role = 'IGNORE'
+    emitter.show_instancer_for_render = emitter.show_instancer_for_viewport = False
+    bpy.context.scene.collection.objects.link(emitter)
+    half = trees // 2
+    scatter(emitter, protos[0], trees - half, 1)
+    scatter(emitter, protos[1], half, 2)
+    bpy.context.view_layer.update()
+    return g
+
+
+def run(main):
+    """Run main(the arguments after --) as a Blender script: exit 1 on failure (Blender's
+    own exit code ignores an exception in a --python script)."""
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    try:
+        main(argv)
+    except SystemExit as e:
+        if e.code not in (None, 0):
+            print(e.code if isinstance(e.code, str) else f"exit {e.code}", file=sys.stderr)
+            sys.exit(1)
+    except Exception:
+        import traceback
+        traceback.print_exc()
+        sys.exit(1)
+
+
 def main(argv):
     ap = argparse.ArgumentParser(prog="forest_scene.py")
     ap.add_argument("--trees", type=int, default=10000)
@@ -101,25 +139,10 @@ def main(argv):
     from canopy_ao.blender.job import run_bake
 
     t0 = time.perf_counter()
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob, do_unlink=True)
-    protos = [prototype(cs.round_tree(seed=1, leaves=8000, ground=False), "RoundTree"),
-              prototype(cs.conifer(seed=2, leaves=8000, ground=False), "Conifer")]
-    g = ground(args.ground_vertices, args.side)
-    s = args.side / 2
-    emitter = bpy.data.objects.new("Emitter", mesh_from_arrays(
-        "Emitter", np.float32([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]]),
-        np.int32([[0, 1, 2], [0, 2, 3]])))
-    emitter.canopy_ao.role = 'IGNORE'
-    emitter.show_instancer_for_render = emitter.show_instancer_for_viewport = False
-    bpy.context.scene.collection.objects.link(emitter)
-    half = args.trees // 2
-    scatter(emitter, protos[0], args.trees - half, 1)
-    scatter(emitter, protos[1], half, 2)
-    bpy.context.view_layer.update()
+    g = build(args.trees, args.ground_vertices, args.side)
     t_build = time.perf_counter() - t0
     print(f"scene: {len(g.data.vertices)} ground vertices, {args.trees} trees "
-          f"({args.trees - half} round, {half} conifer) on {args.side:g} m, built in "
+          f"({args.trees - args.trees // 2} round, {args.trees // 2} conifer) on {args.side:g} m, built in "
           f"{t_build:.1f} s", flush=True)
 
     opts = properties.scene_options(bpy.context.scene)
@@ -152,14 +175,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    try:
-        main(argv)
-    except SystemExit as e:
-        if e.code not in (None, 0):
-            print(e.code if isinstance(e.code, str) else f"exit {e.code}", file=sys.stderr)
-            sys.exit(1)
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        sys.exit(1)
+    run(main)

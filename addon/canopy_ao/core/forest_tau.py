@@ -1,5 +1,5 @@
 """The instanced forest's τ, calibrated where the forest is seen: on the receivers it shades.
-No bpy. (docs/DESIGN.md, 'The forest's τ'.)
+No bpy. (docs/DESIGN.md, 'How each role is lit': the forest's τ.)
 
 A prototype's τ is fitted by its own self-bake, on its own leaves and branches: from inside
 its crown. The ground sees every instance's crown from outside, through its whole depth, and
@@ -25,10 +25,10 @@ import time
 import numpy as np
 
 from . import ladder
+from .taufit import TAU_RANGE
 from .lighting import evaluate_points, trace, traces_instances
 from .scene import Plan
 
-SCALE_RANGE = (0.02, 50.0)  # κ's search range, as ladder.calibrate's τ
 KEEP = 0.99  # κ replaces 1 only if it cuts the sample's squared error by more than 1 %
 SEED_OFFSET = 104729  # the sample's own draw (not the ladder's points)
 
@@ -79,7 +79,7 @@ def calibrate(plan: Plan, items) -> dict | None:
         return float(np.mean((np.clip(own_ao * f.ao(P, N), 0.0, 1.0) - ref) ** 2))
 
     base = err(1.0, forest)
-    x, e = ladder.golden_min(lambda v: err(math.exp(v)), *map(math.log, SCALE_RANGE))
+    x, e = ladder.golden_min(lambda v: err(math.exp(v)), *TAU_RANGE)
     scale = math.exp(x)
     kept = e < KEEP * base
     if kept:
