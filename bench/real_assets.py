@@ -96,7 +96,7 @@ def methods(sc, seen=None):
             yield m, None, 0.0, f"failed: {exc}"
     tracer, t_bvh = timed(lambda: rs.scene_tracer(sc))
     for n in RAYS:
-        ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0))
+        ao, dt = timed(lambda: rs.trace_vertices(tracer, sc, n, D, 0, shared=True))
         yield f"rays {n}", ao, dt + t_bvh, ""
     def regression_bake():  # core.bake's steps, keeping the plan: what its buried test found
         plan = core.prepare(items, core.BakeSettings(method="regression", distance=D))

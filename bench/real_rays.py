@@ -17,9 +17,10 @@ Cycles bakes at S samples are seed 0's, whose samples are the first S of seed 0'
 correlated with it and reads low (≈ √(15/17) at 64 samples); the summary gives both.
 
 Per scene and sample count S: Cycles at S samples (when baked), our rays at S samples per face
-corner as the add-on casts them (and as Cycles does: the same rays per vertex), mean of --seeds
-seeds; their ratio (docs/DESIGN.md, 'Rays against Cycles' samples': the target is ours ≤ 0.85 ×
-Cycles); the rule before (S rays per vertex dealt out to its corners) and its ratio; and the
+corner as the add-on's exact rung casts them (as many rays as Cycles' in all, spread evenly over
+the vertices: core/ray_budget.py), mean of --seeds seeds; their ratio
+(docs/DESIGN.md, 'Rays against Cycles' samples': the target is ours ≤ 0.85 × Cycles); the rule
+before (S per corner at every vertex, as Cycles) and its ratio; and the
 contact share (vertices with a ray blocked within 1e-4 of the AO distance) with the MAE there;
 the same ratio over vertices with one corner and with more (stratifying across corners is
 where ours gains; one corner against one is a stratified set against another); where faces
@@ -97,14 +98,13 @@ def main():
               f"{args.reference} samples, seed {ref_seed}")
         one = corner_counts(tracer, sc.n_vertices) == 1
         print("   S | Cycles all / unburied | ours all / unburied | ours / Cycles all / "
-              "unburied | before (S per vertex): all, ratio | contact: Cycles / ours")
+              "unburied | before (S per corner each): all, ratio | contact: Cycles / ours")
         for s in args.samples:
             cyc = rs.cycles_ao(sc, s)
-            ours = [rs.trace_vertices(tracer, sc, s, sc.distance, seed)
+            ours = [rs.trace_vertices(tracer, sc, s, sc.distance, seed, shared=True)
                     for seed in range(args.seeds)]
             e_ours = np.mean([np.abs(o - ref) for o in ours], axis=0)
-            e_old = np.mean([np.abs(rs.trace_vertices(tracer, sc, s, sc.distance, seed,
-                                                      per_corner=False) - ref)
+            e_old = np.mean([np.abs(rs.trace_vertices(tracer, sc, s, sc.distance, seed) - ref)
                              for seed in range(args.seeds)], axis=0)
             line = f"{s:4d} |"
             e_c = np.abs(cyc - ref) if cyc is not None else None
@@ -136,14 +136,15 @@ def main():
         touching, only = zero_area(sc)
         if touching.any():  # where Cycles bakes with NaN face normals (docs/DESIGN.md)
             last = args.samples[-1]
-            ours = rs.trace_vertices(tracer, sc, last, sc.distance, 0)
+            ours = rs.trace_vertices(tracer, sc, last, sc.distance, 0, shared=True)
             err = np.abs(ours - ref)
             print(f"  zero-area faces: {touching.sum()} vertices touch one (MAE at {last} rays "
                   f"{err[touching].mean():.3f}, elsewhere {err[~touching].mean():.3f}), "
                   f"{only.sum()} have only such faces; there ours {ours[only].mean():.3f} and "
                   f"Cycles {ref[only].mean():.3f} on average, MAE {err[only].mean():.3f}")
         print(f"  ({time.perf_counter() - t0:.0f} s)")
-    print("\nours / Cycles (target ≤ 0.85), all vertices / unburied; before (S per vertex); "
+    print("\nours / Cycles (target ≤ 0.85), all vertices / unburied; before (S per corner at "
+          "every vertex); "
           "against seed 0's reference (Cycles' S samples are its first S):")
     for name, s, ra, ru, rb, r0 in summary:
         if ra is not None:

@@ -185,19 +185,23 @@ void bind_raytrace(py::module_& m) {
           [](const RayTracer& self, const py::array& points, const py::array& normals,
              const py::object& samples, double distance, const py::object& seed,
              double offset, const py::object& vertex_ids, const py::object& triangle_ids,
-             const std::string& sampling, bool bent_normals, bool per_corner) {
+             const std::string& sampling, bool bent_normals, bool per_corner,
+             const py::object& point_samples) {
             RayTraceOptions o = options_arg(samples, distance, seed, offset);
             o.sampling = sampling_arg(sampling);
             o.per_corner = per_corner;
+            o.point_samples = ids_arg(point_samples, "point_samples",
+                                      static_cast<std::size_t>(py::len(points)));
             return trace(self, points, normals, o, vertex_ids, triangle_ids, bent_normals);
           },
           py::arg("points"), py::arg("normals"), py::arg("samples") = 64,
           py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("offset") = -1.0,
           py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
           py::arg("sampling") = "lattice", py::arg("bent_normals") = false,
-          py::arg("per_corner") = true,
+          py::arg("per_corner") = true, py::arg("point_samples") = py::none(),
           "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
-          "triangle_ids=None, sampling='lattice', bent_normals=False, per_corner=True) -> "
+          "triangle_ids=None, sampling='lattice', bent_normals=False, per_corner=True, "
+          "point_samples=None) -> "
           "float32 (N,), or (ao, bent) with bent_normals\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
@@ -222,6 +226,8 @@ void bind_raytrace(py::module_& m) {
           "Cycles' bake samples every corner with its full count (one set of k x samples "
           "directions dealt out to the k corners in turn; at most max(samples, 65536)); False "
           "deals `samples` rays out to the corners.\n\n"
+          "point_samples: int32 (N,), each point's own count in place of `samples` (>= 1; "
+          "ValueError otherwise).\n\n"
           "bent_normals=True also returns each point's bent normal, float32 (N, 3), world "
           "space: the normalised sum of its unblocked rays' directions (the cosine-weighted "
           "mean unoccluded direction), from the same rays as the AO. Every ray blocked: the "

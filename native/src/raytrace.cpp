@@ -12,6 +12,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
 #include <utility>
 
 #include "canopy_ao/parallel.h"
@@ -978,6 +979,13 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   if (std::isnan(options.offset) || std::isinf(options.offset)) {
     throw std::invalid_argument("offset must be finite (< 0 = automatic)");
   }
+  for (std::size_t i = 0; options.point_samples && i < points.size; ++i) {
+    if (options.point_samples[i] < 1) {
+      std::ostringstream s;
+      s << "point_samples[" << i << "] = " << options.point_samples[i] << ": each must be >= 1";
+      throw std::invalid_argument(s.str());
+    }
+  }
   check_points(points, "points");
   check_points(normals, "normals");
   if (points.size > 0 && out == nullptr) throw std::invalid_argument("out is null");
@@ -1010,12 +1018,12 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     // INV: rays[0..filled) belong to points owner[0..filled); hits are counted when flushed.
     alignas(64) RTCRay rays[kStream];
     std::uint32_t owner[kStream];
-    std::vector<int> open(end - begin, 0), cast(end - begin, samples);
+    std::vector<int> open(end - begin, 0), cast(end - begin, 1);
     std::vector<float> open_sum(bent ? 3 * (end - begin) : 0, 0.0f);  // Σ unblocked ω
     std::vector<float> xs(samples), ys(samples), zs(samples);
     // Per corner (RayTraceOptions::per_corner): k corners cast one set of k × samples rays; the
-    // lattice of each size this block meets, built once per block.
-    std::vector<std::unique_ptr<SampleSet>> sets;
+    // lattice of each size this block meets (other than `set`), built once per block.
+    std::unordered_map<int, std::unique_ptr<SampleSet>> sets;
     std::size_t filled = 0;
     std::int32_t skip[kStream];  // bake-point mode: the triangle each batched ray skips
     std::vector<Corner> corners;
@@ -1042,7 +1050,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     for (std::size_t i = begin; i < end; ++i) {
       const Vec3 nn = unit_or_zero(normals[i]);
       if (!(length(nn) > 0.0f)) {  // zero normal: documented fallback, no hemisphere
-        open[i - begin] = samples;
+        open[i - begin] = 1;
         continue;
       }
       Vec3 t, b;
@@ -1080,18 +1088,19 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const std::size_t k = corners.size();
       // Per corner: k × samples, at most kMaxRaysPerVertex (or samples if more): a fan of
       // thousands of faces stays finite.
+      const int samples_here = options.point_samples ? options.point_samples[i] : samples;
       const int rays_here = static_cast<int>(
-          vertex_ray_count(static_cast<std::int64_t>(k), samples, options.per_corner));
+          vertex_ray_count(static_cast<std::int64_t>(k), samples_here, options.per_corner));
       const SampleSet* here = &set;
-      if (rays_here != samples) {
-        if (sets.size() < k + 1) sets.resize(k + 1);
-        if (!sets[k]) sets[k] = std::make_unique<SampleSet>(rays_here);
-        here = sets[k].get();
-        if (xs.size() < static_cast<std::size_t>(rays_here)) {
-          xs.resize(rays_here);
-          ys.resize(rays_here);
-          zs.resize(rays_here);
-        }
+      if (rays_here != samples && options.sampling == Sampling::kLattice) {
+        std::unique_ptr<SampleSet>& built = sets[rays_here];
+        if (!built) built = std::make_unique<SampleSet>(rays_here);
+        here = built.get();
+      }
+      if (xs.size() < static_cast<std::size_t>(rays_here)) {
+        xs.resize(rays_here);
+        ys.resize(rays_here);
+        zs.resize(rays_here);
       }
       cast[local] = rays_here;
       // Keyed by the vertex id where there is one: the same rays in any split into calls.

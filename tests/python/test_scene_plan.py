@@ -13,7 +13,7 @@ import pytest
 sys.path.insert(0, os.path.dirname(__file__))
 
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import forest, grass_layer, lighting  # noqa: E402
+from canopy_ao.core import forest, grass_layer, lighting, ray_budget  # noqa: E402
 from canopy_ao.core.native import _core  # noqa: E402
 import lighting_reference  # noqa: E402
 import tree_scene as ts  # noqa: E402
@@ -325,8 +325,9 @@ def test_the_exact_rung_multiplies_the_forest_only_when_its_rays_miss_the_instan
     ground = next(it for it in items if it.role == "GROUND")
     got = core.evaluate_item(plan, ground).ao
     own = {"vertex_ids": np.arange(len(ground.positions), dtype=np.int32)}
-    rays = lighting.trace(plan, ground.positions, ground.normals, 16,
-                          own=lighting.own_ids(plan, ground.name, own))
+    own = lighting.own_ids(plan, ground.name, own)
+    assert ray_budget.applies(plan, ground.name, own)  # the exact rung's rays at vertices
+    rays = ray_budget.trace(plan, ground.positions, ground.normals, own)
     want = rays if mesh else np.clip(rays * lighting_reference.forest_ao(
         plan.forest, ground.positions, ground.normals), 0, 1)
     np.testing.assert_allclose(got, want, atol=1e-6)

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from . import ray_budget
 from .native import CanopyAOError, _core
 from .scene import Plan
 
@@ -134,7 +135,10 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     elif method == "hybrid" and role == "GRASS":
         method = "grid"
     if method == "raytrace":
-        return trace(plan, p, n, plan.settings.samples, own=own_ids(plan, grass_key, own))
+        ids = own_ids(plan, grass_key, own)
+        if ray_budget.applies(plan, grass_key, ids):
+            return ray_budget.trace(plan, p, n, ids)
+        return trace(plan, p, n, plan.settings.samples, own=ids)
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     if method == "regression":

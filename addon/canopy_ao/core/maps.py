@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import lighting
+from . import lighting, ray_budget
 from .native import CanopyAOError
 from .scene import Plan, SceneItem, own_primitives
 
@@ -74,6 +74,7 @@ def ensure_tracer(plan: Plan, items) -> None:
     protos = plan.forest.prototypes if plan.forest is not None else None
     if plan.tracer is None:
         plan.tracer = lighting.build_tracer(items, plan.tracer_bases, protos)
+        plan.tracer_items = list(items)  # the receivers the bent normals' rays are spread over
         plan.notes.append("bent normals: built the ray tracer (the AO's method traces none)")
     if protos and not lighting.traces_instances(plan) and not any(
             n.startswith("bent normals: rays do not") for n in plan.notes):
@@ -103,7 +104,10 @@ def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     own = lighting.own_ids(plan, item.name, own_primitives(item, vertices, triangles))
-    ao, bent = lighting.trace(plan, p, n, plan.settings.samples, own=own, bent_normals=True)
+    if ray_budget.applies(plan, item.name, own):  # the exact rung's rays (ray_budget.py)
+        ao, bent = ray_budget.trace(plan, p, n, own, bent_normals=True)
+    else:
+        ao, bent = lighting.trace(plan, p, n, plan.settings.samples, own=own, bent_normals=True)
     bent = np.asarray(bent, np.float32)
     return (np.asarray(ao, np.float32), bent) if with_ao else bent
 

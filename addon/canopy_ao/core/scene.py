@@ -100,6 +100,9 @@ class Plan:
     # frames, which have no tracer), and -> how many receivers a bake set to 0 so
     buried: dict = field(default_factory=dict)
     buried_count: dict = field(default_factory=dict)
+    # ("mean corners", id(tracer)) -> the mean corners per vertex of the bake's vertex
+    # receivers: the exact rung's rays per vertex over the samples (ray_budget.py)
+    ray_shares: dict = field(default_factory=dict)
 
     def taus(self):
         """What lighting takes as τ: plan.tau, or {tree: τ, None: plan.tau} per tree."""

@@ -95,7 +95,8 @@
 //  - triangle index outside [0, V): std::invalid_argument;
 //  - an own vertex id outside [0, V) or own triangle id outside [0, M) (other than −1 = none):
 //    std::invalid_argument;
-//  - samples < 1, distance ≤ 0 or NaN, offset NaN: std::invalid_argument;
+//  - samples < 1 (or a point's own count), distance ≤ 0 or NaN, offset NaN:
+//    std::invalid_argument;
 //  - a failure reported by Embree (out of memory, ...): canopy_ao::Error with Embree's message.
 //
 // Bent normals (docs/DESIGN.md, 'Bent normals'): on request, each point's cosine-weighted mean
@@ -163,6 +164,11 @@ struct RayTraceOptions {
   /// (k times fewer rays; docs/DESIGN.md, 'Rays against Cycles' samples'). Other receivers have
   /// one start and cast `samples` either way. A vertex casts at most max(samples, 65,536) rays.
   bool per_corner = true;
+  /// Per-point sample counts (N entries, each ≥ 1, taking `samples`' place point by point), or
+  /// null: every point takes `samples`. The add-on's vertex bakes give every vertex the same
+  /// rays whatever its corners (per_corner false; docs/DESIGN.md, 'Rays against Cycles'
+  /// samples').
+  const std::int32_t* point_samples = nullptr;
 };
 
 /// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no
