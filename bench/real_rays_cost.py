@@ -1,11 +1,13 @@
 """What Cycles' bake point costs on a real tree: one exact-rung trace of every vertex.
 
-    /usr/bin/python3 bench/real_rays_cost.py SCENE bake|dealt|before [--samples 256]
+    /usr/bin/python3 bench/real_rays_cost.py SCENE bake|corner|dealt|before [--samples 256]
 
 SCENE is a Sapling export in bench/out/real (bench/real_scenes.py). `bake` traces as the add-on
-does (vertex normals: each vertex at Cycles' bake point, a ROBUST scene, `--samples` rays at
-every face corner), `dealt` the same tracer with `--samples` rays per vertex dealt out to its
-corners (per_corner=False), `before` without normals (the rule before the bake point). Time
+does (vertex normals: each vertex at Cycles' bake point, a ROBUST scene, Cycles' rays at
+`--samples` in all spread evenly over the vertices: core/ray_budget.py), `corner` the same
+tracer with `--samples` rays at every face corner (Cycles' deal, the add-on's rule before),
+`dealt` with `--samples` rays per vertex dealt out to its corners (per_corner=False, a k-th of
+the rays), `before` without normals (the rule before the bake point). Time
 them against each other with farm-bench, e.g.
 
     farm-bench -n 5 --timeout 400 \\
@@ -28,14 +30,17 @@ from canopy_ao import _core  # noqa: E402
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scene")
-    ap.add_argument("rule", choices=("bake", "dealt", "before"))
+    ap.add_argument("rule", choices=("bake", "corner", "dealt", "before"))
     ap.add_argument("--samples", type=int, default=256)
     a = ap.parse_args()
     sc = rs.load(a.scene)
     tracer = rs.scene_tracer(sc) if a.rule != "before" else _core.RayTracer(sc.V, sc.T)
     ids = np.arange(sc.n_vertices, dtype=np.int32)
-    tracer.ao(sc.V, sc.N, samples=a.samples, distance=sc.distance, vertex_ids=ids,
-              per_corner=a.rule == "bake")
+    if a.rule == "bake":
+        rs.trace_vertices(tracer, sc, a.samples, sc.distance, 0, shared=True)
+    else:
+        tracer.ao(sc.V, sc.N, samples=a.samples, distance=sc.distance, vertex_ids=ids,
+                  per_corner=a.rule == "corner")
 
 
 if __name__ == "__main__":
