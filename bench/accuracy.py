@@ -99,8 +99,15 @@ class Prepared:
         """The scene's tracer as the add-on builds it (vertex normals: Cycles' bake point)."""
         return _core.RayTracer(self.V, self.T, normals=np.ascontiguousarray(self.N, np.float32))
 
-    def trace(self, tracer, samples, distance, seed, rows=slice(None)):
-        """AO at vertices ``rows``, each its own receiver (as the add-on's exact rung)."""
+    def trace(self, tracer, samples, distance, seed, rows=slice(None), shared=False):
+        """AO at vertices ``rows``, each its own receiver: ``samples`` rays at every face
+        corner, or (shared, every vertex) as the add-on's exact rung casts them, the same rays
+        in all spread evenly over the vertices (core/ray_budget.py)."""
+        if shared:
+            from canopy_ao.core import ray_budget
+            per_vertex = samples * tracer.corners_per_vertex
+            return np.asarray(ray_budget.trace_even(tracer, self.V, self.N, self.ids, samples,
+                                                    per_vertex, seed, distance), np.float32)
         return np.asarray(tracer.ao(self.V[rows], self.N[rows], samples=samples,
                                     distance=distance, seed=seed, vertex_ids=self.ids[rows]),
                           np.float32)
@@ -268,7 +275,7 @@ def method_runs(prep, ref, args):
     if hasattr(_core, "RayTracer"):
         tracer, t_build = timed(prep.tracer, 1)
         for n in args.ray_samples:
-            ao, te = timed(lambda: prep.trace(tracer, n, D, 0), args.repeats)
+            ao, te = timed(lambda: prep.trace(tracer, n, D, 0, shared=True), args.repeats)
             yield "raytrace", "raytrace", f"{n} rays", math.nan, "", ao, t_build, te, ""
 
 

@@ -136,8 +136,9 @@ OPTIONS = (
            "shorten paths inside a crown", min=0.0, unit='LENGTH',
            cli_default="the World's AO distance, as Cycles uses it; unlimited without a world"),
     Option("samples", "int", 64, "Samples", "Rays per face corner for the ray-traced method, "
-           "as Cycles' bake samples count (a vertex on k faces casts k times this many; a "
-           "texel one)", min=1, max=65536, soft_max=1024),
+           "as Cycles' bake counts samples: the bake casts Cycles' rays (a vertex on k faces "
+           "k times this many, a texel this many), spread evenly over the vertices",
+           min=1, max=65536, soft_max=1024),
     Option("time_budget", "float", 2.0, "Time Budget",
            "Auto: seconds the bake may take; richer models predicted to take longer are not "
            "chosen, and rays over it are weighed at half the samples, halved again down to 16 "
