@@ -117,13 +117,7 @@ def test_bent_normals_of_a_baked_tree_whatever_the_rung():
 
 def _tree_items():
     """The small tree scene (leaves, trunk, ground) as scene items."""
-    items = []
-    for name, (p, t) in tree_scene.scene(False).items():
-        role = {"Leaves": "CANOPY", "Trunk": "TRUNK", "Ground": "GROUND"}[name]
-        q = np.asarray(p, np.float32)
-        items.append(core.SceneItem(name, role, "" if role == "GROUND" else "T", q,
-                                    tree_scene.vertex_normals(q, t), t))
-    return items
+    return tree_scene.scene_items(core)
 
 
 def test_under_the_exact_rung_one_trace_gives_the_ao_and_the_bent_normals():

@@ -68,13 +68,7 @@ def test_thickness_of_a_baked_tree_and_its_scaled_copy():
     leaves more than outer ones, the ground far from the crown 0, and a tree 100 times larger,
     or lit by another rung, the same thickness."""
     def items(scale):
-        out = []
-        for name, (p, t) in tree_scene.scene(False).items():
-            role = {"Leaves": "CANOPY", "Trunk": "TRUNK", "Ground": "GROUND"}[name]
-            q = np.asarray(p, np.float32) * scale
-            out.append(core.SceneItem(name, role, "" if role == "GROUND" else "T", q,
-                                      tree_scene.vertex_normals(q, t), t))
-        return out
+        return tree_scene.scene_items(core, scale)
 
     results = []
     for scale in (1.0, 100.0):

@@ -17,13 +17,7 @@ import tree_scene  # noqa: E402
 
 def _items():
     """The small tree scene (leaves, trunk, ground) as scene items."""
-    items = []
-    for name, (p, t) in tree_scene.scene(False).items():
-        role = {"Leaves": "CANOPY", "Trunk": "TRUNK", "Ground": "GROUND"}[name]
-        q = np.asarray(p, np.float32)
-        items.append(core.SceneItem(name, role, "" if role == "GROUND" else "T", q,
-                                    tree_scene.vertex_normals(q, t), t))
-    return items
+    return tree_scene.scene_items(core)
 
 
 @pytest.fixture(scope="module")

@@ -88,3 +88,15 @@ def scene(with_grass=False):
     if with_grass:
         out["Grass"] = grass()
     return out
+
+
+def scene_items(core, scale=1.0):
+    """scene() without grass as the add-on's core.SceneItems (``core``: canopy_ao.core, passed
+    in so this module imports no add-on), roles by ROLE, tree "T" but the ground's, every
+    coordinate times ``scale``."""
+    items = []
+    for name, (p, t) in scene(False).items():
+        q = np.asarray(p, np.float32) * scale
+        items.append(core.SceneItem(name, ROLE[name], "" if name == "Ground" else "T", q,
+                                    vertex_normals(q, t), t))
+    return items
