@@ -886,6 +886,50 @@ TEST(BakePoint, EveryCornerCastsTheFullSampleCount) {
             tracer.ao(free_point.points(), free_point.normals(), dealt));
 }
 
+TEST(BakePoint, EachPointCastsItsOwnSampleCount) {
+  // point_samples: a point's count in place of `samples`, each point as if traced alone at it
+  // (the add-on spreads Cycles' rays evenly: a count per vertex, dealt out to its corners).
+  Mesh m = hexagon_fan();
+  m.quad({-0.2f, -0.3f, 0.15f}, {0.6f, -0.3f, 0.15f}, {0.6f, 0.5f, 0.15f}, {-0.2f, 0.5f, 0.15f});
+  const std::vector<float> up = same_normals(m, {0, 0, 1});
+  const RayTracer tracer = m.baking(up);
+  std::vector<std::int32_t> ids = {0, 1, 2, 0};
+  std::vector<float> pts, nrm;
+  for (std::int32_t v : ids) {
+    const Vec3 x = m.view()[static_cast<std::size_t>(v)];
+    pts.insert(pts.end(), {x.x, x.y, x.z});
+    nrm.insert(nrm.end(), {0.0f, 0.0f, 1.0f});
+  }
+  const PointsView p{pts.data(), ids.size()}, n{nrm.data(), ids.size()};
+  OwnPrimitives own;
+  own.vertex_ids = ids.data();
+  const std::vector<std::int32_t> counts = {12, 6, 24, 48};
+  for (const bool per_corner : {true, false}) {
+    RayTraceOptions each = opts(8);
+    each.per_corner = per_corner;
+    each.point_samples = counts.data();
+    std::vector<float> got(ids.size(), -1.0f);
+    tracer.ao(p, n, own, each, got.data());
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      RayTraceOptions alone = opts(counts[i]);
+      alone.per_corner = per_corner;
+      std::vector<float> want(ids.size(), -1.0f);
+      tracer.ao(p, n, own, alone, want.data());
+      EXPECT_EQ(got[i], want[i]) << "point " << i << (per_corner ? " per corner" : " dealt");
+    }
+    if (per_corner) {  // the hub (under the roof) at 12 and at 48: other rays, other AO
+      EXPECT_NE(got[0], got[3]);
+      EXPECT_GT(got[0], 0.05f);
+      EXPECT_LT(got[0], 0.95f);
+    }
+  }
+  const std::vector<std::int32_t> bad = {12, 0, 24, 48};
+  RayTraceOptions zero = opts(8);
+  zero.point_samples = bad.data();
+  std::vector<float> out(ids.size());
+  EXPECT_THROW(tracer.ao(p, n, own, zero, out.data()), std::invalid_argument);
+}
+
 TEST(BakePoint, CornersPerVertexCountsFacesWithArea) {
   const Mesh fan = hexagon_fan();
   const std::vector<float> up = same_normals(fan, {0, 0, 1});

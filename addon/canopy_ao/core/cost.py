@@ -69,7 +69,7 @@ def receiver_count(plan, items) -> int:
     return sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
 
 
-def _receiver_items(plan, names=None):
+def receiver_items(plan, names=None):
     """(item, kind, count) of each receiver item the tracer holds that a bake with this plan
     evaluates: named in ``names`` (None: every one) and, when the plan has targets, one of them
     (its kind, "vertex" or "texel", and count from the target; else every vertex)."""
@@ -93,7 +93,7 @@ def corners(plan, names=None, samples=None) -> float:
         return 1.0
     samples = int(plan.settings.samples if samples is None else samples)
     rays = count = 0
-    for it, kind, n in _receiver_items(plan, names):
+    for it, kind, n in receiver_items(plan, names):
         base = plan.tracer_bases.get(it.name)
         rays += (int(tracer.vertex_rays(base[0], n, samples))
                  if base is not None and kind == "vertex" else n * samples)
@@ -112,7 +112,7 @@ def buried_test_rays(plan, receivers: int, names=None) -> float:
     if plan.tracer is None or receivers <= 0:
         return 0.0
     tested = total = 0
-    for it, _kind, n in _receiver_items(plan, names):
+    for it, _kind, n in receiver_items(plan, names):
         total += n
         tested += n if it.role in BURIED_ROLES else 0
     return float(receivers) * (tested / total if total else 0.0) * BURIED_RECEIVER_RAYS
