@@ -482,8 +482,9 @@ def test_vertex_rays_are_per_corner_and_counted_so():
         tracer.vertex_rays(5, 5, 16)
     with pytest.raises(ValueError, match="samples"):
         tracer.vertex_rays(0, 1, 0)
-    # The cost model's raytrace work is receivers × samples × their corners × log2(triangles):
-    # the corners of the receivers it is asked about (pyramid 12 / 5, roof 6 / 4), 1 per texel.
+    # The cost model's raytrace work is the rays the bake casts × log2(triangles): Cycles' rays
+    # (samples × 18 corners) spread evenly over the 9 vertices (ray_budget.py), 2 × samples
+    # each, for the pyramid (12 / 5 corners) as for the roof (6 / 4); 1 per texel.
     pyramid = engine.SceneItem("P", "GROUND", "", v[:5], n[:5], t[:4])
     roof = engine.SceneItem("R", "TRUNK", "", v[5:], n[5:], t[4:] - 5)
     settings = engine.BakeSettings(method="raytrace", samples=16)
@@ -492,13 +493,13 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     unit, work = cost.work(plan, "raytrace", 9)
     assert unit == "bvh_step"
     assert abs(work - 9 * 16 * 2.0 * np.log2(6)) < 1e-9
-    assert abs(cost.corners(plan, ("P",)) - 2.4) < 1e-12
-    assert abs(cost.corners(plan, ("R",)) - 1.5) < 1e-12
+    assert abs(cost.corners(plan, ("P",)) - 2.0) < 1e-12
+    assert abs(cost.corners(plan, ("R",)) - 2.0) < 1e-12
     _u, roof_work = cost.work(plan, "raytrace", 4, names=("R",))
-    assert abs(roof_work - 4 * 16 * 1.5 * np.log2(6)) < 1e-9
+    assert abs(roof_work - 4 * 16 * 2.0 * np.log2(6)) < 1e-9
     _results, report = engine.bake([pyramid, roof], settings)
     predicted = {k: o["predicted_seconds"] for k, o in report["objects"].items()}
-    assert abs(predicted["P"] / predicted["R"] - (5 * 2.4) / (4 * 1.5)) < 1e-9
+    assert abs(predicted["P"] / predicted["R"] - 5 / 4) < 1e-9
     # The receivers counted are the bake's targets: a texel has one corner, an object not
     # baked is not counted.
     both = [pyramid, roof]

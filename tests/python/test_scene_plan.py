@@ -327,7 +327,7 @@ def test_the_exact_rung_multiplies_the_forest_only_when_its_rays_miss_the_instan
     own = {"vertex_ids": np.arange(len(ground.positions), dtype=np.int32)}
     own = lighting.own_ids(plan, ground.name, own)
     assert ray_budget.applies(plan, ground.name, own)  # the exact rung's rays at vertices
-    rays = ray_budget.trace(plan, ground.positions, ground.normals, own)
+    rays = ray_budget.trace(plan, ground.name, ground.positions, ground.normals, own)
     want = rays if mesh else np.clip(rays * lighting_reference.forest_ao(
         plan.forest, ground.positions, ground.normals), 0, 1)
     np.testing.assert_allclose(got, want, atol=1e-6)

@@ -8,9 +8,10 @@ Work per receiver, counted from the plan:
 - medium: as shells, each a medium-table lookup (a costlier unit);
 - grid: DensityAOOptions.directions line integrals, each ~kExactVoxels + 2 log2(resolution)
   voxel steps (exact DDA near, mip steps growing with distance: density_grid.h);
-- raytrace: samples rays per face corner (a vertex at Cycles' bake point casts its sample
-  count at each of its corners, as Cycles does), counted over the receivers' own vertices
-  (RayTracer.vertex_rays; a texel has one corner), each ~log2(triangles) BVH steps;
+- raytrace: Cycles' rays (samples at each face corner of a vertex at its bake point), spread
+  evenly over the bake's vertices (ray_budget.py: each vertex the multiple of its corners
+  nearest to samples × their mean), counted vertex by vertex over the receivers (a texel
+  casts samples), each ~log2(triangles) BVH steps;
 - regression: one trilinear look-up of the swept optical depth per feature direction
   (occlusion_features.h), counted as a voxel step each;
 - hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps;
@@ -86,17 +87,24 @@ def corners(plan, names=None, samples=None) -> float:
     """Rays per sample a receiver of this plan casts with the exact rung at ``samples`` rays
     per corner (None: the settings'): the mean face corners per receiver over the items named
     ``names`` (None: the plan's targets, else every receiver the tracer holds), counted by the
-    tracer (RayTracer.vertex_rays, its per-vertex cap included); a texel has one corner, and
-    so has a vertex the tracer does not hold by name."""
+    tracer: at Cycles' bake point its rays spread evenly over the bake's vertices
+    (ray_budget.object_rays), else RayTracer.vertex_rays (its per-vertex cap included); a
+    texel has one corner, and so has a vertex the tracer does not hold by name."""
+    from . import ray_budget
     tracer = plan.tracer
     if tracer is None:
         return 1.0
     samples = int(plan.settings.samples if samples is None else samples)
+    even = ray_budget.shared(plan)  # vertex rays spread evenly over the bake's vertices
     rays = count = 0
     for it, kind, n in receiver_items(plan, names):
         base = plan.tracer_bases.get(it.name)
-        rays += (int(tracer.vertex_rays(base[0], n, samples))
-                 if base is not None and kind == "vertex" else n * samples)
+        if base is None or kind != "vertex":
+            rays += n * samples
+        elif even:
+            rays += ray_budget.object_rays(plan, it.name, samples)
+        else:
+            rays += int(tracer.vertex_rays(base[0], n, samples))
         count += n
     if count == 0:  # no receiver held by name: the mesh's mean
         return float(tracer.corners_per_vertex)

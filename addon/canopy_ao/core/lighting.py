@@ -137,7 +137,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "raytrace":
         ids = own_ids(plan, grass_key, own)
         if ray_budget.applies(plan, grass_key, ids):
-            return ray_budget.trace(plan, p, n, ids)
+            return ray_budget.trace(plan, grass_key, p, n, ids)
         return trace(plan, p, n, plan.settings.samples, own=ids)
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))

@@ -105,7 +105,7 @@ def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     own = lighting.own_ids(plan, item.name, own_primitives(item, vertices, triangles))
     if ray_budget.applies(plan, item.name, own):  # the exact rung's rays (ray_budget.py)
-        ao, bent = ray_budget.trace(plan, p, n, own, bent_normals=True)
+        ao, bent = ray_budget.trace(plan, item.name, p, n, own, bent_normals=True)
     else:
         ao, bent = lighting.trace(plan, p, n, plan.settings.samples, own=own, bent_normals=True)
     bent = np.asarray(bent, np.float32)

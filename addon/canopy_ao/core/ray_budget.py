@@ -37,7 +37,7 @@ def applies(plan, name, own) -> bool:
     own vertex (own: the tracer-mesh ids, lighting.own_ids), the object in the tracer."""
     ids = (own or {}).get("vertex_ids")
     return (shared(plan) and ids is not None and plan.tracer_bases.get(name) is not None
-            and bool(np.all(ids >= 0)))
+            and bool(np.all(ids >= 0)) and any(it.name == name for it in plan.tracer_items))
 
 
 def mean_corners(plan) -> float:
@@ -68,21 +68,43 @@ def corners_of(tracer, ids) -> np.ndarray:
     return np.array([tracer.vertex_rays(int(v), 1, 1) for v in ids], np.int64)
 
 
-def trace_even(tracer, p, n, ids, samples, per_vertex, seed=0, distance=math.inf, **extra):
+def object_corners(plan, name) -> np.ndarray:
+    """int64 (V,): the corners of each vertex of object ``name`` (held by the tracer under
+    that name), counted once per plan and tracer."""
+    key = ("corners", name, id(plan.tracer))
+    got = plan.ray_shares.get(key)
+    if got is None:
+        item = next(it for it in plan.tracer_items if it.name == name)
+        base = plan.tracer_bases[name][0]
+        got = plan.ray_shares[key] = corners_of(
+            plan.tracer, range(base, base + len(item.positions)))
+    return got
+
+
+def object_rays(plan, name, samples) -> int:
+    """The rays the exact rung casts at the vertices of object ``name`` at ``samples``: each
+    vertex vertex_rays(its corners, samples × mean_corners) (the cost model's count)."""
+    return int(vertex_rays(object_corners(plan, name), samples * mean_corners(plan)).sum())
+
+
+def trace_even(tracer, p, n, ids, samples, per_vertex, seed=0, distance=math.inf,
+               corners=None, **extra):
     """AO float32 (N,) of tracer vertices ids (int32 (N,)) at p, n, each casting
-    vertex_rays(its corners, per_vertex) rays dealt out to its corners (extra: more
-    RayTracer.ao arguments, bent_normals=True)."""
-    rays = vertex_rays(corners_of(tracer, ids), per_vertex)
+    vertex_rays(its corners, per_vertex) rays dealt out to its corners (corners: theirs, else
+    counted here; extra: more RayTracer.ao arguments, bent_normals=True)."""
+    rays = vertex_rays(corners_of(tracer, ids) if corners is None else corners, per_vertex)
     return tracer.ao(np.ascontiguousarray(p, np.float32), np.ascontiguousarray(n, np.float32),
                      samples=int(samples), distance=distance, seed=int(seed),
                      vertex_ids=np.ascontiguousarray(ids, np.int32), per_corner=False,
                      point_samples=rays, **extra)
 
 
-def trace(plan, p, n, own, **extra):
-    """The exact rung's AO float32 (N,) of an object's vertex receivers (own: the tracer-mesh
-    ids, lighting.own_ids) at the plan's samples, spread evenly (module doc)."""
+def trace(plan, name, p, n, own, **extra):
+    """The exact rung's AO float32 (N,) of object ``name``'s vertex receivers (own: the
+    tracer-mesh ids, lighting.own_ids) at the plan's samples, spread evenly (module doc)."""
     s = plan.settings
     d = float(s.distance) if s.distance > 0 else math.inf
-    return trace_even(plan.tracer, p, n, own["vertex_ids"], s.samples,
-                      s.samples * mean_corners(plan), s.seed, d, **extra)
+    ids = own["vertex_ids"]
+    corners = object_corners(plan, name)[ids.astype(np.int64) - plan.tracer_bases[name][0]]
+    return trace_even(plan.tracer, p, n, ids, s.samples, s.samples * mean_corners(plan),
+                      s.seed, d, corners=corners, **extra)
