@@ -105,9 +105,7 @@ class Prepared:
         in all spread evenly over the vertices (core/ray_budget.py)."""
         if shared:
             from canopy_ao.core import ray_budget
-            per_vertex = samples * tracer.corners_per_vertex
-            return np.asarray(ray_budget.trace_even(tracer, self.V, self.N, self.ids, samples,
-                                                    per_vertex, seed, distance), np.float32)
+            return ray_budget.trace_mesh(tracer, self.V, self.N, samples, seed, distance)
         return np.asarray(tracer.ao(self.V[rows], self.N[rows], samples=samples,
                                     distance=distance, seed=seed, vertex_ids=self.ids[rows]),
                           np.float32)

@@ -147,12 +147,10 @@ def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None), per_co
     per face corner (as Cycles), or dealt out to the corners (per_corner=False, an older rule).
     shared=True: as the add-on's exact rung bakes the scene's vertices (every one a receiver):
     Cycles' rays in all, spread evenly over the vertices (core/ray_budget.py)."""
-    ids = np.arange(sc.n_vertices, dtype=np.int32)[rows]
     if shared:
         from canopy_ao.core import ray_budget
-        per_vertex = samples * tracer.vertex_rays(0, sc.n_vertices, 1) / sc.n_vertices
-        return np.asarray(ray_budget.trace_even(tracer, sc.V[rows], sc.N[rows], ids, samples,
-                                                per_vertex, seed, distance), np.float32)
+        return ray_budget.trace_mesh(tracer, sc.V, sc.N, samples, seed, distance, rows)
+    ids = np.arange(sc.n_vertices, dtype=np.int32)[rows]
     return np.asarray(tracer.ao(sc.V[rows], sc.N[rows], samples=samples, distance=distance,
                                 seed=seed, vertex_ids=ids, per_corner=per_corner), np.float32)
 

@@ -6,6 +6,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -245,6 +246,18 @@ void bind_raytrace(py::module_& m) {
            "The rays a bake of the tracer's vertices [first, first + count) casts at `samples` "
            "per face corner (each vertex at Cycles' bake point): what the cost model counts. "
            "ValueError if the range is not in the mesh or samples < 1.")
+      .def(
+          "vertex_corners",
+          [](const RayTracer& self, std::size_t first, std::size_t count) {
+            std::vector<std::int32_t> c = self.vertex_corners(first, count);
+            py::array_t<std::int32_t> out(static_cast<py::ssize_t>(c.size()));
+            std::copy(c.begin(), c.end(), out.mutable_data());
+            return out;
+          },
+          py::arg("first"), py::arg("count"),
+          "int32 (count,): each of the tracer's vertices [first, first + count)'s corner count "
+          "(its rays at one sample per corner, vertex_rays(v, 1, 1); at least 1, 1 without "
+          "vertex normals). ValueError if the range is not in the mesh.")
       .def_property_readonly("auto_offset", &RayTracer::auto_offset,
                              "The origin offset used when offset < 0, in scene units.")
       .def("__repr__", [](const RayTracer& self) {

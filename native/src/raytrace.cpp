@@ -948,6 +948,22 @@ std::uint64_t RayTracer::vertex_rays(std::size_t first, std::size_t count, int s
   return total;
 }
 
+std::vector<std::int32_t> RayTracer::vertex_corners(std::size_t first, std::size_t count) const {
+  const Impl& m = *impl_;
+  if (first > m.vertex_count || count > m.vertex_count - first) {
+    std::ostringstream s;
+    s << "vertices [" << first << ", " << first + count << ") are not in the tracer's "
+      << m.vertex_count;
+    throw std::invalid_argument(s.str());
+  }
+  std::vector<std::int32_t> out(count, 1);
+  if (m.corner_first.empty()) return out;
+  for (std::size_t i = 0; i < count; ++i) {
+    out[i] = static_cast<std::int32_t>(vertex_ray_count(m.corner_total(first + i), 1, true));
+  }
+  return out;
+}
+
 // === Methods
 void RayTracer::ao(PointsView points, PointsView normals, const RayTraceOptions& options,
                    float* out) const {

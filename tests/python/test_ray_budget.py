@@ -71,7 +71,7 @@ def test_every_vertex_casts_cycles_mean_rays_whole_corners_each():
 def test_the_bake_casts_cycles_rays_the_same_whole_or_in_chunks():
     items = _items()
     plan = core.prepare(items, core.BakeSettings(method="raytrace", samples=16, seed=3))
-    assert ray_budget.shared(plan)
+    assert ray_budget.spreads(plan)
     k = plan.tracer.corners_per_vertex  # every item a receiver: the tracer's whole mesh
     assert ray_budget.mean_corners(plan) == pytest.approx(k) and k > 1.2
     spent = sum(ray_budget.vertex_rays(ray_budget.corners_of(plan.tracer, ids), 16 * k).sum()
@@ -109,3 +109,16 @@ def test_the_same_rays_spread_evenly_miss_less_than_cycles_deal(traced):
         err_c.append(np.abs(cycles_deal - ref).mean())
         err_e.append(np.abs(even - ref).mean())
     assert np.mean(err_e) < 0.92 * np.mean(err_c), (np.mean(err_e), np.mean(err_c))
+
+
+def test_vertex_corners_are_each_vertexs_rays_at_one_sample(traced):
+    """RayTracer.vertex_corners: vertex_rays(v, 1, 1) for every vertex in one call."""
+    _items_, tracer, _ids = traced
+    got = tracer.vertex_corners(0, tracer.vertex_count)
+    assert got.dtype == np.int32 and len(got) == tracer.vertex_count
+    want = [tracer.vertex_rays(v, 1, 1) for v in range(tracer.vertex_count)]
+    np.testing.assert_array_equal(got, want)
+    assert got.min() >= 1 and got.max() > 1
+    np.testing.assert_array_equal(tracer.vertex_corners(5, 3), want[5:8])
+    with pytest.raises(ValueError, match="not in the tracer"):
+        tracer.vertex_corners(tracer.vertex_count - 1, 2)

@@ -95,7 +95,7 @@ def corners(plan, names=None, samples=None) -> float:
     if tracer is None:
         return 1.0
     samples = int(plan.settings.samples if samples is None else samples)
-    even = ray_budget.shared(plan)  # vertex rays spread evenly over the bake's vertices
+    even = ray_budget.spreads(plan)  # vertex rays spread evenly over the bake's vertices
     rays = count = 0
     for it, kind, n in receiver_items(plan, names):
         base = plan.tracer_bases.get(it.name)

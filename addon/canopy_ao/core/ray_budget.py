@@ -26,17 +26,17 @@ import numpy as np
 from . import cost
 
 
-def shared(plan) -> bool:
+def spreads(plan) -> bool:
     """Whether the plan's vertex receivers start at Cycles' bake point (a tracer with vertex
     normals: each has corners), where their rays are spread evenly."""
     return plan.tracer is not None and plan.tracer.has_vertex_normals
 
 
 def applies(plan, name, own) -> bool:
-    """Whether these receivers of object ``name`` are spread evenly (shared): every one its
+    """Whether these receivers of object ``name`` are spread evenly (spreads): every one its
     own vertex (own: the tracer-mesh ids, lighting.own_ids), the object in the tracer."""
     ids = (own or {}).get("vertex_ids")
-    return (shared(plan) and ids is not None and plan.tracer_bases.get(name) is not None
+    return (spreads(plan) and ids is not None and plan.tracer_bases.get(name) is not None
             and bool(np.all(ids >= 0)) and any(it.name == name for it in plan.tracer_items))
 
 
@@ -64,8 +64,8 @@ def vertex_rays(corners, per_vertex) -> np.ndarray:
 
 
 def corners_of(tracer, ids) -> np.ndarray:
-    """int64 (N,): each tracer vertex's corners (its rays at one sample per corner)."""
-    return np.array([tracer.vertex_rays(int(v), 1, 1) for v in ids], np.int64)
+    """int64 (N,): each tracer vertex's corners (RayTracer.vertex_corners) at ids."""
+    return tracer.vertex_corners(0, tracer.vertex_count).astype(np.int64)[ids]
 
 
 def object_corners(plan, name) -> np.ndarray:
@@ -75,9 +75,8 @@ def object_corners(plan, name) -> np.ndarray:
     got = plan.ray_shares.get(key)
     if got is None:
         item = next(it for it in plan.tracer_items if it.name == name)
-        base = plan.tracer_bases[name][0]
-        got = plan.ray_shares[key] = corners_of(
-            plan.tracer, range(base, base + len(item.positions)))
+        got = plan.ray_shares[key] = plan.tracer.vertex_corners(
+            plan.tracer_bases[name][0], len(item.positions)).astype(np.int64)
     return got
 
 
@@ -97,6 +96,16 @@ def trace_even(tracer, p, n, ids, samples, per_vertex, seed=0, distance=math.inf
                      samples=int(samples), distance=distance, seed=int(seed),
                      vertex_ids=np.ascontiguousarray(ids, np.int32), per_corner=False,
                      point_samples=rays, **extra)
+
+
+def trace_mesh(tracer, p, n, samples, seed=0, distance=math.inf, rows=slice(None)):
+    """AO float32 of the tracer's own vertices ``rows`` (p, n: every vertex's, as the
+    tracer's mesh) when every vertex is a receiver: Cycles' rays at ``samples``, spread evenly
+    over all of them (the benchmarks' call; a bake spreads over its receivers: trace)."""
+    ids = np.arange(tracer.vertex_count, dtype=np.int32)[rows]
+    per_vertex = samples * tracer.corners_per_vertex
+    return np.asarray(trace_even(tracer, np.asarray(p)[rows], np.asarray(n)[rows], ids,
+                                 samples, per_vertex, seed, distance), np.float32)
 
 
 def trace(plan, name, p, n, own, **extra):

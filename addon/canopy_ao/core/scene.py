@@ -100,8 +100,10 @@ class Plan:
     # frames, which have no tracer), and -> how many receivers a bake set to 0 so
     buried: dict = field(default_factory=dict)
     buried_count: dict = field(default_factory=dict)
-    # ("mean corners", id(tracer)) -> the mean corners per vertex of the bake's vertex
-    # receivers: the exact rung's rays per vertex over the samples (ray_budget.py)
+    # ray_budget's counts, per tracer: ("mean corners", id(tracer)) -> the mean corners per
+    # vertex of the bake's vertex receivers (the exact rung's rays per vertex over the
+    # samples), ("corners", name, id(tracer)) -> int64 (V,) each of that object's vertices'
+    # corners
     ray_shares: dict = field(default_factory=dict)
 
     def taus(self):

@@ -286,6 +286,10 @@ class RayTracer {
   /// model's counted work. Throws std::invalid_argument if the range is not in the mesh or
   /// samples < 1.
   std::uint64_t vertex_rays(std::size_t first, std::size_t count, int samples) const;
+  /// Each of vertices [first, first + count)'s rays at one sample per corner — its corner count
+  /// (at least 1; 1 each without vertex normals) — one entry per vertex: vertex_rays(v, 1, 1)
+  /// for every v in one call. Throws std::invalid_argument if the range is not in the mesh.
+  std::vector<std::int32_t> vertex_corners(std::size_t first, std::size_t count) const;
 
  private:
   struct Impl;
