@@ -43,7 +43,9 @@
 //  - the start is the corner's vertex moved towards the corner triangle's centroid by
 //    min(distance to the centroid, 1e-4 × max(1, largest |coordinate| of the vertex)) — Cycles'
 //    bake_offset_towards_center; it depends on the distance from the world origin, as Cycles'
-//    does (1.2 mm for a vertex 12 m from it);
+//    does (1.2 mm for a vertex 12 m from it). Its barycentrics are the move's own, exact (Cycles
+//    projects the moved point back in float, which on a sliver lands it anywhere along the
+//    sliver: raytrace.cpp, RayTracer::Impl::corners);
 //  - the hemisphere is around the smooth normal interpolated there from the triangle's three
 //    vertex normals, the face normal taken on its side (where a vertex normal opposes its face,
 //    which Blender's own normals never do, Cycles would bake the other hemisphere);
