@@ -274,6 +274,52 @@ inline bool barycentric(const Vec3 V[3], Vec3 x, float* v, float* w) {
   return true;
 }
 
+/// Cycles' bake_offset_towards_center (kernel integrator/init_from_bake.h, Blender 3.x-5.x),
+/// float for float: vertex `slot` of triangle V moved towards the centroid by min(distance,
+/// reach), projected back onto the triangle's plane for its barycentric weights w (of V[0],
+/// V[1], V[2]), clamped to [1e-5, 1 - 1e-5] and V[2]'s weight what the others leave. Cycles'
+/// CPU kernels are compiled with FMA contraction: the move and each 2 x 2 determinant are
+/// fused. Reproduced: the bake points Cycles shades (its Position, baked per face corner) on
+/// the Douglas fir's 57k branch triangles agree with these within 6e-6 at all but 7 of their
+/// 171k corners, and at every corner of its 2,186 triangles whose last two vertices coincide,
+/// where the same arithmetic without fusing misses most. Used for those (residue corners); on
+/// other triangles the tracer takes the move's exact barycentrics instead (corners(), and
+/// docs/DESIGN.md, 'Rays against Cycles' samples', "Slivers", for why). std::fma makes the
+/// fused operations the same on any compiler; nothing else here may be contracted
+/// (CMakeLists.txt compiles this file with -ffp-contract=off).
+void cycles_bake_offset(const Vec3 V[3], int slot, float reach, float w[3]) {
+  const auto divide = [](Vec3 a, float s) { return Vec3{a.x / s, a.y / s, a.z / s}; };
+  const Vec3 P = V[slot];
+  const Vec3 to = divide(V[0] + V[1] + V[2], 3.0f) - P;  // a division, as Cycles' float3
+  const float len = std::sqrt(dot(to, to));
+  const Vec3 dir = divide(to, len);
+  const float step = std::min(len, reach);
+  const Vec3 moved = len > 0.0f ? Vec3{std::fma(dir.x, step, P.x), std::fma(dir.y, step, P.y),
+                                       std::fma(dir.z, step, P.z)}
+                                : P;
+  const Vec3 v1 = V[1] - V[0], v2 = V[2] - V[0], vp = moved - V[0];
+  const float d11 = dot(v1, v1), d12 = dot(v1, v2), d22 = dot(v2, v2);
+  const float dp1 = dot(vp, v1), dp2 = dot(vp, v2);
+  const float denom = std::fma(d11, d22, -(d12 * d12));
+  if (denom == 0.0f) {  // Cycles' (u, v) = (0, 0): the third vertex
+    w[0] = w[1] = 0.0f;
+    w[2] = 1.0f;
+    return;
+  }
+  const float ov = std::clamp(std::fma(d22, dp1, -(d12 * dp2)) / denom, 1e-5f, 1.0f - 1e-5f);
+  const float ow = std::clamp(std::fma(d11, dp2, -(d12 * dp1)) / denom, 1e-5f, 1.0f - 1e-5f);
+  w[0] = std::clamp(1.0f - ov - ow, 1e-5f, 1.0f - 1e-5f);
+  w[1] = ov;
+  w[2] = 1.0f - w[0] - w[1];
+}
+
+/// Cycles' face normal on an FMA machine, unnormalised: each component one fused
+/// multiply-subtract, which for two equal edges leaves each product's rounding error.
+inline Vec3 residue_cross(Vec3 a, Vec3 b) {
+  return Vec3{std::fma(a.y, b.z, -(a.z * b.y)), std::fma(a.z, b.x, -(a.x * b.z)),
+              std::fma(a.x, b.y, -(a.y * b.x))};
+}
+
 /// Cycles' default shadow-terminator geometry offset (Object > Shading): rays within this
 /// cosine of grazing their face start lifted onto the smooth surface (raytrace.h, "Origins").
 constexpr float kTerminatorCutoff = 0.1f;
@@ -295,6 +341,8 @@ struct BakeCorner {
   std::uint32_t tri;
   std::uint8_t slot;
   bool open;  // tri has a vertex on its first one (an edge from it of length 0): NaN normal
+  bool residue = false;  // tri's last two vertices coincide: Cycles' face normal is the
+                         // rounding residue of its fused cross product
 };
 
 /// Cycles' shadow_ray_smooth_surface_offset: the point lifted by h along the interpolated
@@ -612,8 +660,9 @@ struct RayTracer::Impl {
       const Vec3 e1 = vertex(t[1]) - vertex(t[0]), e2 = vertex(t[2]) - vertex(t[0]);
       const bool nan_normal = (e1.x == 0.0f && e1.y == 0.0f && e1.z == 0.0f) ||
                               (e2.x == 0.0f && e2.y == 0.0f && e2.z == 0.0f);
-      if (!nan_normal && !has_area(en.tri)) continue;  // no corner (see above)
-      bake_corners.push_back({en.tri, en.slot, nan_normal});
+      const bool residue = !nan_normal && !has_area(en.tri);
+      if (residue && !(length(residue_cross(e1, e2)) > 0.0f)) continue;  // no normal at all
+      bake_corners.push_back({en.tri, en.slot, nan_normal, residue});
       ++corner_first[en.v + 1];
     }
     for (std::size_t v = 0; v < nverts; ++v) corner_first[v + 1] += corner_first[v];
@@ -643,6 +692,13 @@ struct RayTracer::Impl {
       const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
       const Vec3 P = V[bc.slot];
       const float reach = bake_reach(P);
+      if (bc.residue) {
+        float w[3];
+        cycles_bake_offset(V, bc.slot, reach, w);
+        const Vec3 ng = normalize(residue_cross(V[1] - V[0], V[2] - V[0]));
+        out->push_back(residue_corner(tri, V, ng, w));
+        continue;
+      }
       const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
       const float area2 = length(c);
       const Vec3 ng = c / area2;
@@ -697,6 +753,36 @@ struct RayTracer::Impl {
     onb(n, &cn.t, &cn.b);
     cn.ng = ng;
     cn.lift = smooth_surface_offset(V, N, w, ng);
+    cn.tri = static_cast<std::int32_t>(tri);
+    return cn;
+  }
+
+  /// A corner on a triangle whose last two vertices coincide, as Cycles shades it: the face
+  /// normal ng is its fused cross product's rounding residue (a direction at random), and
+  /// where it opposes the smooth normal Cycles takes the corner as backfacing and flips both,
+  /// so the hemisphere turns into the surface.
+  Corner residue_corner(std::uint32_t tri, const Vec3 V[3], Vec3 ng, const float w[3]) const {
+    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
+    Vec3 N[3];
+    for (int j = 0; j < 3; ++j) {
+      const float* q = vertex_normals.data() + 3 * static_cast<std::size_t>(t[j]);
+      N[j] = Vec3{q[0], q[1], q[2]};
+      if (!(length(N[j]) > 0.0f)) N[j] = ng;
+    }
+    Vec3 n = N[0] * w[0] + N[1] * w[1] + N[2] * w[2];
+    const float nl = length(n);
+    n = nl > 0.0f ? n / nl : ng;
+    Corner cn;
+    const bool back = dot(ng, n) < 0.0f;
+    cn.start = V[0] * w[0] + V[1] * w[1] + V[2] * w[2];
+    cn.lift = smooth_surface_offset(V, N, w, back ? -ng : ng);
+    if (back) {
+      n = -n;
+      ng = -ng;
+    }
+    cn.n = n;
+    onb(n, &cn.t, &cn.b);
+    cn.ng = ng;
     cn.tri = static_cast<std::int32_t>(tri);
     return cn;
   }
