@@ -661,8 +661,9 @@ struct RayTracer::Impl {
       const bool nan_normal = (e1.x == 0.0f && e1.y == 0.0f && e1.z == 0.0f) ||
                               (e2.x == 0.0f && e2.y == 0.0f && e2.z == 0.0f);
       const bool residue = !nan_normal && !has_area(en.tri);
-      if (residue && !(length(residue_cross(e1, e2)) > 0.0f)) continue;  // no normal at all
-      bake_corners.push_back({en.tri, en.slot, nan_normal, residue});
+      // No residue at all (every product exact): Cycles' face normal is 0 / 0, NaN, as above.
+      const bool open = nan_normal || (residue && !(length(residue_cross(e1, e2)) > 0.0f));
+      bake_corners.push_back({en.tri, en.slot, open, residue && !open});
       ++corner_first[en.v + 1];
     }
     for (std::size_t v = 0; v < nverts; ++v) corner_first[v + 1] += corner_first[v];

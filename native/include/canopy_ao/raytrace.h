@@ -46,7 +46,7 @@
 // rounding residue of Cycles' fused cross product (e_a·e_b − fl(e_a·e_b) per component, e the
 // repeated edge: a direction at random), and where that opposes the smooth normal the corner
 // is backfacing, as Cycles shades it: both flip and the hemisphere turns into the surface. A
-// triangle of zero area whose cross product leaves no residue at all is no corner. For each
+// residue of exactly 0 (every product exact) is Cycles' NaN normal again: open. For each
 // other traced corner:
 //  - the start is the corner's vertex moved towards the corner triangle's centroid by
 //    min(distance to the centroid, 1e-4 × max(1, largest |coordinate| of the vertex)) — Cycles'
@@ -63,7 +63,7 @@
 //    the face keeps its own triangle as an occluder;
 //  - the scene is built ROBUST, as Cycles builds it: its hit test also counts a face through
 //    the ray's start (t = 0), so a start lying in another face's plane sees that face.
-// A vertex with no corner (all its faces of zero area without a residue) starts
+// A vertex with no corner (only collinear faces of zero area with distinct corners) starts
 // 1e-4 × max(1, largest |coordinate|) off it along its normal and skips nothing. Measured on
 // Sapling's collapsed branch tips (docs/DESIGN.md, 'Rays against Cycles' samples'): residue
 // corners cut the error to Cycles' 1024 samples at the Douglas fir's 4,372 vertices on one from
