@@ -60,11 +60,10 @@ from canopy_ao.core.metrics import compare  # noqa: E402
 OUT = os.path.join(HERE, "out")
 CACHE = os.path.join(OUT, "cache")
 REF_SEED = 12345
-# Which tracer made a cached reference: each vertex its own receiver at Cycles' bake point, its
-# samples at every face corner (native raytrace.h, 'Origins'; a sliver's start at the move's
-# exact barycentrics, residue corners as Cycles shades them), as the add-on traces it. Change it
-# whenever the tracer's rule changes, so cached references are traced again.
-TRACER_TAG = "bake-point-per-corner-exact-move-residue"
+# Which tracer made a cached reference: the native tracer's rule for vertex starts (Cycles' bake
+# point, native raytrace.h 'Origins', kTracerRule), so a reference traced by an earlier rule is
+# traced again.
+TRACER_TAG = _core.TRACER_RULE
 ROLES = ("canopy", "trunk", "ground", "grass")
 BURIED = 0.02   # reference AO at or below this: a vertex buried inside other geometry
 DEFAULT_SCENES = [n for n in cs.SCENES if n != "large_tree"]

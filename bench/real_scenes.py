@@ -126,13 +126,11 @@ def load(scene, quick=True, out_dir=REAL):
 
 
 def tracer_tag():
-    """Which ray tracer made a reference: each vertex starts at Cycles' bake point (native
-    raytrace.h, 'Origins') and casts its samples at every face corner, each baked where
-    Blender's bake puts it (its own triangulation; a NaN-normal corner open; a sliver's start
-    at the move's exact barycentrics; a corner whose last two vertices coincide baked with
-    Cycles' residue normal), as the add-on's tracer does. Change it whenever the tracer's rule
-    changes: a reference cached under the old tag is then traced again."""
-    return "bake-point-per-corner-bake-split-exact-move-residue"
+    """Which ray tracer made a reference: the native tracer's rule for vertex starts (Cycles'
+    bake point, native raytrace.h 'Origins', kTracerRule), so a reference traced by an earlier
+    rule is traced again."""
+    from canopy_ao import _core
+    return _core.TRACER_RULE
 
 
 def scene_tracer(sc: RealScene):

@@ -159,6 +159,7 @@ Sampling sampling_arg(const std::string& name) {
 }  // namespace
 
 void bind_raytrace(py::module_& m) {
+  m.attr("TRACER_RULE") = kTracerRule;
   py::class_<RayTracer>(m, "RayTracer",
                         "An Embree scene of two-sided triangles for ray-traced AO, built once "
                         "(expensive: reuse it for many queries).")

@@ -281,8 +281,8 @@ inline bool barycentric(const Vec3 V[3], Vec3 x, float* v, float* w) {
 /// CPU kernels are compiled with FMA contraction: the move and each 2 x 2 determinant are
 /// fused. Reproduced: the bake points Cycles shades (its Position, baked per face corner) on
 /// the Douglas fir's 57k branch triangles agree with these within 6e-6 at all but 7 of their
-/// 171k corners, and at every corner of its 2,186 triangles whose last two vertices coincide,
-/// where the same arithmetic without fusing misses most. Used for those (residue corners); on
+/// 171k corners, and at all but 3 of the 6,558 corners of its 2,186 triangles whose last two
+/// vertices coincide, where the same arithmetic without fusing misses 64-100 % of them. Used for those (residue corners); on
 /// other triangles the tracer takes the move's exact barycentrics instead (corners(), and
 /// docs/DESIGN.md, 'Rays against Cycles' samples', "Slivers", for why). std::fma makes the
 /// fused operations the same on any compiler; nothing else here may be contracted
@@ -697,7 +697,7 @@ struct RayTracer::Impl {
         float w[3];
         cycles_bake_offset(V, bc.slot, reach, w);
         const Vec3 ng = normalize(residue_cross(V[1] - V[0], V[2] - V[0]));
-        out->push_back(residue_corner(tri, V, ng, w));
+        out->push_back(corner_at(tri, V, ng, w, nullptr, true));
         continue;
       }
       const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
@@ -711,8 +711,8 @@ struct RayTracer::Impl {
       // catastrophically; the tracer's own float projection put one such start 5.6 mm down
       // the twig on the neighbouring face's edge (AO 0.18 where Cycles reads 0.97). Cycles'
       // projection, reproduced with its fused multiply-subtracts, matches the bake points it
-      // shades within 6e-6 — and lands 12 % of the Douglas fir's tip corners off the move, by
-      // up to 4 cm, often within float spacing of an edge, where whether a ray is stopped at
+      // shades within 6e-6 — and lands 12 % of the Douglas fir's branch corners at slots 1 and 2
+      // off the move, by up to 4 cm, often within float spacing of an edge, where whether a ray is stopped at
       // t = 0 turns on the start's last bit: traced from there, ours agreed with Cycles worse
       // (docs/DESIGN.md, 'Rays against Cycles' samples'). So the start is where the move puts
       // it.
@@ -731,9 +731,12 @@ struct RayTracer::Impl {
 
   /// The Corner of a bake point with barycentric weights w on triangle tri (vertices V, unit
   /// face normal ng): the smooth normal interpolated there (or `normal` when given: a texel's
-  /// own), the face normal on its side, and the terminator lift.
+  /// own), the face normal on its side, and the terminator lift. backfacing: where the face
+  /// normal opposes the smooth one, flip the smooth normal too, as Cycles shades a backfacing
+  /// hit — a residue corner, whose face normal is a direction at random (raytrace.h,
+  /// 'Origins'): its hemisphere then turns into the surface.
   Corner corner_at(std::uint32_t tri, const Vec3 V[3], Vec3 ng, const float w[3],
-                   const Vec3* normal) const {
+                   const Vec3* normal, bool backfacing = false) const {
     const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
     Vec3 N[3];
     for (int j = 0; j < 3; ++j) {
@@ -746,44 +749,17 @@ struct RayTracer::Impl {
     n = nl > 0.0f ? n / nl : ng;
     // The face normal on the shading normal's side. (Where a vertex normal opposes its face,
     // which Blender's own normals never do, Cycles would bake the other hemisphere; the
-    // receiver's normal is kept instead.)
-    if (dot(ng, n) < 0.0f) ng = -ng;
+    // receiver's normal is kept instead, but for a residue corner.)
+    if (dot(ng, n) < 0.0f) {
+      ng = -ng;
+      if (backfacing) n = -n;
+    }
     Corner cn;
     cn.start = V[0] * w[0] + V[1] * w[1] + V[2] * w[2];
     cn.n = n;
     onb(n, &cn.t, &cn.b);
     cn.ng = ng;
     cn.lift = smooth_surface_offset(V, N, w, ng);
-    cn.tri = static_cast<std::int32_t>(tri);
-    return cn;
-  }
-
-  /// A corner on a triangle whose last two vertices coincide, as Cycles shades it: the face
-  /// normal ng is its fused cross product's rounding residue (a direction at random), and
-  /// where it opposes the smooth normal Cycles takes the corner as backfacing and flips both,
-  /// so the hemisphere turns into the surface.
-  Corner residue_corner(std::uint32_t tri, const Vec3 V[3], Vec3 ng, const float w[3]) const {
-    const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
-    Vec3 N[3];
-    for (int j = 0; j < 3; ++j) {
-      const float* q = vertex_normals.data() + 3 * static_cast<std::size_t>(t[j]);
-      N[j] = Vec3{q[0], q[1], q[2]};
-      if (!(length(N[j]) > 0.0f)) N[j] = ng;
-    }
-    Vec3 n = N[0] * w[0] + N[1] * w[1] + N[2] * w[2];
-    const float nl = length(n);
-    n = nl > 0.0f ? n / nl : ng;
-    Corner cn;
-    const bool back = dot(ng, n) < 0.0f;
-    cn.start = V[0] * w[0] + V[1] * w[1] + V[2] * w[2];
-    cn.lift = smooth_surface_offset(V, N, w, back ? -ng : ng);
-    if (back) {
-      n = -n;
-      ng = -ng;
-    }
-    cn.n = n;
-    onb(n, &cn.t, &cn.b);
-    cn.ng = ng;
     cn.tri = static_cast<std::int32_t>(tri);
     return cn;
   }

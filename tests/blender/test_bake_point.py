@@ -224,8 +224,8 @@ def test_tip_faces_whose_last_two_corners_coincide_bake_as_in_cycles(clean):
     product's rounding residue, a direction at random; where it opposes the smooth normal
     Cycles takes the corner as backfacing and bakes the hemisphere into the twig (native
     raytrace.h, 'Origins'). Over six such twigs (two places, three tip lengths) the rule before,
-    which dropped those corners, read the ring and the tip 0.19 from Cycles on average; now
-    0.09 (single vertices still differ: where a start sits on a vertex, whether a ray is
+    which dropped those corners, read the ring and the tip 0.18 from Cycles on average; now
+    0.08 (single vertices still differ: where a start sits on a vertex, whether a ray is
     stopped at t = 0 turns on the last bit)."""
     errs, dark = [], []
     for base, axis in (((-8.26, 2.16, 27.57), (-0.24, 0.63, -0.01)),

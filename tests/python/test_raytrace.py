@@ -389,6 +389,11 @@ def test_tracing_releases_the_gil():
     assert span["ao"].shape == (2000,)
 
 
+def test_the_tracer_names_its_bake_point_rule():
+    """The benchmarks' reference caches key on it (bench/real_scenes.tracer_tag)."""
+    assert isinstance(_core.TRACER_RULE, str) and "bake-point" in _core.TRACER_RULE
+
+
 def test_bake_point_shading_is_checked():
     """normals=/polygons= (the bake point, native raytrace.h 'Origins'): shapes and the pairing
     are checked, a tracer without them keeps the rule before."""

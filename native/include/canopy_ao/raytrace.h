@@ -132,6 +132,12 @@
 
 namespace canopy_ao {
 
+/// Names the rule by which vertex receivers start at Cycles' bake point ("Origins" above), so
+/// that AO cached from an earlier rule is recognised as stale (the benchmarks' reference caches
+/// key on it; Python: `_core.TRACER_RULE`). Change it with the rule.
+inline constexpr const char* kTracerRule =
+    "bake-point-per-corner-bake-split-exact-move-residue";
+
 // === Options
 /// Each point's cosine-weighted sample set. Measured on Sapling Tree Gen trees (MAE against a
 /// 4096-ray reference, bench/bench_sampling.py): the lattice is as good as the Owen-scrambled
