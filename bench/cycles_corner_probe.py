@@ -11,7 +11,9 @@ checked against the export's geometry hash) so each corner's own value shows, be
 the vertex (the add-on's tracer, `samples` rays per corner). It prints the --worst vertices and,
 over every vertex where ours and the reference differ by more than --gap, how many have a corner
 Cycles finds fully blocked (< 0.01) and how many have a twin: a vertex of another piece within
-1e-4 of the AO distance (Sapling's branch pieces meet at nearly coincident rings).
+1e-4 of the AO distance (Sapling's branch pieces meet at nearly coincident rings), and how many
+have a corner whose start (Cycles' POSITION bake of the corner) lies less than half the move of
+native raytrace.h 'Origins' from the vertex.
 docs/DESIGN.md, 'Rays against Cycles' samples', says what it found.
 """
 import argparse
@@ -39,25 +41,29 @@ TWIN = 1e-4      # of the AO distance
 DEAD = 0.01      # a corner this dark is fully blocked
 
 
-def corner_bake(objs, distance, samples):
-    """{object name: (AO per loop, vertex per loop, loop start per polygon)}: Cycles' bake of
-    the CORNER domain (a temporary attribute on each mesh, which stays in this session only)."""
+def corner_bake(objs, distance, samples, kind="AO"):
+    """{object name: (AO, or start position (n, 3), per loop; vertex per loop; loop start per
+    polygon)}: Cycles' bake of the CORNER domain (a temporary attribute on each mesh, which
+    stays in this session only). kind "POSITION": where Cycles starts each corner's rays."""
     out = {}
+    name = f"CanopyAO_CornerProbe_{kind}"
     with cycles_check._cycles_bake_settings(bpy.context, objs, distance, samples):
         for o in objs:
             ca = o.data.color_attributes
-            ca.active_color = ca.new("CanopyAO_CornerProbe", "FLOAT_COLOR", "CORNER")
-        cycles_check._run_bake("VERTEX_COLORS")
+            ca.active_color = ca.new(name, "FLOAT_COLOR", "CORNER")
+        bpy.ops.object.bake(type=kind, target="VERTEX_COLORS", margin=0, use_clear=True,
+                            use_selected_to_active=False, save_mode="INTERNAL")
     for o in objs:
         me = o.data
         n = len(me.loops)
-        ao = np.empty(4 * n, np.float32)
-        me.color_attributes["CanopyAO_CornerProbe"].data.foreach_get("color", ao)
+        rgba = np.empty(4 * n, np.float32)
+        me.color_attributes[name].data.foreach_get("color", rgba)
+        ao = rgba.reshape(n, 4)[:, :3] if kind == "POSITION" else rgba[0::4]
         lv = np.empty(n, np.int64)
         me.loops.foreach_get("vertex_index", lv)
         ls = np.empty(len(me.polygons), np.int64)
         me.polygons.foreach_get("loop_start", ls)
-        out[o.name] = (ao[0::4], lv, ls)
+        out[o.name] = (ao, lv, ls)
     return out
 
 
@@ -99,16 +105,22 @@ def main(argv):
         sys.exit("cycles_corner_probe: the rebuilt scene is not the exported one (re-export it)")
     obs = [o for o, _, _ in objs]
     corners = corner_bake(obs, sc.distance, a.samples)
+    starts = corner_bake(obs, sc.distance, 1, "POSITION")
     tracer = rs.scene_tracer(sc)
     ours = rs.trace_vertices(tracer, sc, a.samples, sc.distance, 0)
     per_vertex = [[] for _ in range(sc.n_vertices)]   # (Cycles' corner AO, polygon's vertices)
+    moved = [[] for _ in range(sc.n_vertices)]  # each corner's start from its vertex / the rule's
     for o in obs:
         ao, lv, ls = corners[o.name]
         base = sc.offsets[sc.names.index(o.name)]
+        x = sc.V[base + lv].astype(np.float64)
+        rule = 1e-4 * np.maximum(1.0, np.abs(x).max(axis=1))  # raytrace.h 'Origins'
+        move = np.linalg.norm(starts[o.name][0] - x, axis=1) / rule
         ends = np.append(ls, len(lv))
         for p in range(len(ls)):
             for l in range(ends[p], ends[p + 1]):
                 per_vertex[base + lv[l]].append((float(ao[l]), (lv[ends[p]:ends[p + 1]] + base)))
+                moved[base + lv[l]].append(float(move[l]))
     twin = twins(sc.V.astype(np.float64), TWIN * sc.distance)
     diff = ours - ref
     bad = np.abs(diff) > a.gap
@@ -120,9 +132,13 @@ def main(argv):
     print(f"  a corner Cycles finds blocked (< {DEAD}): {dead[bad].mean():.0%} of them "
           f"({dead[~bad].mean():.0%} elsewhere); a twin within {TWIN:g} D: {twin[bad].mean():.0%} "
           f"({twin[~bad].mean():.0%} elsewhere)")
+    short = np.array([any(m < 0.5 for m in c) for c in moved])
+    print(f"  a corner Cycles starts less than half the rule's move from its vertex: "
+          f"{short[bad].mean():.0%} of them ({short[~bad].mean():.0%} elsewhere)")
     for i in np.argsort(-np.abs(diff))[:a.worst]:
         print(f"  vertex {i} ({sc.role[i]}): ours {ours[i]:.3f}, Cycles {ref[i]:.3f}; Cycles' "
-              "corners " + ", ".join(f"{v:.3f} on {list(p)}" for v, p in per_vertex[i]))
+              "corners " + ", ".join(f"{v:.3f} on {list(p)} (start {m:.3f} of the rule's move)"
+                                    for (v, p), m in zip(per_vertex[i], moved[i])))
     return 0
 
 
