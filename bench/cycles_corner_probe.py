@@ -10,8 +10,8 @@ vertex; this bakes the CORNER domain of the same scene (rebuilt by examples/sapl
 checked against the export's geometry hash) so each corner's own value shows, beside our AO at
 the vertex (the add-on's tracer, `samples` rays per corner). It prints the --worst vertices and,
 over every vertex where ours and the reference differ by more than --gap, how many have a corner
-Cycles finds fully blocked (< 0.01) and how many have a twin: a vertex of another piece within
-1e-4 of the AO distance (Sapling's branch pieces meet at nearly coincident rings), and how many
+Cycles finds fully blocked (< 0.01) and how many have a twin: another vertex within 1e-4 of the
+AO distance (on Sapling's branches mostly the next piece's nearly coincident ring), and how many
 have a corner whose start (Cycles' POSITION bake of the corner) lies less than half the move of
 native raytrace.h 'Origins' from the vertex.
 docs/DESIGN.md, 'Rays against Cycles' samples', says what it found.
@@ -51,8 +51,7 @@ def corner_bake(objs, distance, samples, kind="AO"):
         for o in objs:
             ca = o.data.color_attributes
             ca.active_color = ca.new(name, "FLOAT_COLOR", "CORNER")
-        bpy.ops.object.bake(type=kind, target="VERTEX_COLORS", margin=0, use_clear=True,
-                            use_selected_to_active=False, save_mode="INTERNAL")
+        cycles_check._run_bake("VERTEX_COLORS", bake_type=kind)
     for o in objs:
         me = o.data
         n = len(me.loops)
@@ -108,23 +107,28 @@ def main(argv):
     starts = corner_bake(obs, sc.distance, 1, "POSITION")
     tracer = rs.scene_tracer(sc)
     ours = rs.trace_vertices(tracer, sc, a.samples, sc.distance, 0)
-    per_vertex = [[] for _ in range(sc.n_vertices)]   # (Cycles' corner AO, polygon's vertices)
-    moved = [[] for _ in range(sc.n_vertices)]  # each corner's start from its vertex / the rule's
+    # Every loop of the scene: its vertex, Cycles' AO there, its start's move / the rule's.
+    vert, ao, move, poly_of = [], [], [], []
     for o in obs:
-        ao, lv, ls = corners[o.name]
+        a_o, lv, ls = corners[o.name]
         base = sc.offsets[sc.names.index(o.name)]
         x = sc.V[base + lv].astype(np.float64)
-        rule = 1e-4 * np.maximum(1.0, np.abs(x).max(axis=1))  # raytrace.h 'Origins'
-        move = np.linalg.norm(starts[o.name][0] - x, axis=1) / rule
+        rule = 1e-4 * np.maximum(1.0, np.abs(x).max(axis=1))  # native raytrace.h 'Origins'
+        vert.append(base + lv)
+        ao.append(a_o)
+        move.append(np.linalg.norm(starts[o.name][0] - x, axis=1) / rule)
         ends = np.append(ls, len(lv))
-        for p in range(len(ls)):
-            for l in range(ends[p], ends[p + 1]):
-                per_vertex[base + lv[l]].append((float(ao[l]), (lv[ends[p]:ends[p + 1]] + base)))
-                moved[base + lv[l]].append(float(move[l]))
+        poly_of += [base + lv[ends[p]:ends[p + 1]] for p in range(len(ls))
+                    for _ in range(ends[p], ends[p + 1])]
+    vert, ao, move = np.concatenate(vert), np.concatenate(ao), np.concatenate(move)
+    darkest = np.full(sc.n_vertices, np.inf)
+    np.minimum.at(darkest, vert, ao)
+    shortest = np.full(sc.n_vertices, np.inf)
+    np.minimum.at(shortest, vert, move)
     twin = twins(sc.V.astype(np.float64), TWIN * sc.distance)
     diff = ours - ref
     bad = np.abs(diff) > a.gap
-    dead = np.array([any(v < DEAD for v, _ in c) for c in per_vertex])
+    dead = darkest < DEAD
     share = np.abs(diff[bad]).sum() / np.abs(diff).sum()
     print(f"{a.scene}: {bad.sum()} of {sc.n_vertices} vertices differ by > {a.gap} (ours "
           f"{a.samples} rays per corner against Cycles 1024), {share:.0%} of the summed "
@@ -132,13 +136,13 @@ def main(argv):
     print(f"  a corner Cycles finds blocked (< {DEAD}): {dead[bad].mean():.0%} of them "
           f"({dead[~bad].mean():.0%} elsewhere); a twin within {TWIN:g} D: {twin[bad].mean():.0%} "
           f"({twin[~bad].mean():.0%} elsewhere)")
-    short = np.array([any(m < 0.5 for m in c) for c in moved])
+    short = shortest < 0.5
     print(f"  a corner Cycles starts less than half the rule's move from its vertex: "
           f"{short[bad].mean():.0%} of them ({short[~bad].mean():.0%} elsewhere)")
     for i in np.argsort(-np.abs(diff))[:a.worst]:
         print(f"  vertex {i} ({sc.role[i]}): ours {ours[i]:.3f}, Cycles {ref[i]:.3f}; Cycles' "
-              "corners " + ", ".join(f"{v:.3f} on {list(p)} (start {m:.3f} of the rule's move)"
-                                    for (v, p), m in zip(per_vertex[i], moved[i])))
+              "corners " + ", ".join(f"{ao[l]:.3f} on {list(poly_of[l])} (start {move[l]:.3f} "
+                                    "of the rule's move)" for l in np.flatnonzero(vert == i)))
     return 0
 
 

@@ -109,15 +109,17 @@ def _check_bakeable(context, objects):
             raise ValueError(f"Object '{o.name}' is disabled in renders; Cycles cannot bake it")
 
 
-def _run_bake(target, use_clear=True):
-    """One Cycles AO bake of the selected objects (margin 0: we want only covered texels)."""
+def _run_bake(target, use_clear=True, bake_type="AO"):
+    """One Cycles bake of the selected objects (margin 0: we want only covered texels); AO
+    unless bake_type names another pass (bench/cycles_corner_probe.py bakes POSITION)."""
     try:
-        result = bpy.ops.object.bake(type="AO", target=target, margin=0, use_clear=use_clear,
-                                     use_selected_to_active=False, save_mode="INTERNAL")
+        result = bpy.ops.object.bake(type=bake_type, target=target, margin=0,
+                                     use_clear=use_clear, use_selected_to_active=False,
+                                     save_mode="INTERNAL")
     except RuntimeError as exc:  # the operator reports its own reason, e.g. missing image
-        raise RuntimeError(f"Cycles AO bake failed: {str(exc).strip()}") from exc
+        raise RuntimeError(f"Cycles {bake_type} bake failed: {str(exc).strip()}") from exc
     if "FINISHED" not in result:
-        raise RuntimeError(f"Cycles AO bake did not finish ({result})")
+        raise RuntimeError(f"Cycles {bake_type} bake did not finish ({result})")
 
 
 def bake_cycles_vertex_ao(context, objects, distance, samples, seed=None):
