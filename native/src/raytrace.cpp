@@ -4,7 +4,9 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <mutex>
 #include <numeric>
@@ -23,8 +25,9 @@ namespace {
 
 constexpr float kTwoPi = 6.28318530717958647692f;
 // Rays per embree::occluded call (a stream on Embree 3, 8-wide packets on Embree 4): Embree 3's
-// streams are fastest from ~64 rays (docs/DESIGN.md, 'Facts measured in Blender'). A batch is flushed once it holds kMinStream rays
-// and its last point is complete, so at 64 samples a batch is one point's rays (one origin).
+// streams are fastest from ~64 rays (docs/DESIGN.md, 'Facts measured in Blender'). A batch is
+// flushed once it holds kMinStream rays and its last point is complete, so at 64 samples a
+// batch is one point's rays (one origin).
 // Measured on Embree 3: as fast as 256-ray streams mixing four points (within the ±5% noise
 // here), and as fast as a bare per-point rtcOccluded1M loop.
 constexpr std::size_t kStream = 256;
@@ -282,11 +285,11 @@ inline bool barycentric(const Vec3 V[3], Vec3 x, float* v, float* w) {
 /// fused. Reproduced: the bake points Cycles shades (its Position, baked per face corner) on
 /// the Douglas fir's 57k branch triangles agree with these within 6e-6 at all but 7 of their
 /// 171k corners, and at all but 3 of the 6,558 corners of its 2,186 triangles whose last two
-/// vertices coincide, where the same arithmetic without fusing misses 64-100 % of them. Used for those (residue corners); on
-/// other triangles the tracer takes the move's exact barycentrics instead (corners(), and
-/// docs/DESIGN.md, 'Rays against Cycles' samples', "Slivers", for why). std::fma makes the
-/// fused operations the same on any compiler; nothing else here may be contracted
-/// (CMakeLists.txt compiles this file with -ffp-contract=off).
+/// vertices coincide, where the same arithmetic without fusing misses 64-100 % of them, and
+/// the move's exact barycentrics 14k of the 171k (by up to 4 cm, on slivers). Every traced
+/// corner of a vertex starts here (RayTracer::Impl::corners). std::fma makes the fused
+/// operations the same on any compiler; nothing else here may be contracted (CMakeLists.txt
+/// compiles this file with -ffp-contract=off).
 void cycles_bake_offset(const Vec3 V[3], int slot, float reach, float w[3]) {
   const auto divide = [](Vec3 a, float s) { return Vec3{a.x / s, a.y / s, a.z / s}; };
   const Vec3 P = V[slot];
@@ -315,7 +318,7 @@ void cycles_bake_offset(const Vec3 V[3], int slot, float reach, float w[3]) {
 
 /// Cycles' face normal on an FMA machine, unnormalised: each component one fused
 /// multiply-subtract, which for two equal edges leaves each product's rounding error.
-inline Vec3 residue_cross(Vec3 a, Vec3 b) {
+inline Vec3 cycles_cross(Vec3 a, Vec3 b) {
   return Vec3{std::fma(a.y, b.z, -(a.z * b.y)), std::fma(a.z, b.x, -(a.x * b.z)),
               std::fma(a.x, b.y, -(a.y * b.x))};
 }
@@ -331,8 +334,42 @@ struct Corner {
   Vec3 ng;            // the face normal, on n's side
   Vec3 lift;          // Cycles' shadow_ray_smooth_surface_offset at `start` (full amount)
   std::int32_t tri;   // the corner's triangle, the one its rays skip
+  Vec3 V[3];          // its vertices, for Cycles' self-intersection test (cycles_hits_self)
   bool open = false;  // Cycles bakes it with a NaN face normal: every ray counts as unblocked
 };
+
+/// Cycles' ray_offset (kernel/bvh/util.h, Blender 3.2-5.x: Wächter and Binder, "A Fast and
+/// Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): each coordinate
+/// moved int(256 × Ng) float spacings along the face normal Ng (by 2^-16 × Ng within 1/32 of
+/// the origin) — 256 spacings is 0.5 mm at 20 units from the origin.
+inline Vec3 cycles_ray_offset(Vec3 P, Vec3 ng) {
+  const auto one = [](float p, float n) {
+    if (std::fabs(p) < 1.0f / 32.0f) return p + (1.0f / 65536.0f) * n;
+    const std::int32_t of = static_cast<std::int32_t>(256.0f * n);
+    std::int32_t bits;
+    std::memcpy(&bits, &p, sizeof bits);
+    bits += p < 0.0f ? -of : of;
+    float out;
+    std::memcpy(&out, &bits, sizeof out);
+    return out;
+  };
+  return Vec3{one(P.x, ng.x), one(P.y, ng.y), one(P.z, ng.z)};
+}
+
+/// Cycles' ray_triangle_intersect_self (util/math_intersect.h), its SSE madd and msub fused as
+/// on an FMA machine: whether the ray from P along D passes strictly inside triangle V by
+/// Cycles' edge tests. Where it does not (a start within rounding of an edge), Cycles'
+/// integrate_surface_ray_offset moves the ray's origin by ray_offset (raytrace.h, "Origins").
+inline bool cycles_hits_self(Vec3 P, Vec3 D, const Vec3 V[3]) {
+  const Vec3 v0 = V[0] - P, v1 = V[1] - P, v2 = V[2] - P;
+  const Vec3 e0 = v2 - v0, e1 = v0 - v1, e2 = v1 - v2;
+  const auto dt = [](Vec3 a, Vec3 b) { return std::fma(a.x, b.x, std::fma(a.y, b.y, a.z * b.z)); };
+  const float U = dt(cycles_cross(v2 + v0, e0), D), Vv = dt(cycles_cross(v0 + v1, e1), D),
+              W = dt(cycles_cross(v1 + v2, e2), D);
+  const float eps = FLT_EPSILON * std::fabs(U + Vv + W);
+  const float lo = std::min(U, std::min(Vv, W)), hi = std::max(U, std::max(Vv, W));
+  return lo >= eps || hi <= -eps;
+}
 
 /// Where Blender's vertex bake evaluates one face corner of a vertex (raytrace.h, "Origins"):
 /// the tracer's triangle `tri` at its vertex `slot`, which is not always the corner's own
@@ -662,7 +699,7 @@ struct RayTracer::Impl {
                               (e2.x == 0.0f && e2.y == 0.0f && e2.z == 0.0f);
       const bool residue = !nan_normal && !has_area(en.tri);
       // No residue at all (every product exact): Cycles' face normal is 0 / 0, NaN, as above.
-      const bool open = nan_normal || (residue && !(length(residue_cross(e1, e2)) > 0.0f));
+      const bool open = nan_normal || (residue && !(length(cycles_cross(e1, e2)) > 0.0f));
       bake_corners.push_back({en.tri, en.slot, open, residue && !open});
       ++corner_first[en.v + 1];
     }
@@ -693,39 +730,20 @@ struct RayTracer::Impl {
       const Vec3 V[3] = {vertex(t[0]), vertex(t[1]), vertex(t[2])};
       const Vec3 P = V[bc.slot];
       const float reach = bake_reach(P);
-      if (bc.residue) {
-        float w[3];
-        cycles_bake_offset(V, bc.slot, reach, w);
-        const Vec3 ng = normalize(residue_cross(V[1] - V[0], V[2] - V[0]));
-        out->push_back(corner_at(tri, V, ng, w, nullptr, true));
-        continue;
-      }
-      const Vec3 c = cross(V[1] - V[0], V[2] - V[0]);
-      const float area2 = length(c);
-      const Vec3 ng = c / area2;
-      // bake_offset_towards_center: move towards the centroid by min(distance, reach), then
-      // clamp the barycentrics as Cycles does (V2's weight is what V0's and V1's leave). The
-      // moved point's barycentrics are exact here: 1 - 2f/3 at the vertex, f/3 at the others,
-      // f the fraction of the way to the centroid. Cycles projects the moved point back onto
-      // the triangle in float, which on a sliver (a twig's tip quad, 2 mm by 0.6 m) cancels
-      // catastrophically; the tracer's own float projection put one such start 5.6 mm down
-      // the twig on the neighbouring face's edge (AO 0.18 where Cycles reads 0.97). Cycles'
-      // projection, reproduced with its fused multiply-subtracts, matches the bake points it
-      // shades within 6e-6 — and lands 12 % of the Douglas fir's branch corners at slots 1 and 2
-      // off the move, by up to 4 cm, often within float spacing of an edge, where whether a ray is stopped at
-      // t = 0 turns on the start's last bit: traced from there, ours agreed with Cycles worse
-      // (docs/DESIGN.md, 'Rays against Cycles' samples'). So the start is where the move puts
-      // it.
-      const Vec3 to = (V[0] + V[1] + V[2]) / 3.0f - P;
-      const float len = length(to);
-      const float f = len > 0.0f ? std::min(len, reach) / len : 0.0f;
-      float w[3] = {f / 3.0f, f / 3.0f, f / 3.0f};
-      w[bc.slot] = 1.0f - 2.0f * f / 3.0f;
-      w[1] = std::clamp(w[1], 1e-5f, 1.0f - 1e-5f);
-      w[2] = std::clamp(w[2], 1e-5f, 1.0f - 1e-5f);
-      w[0] = std::clamp(1.0f - w[1] - w[2], 1e-5f, 1.0f - 1e-5f);
-      w[2] = 1.0f - w[0] - w[1];
-      out->push_back(corner_at(tri, V, ng, w, nullptr));
+      // Cycles' bake point: the vertex moved towards the centroid and projected back onto the
+      // triangle in Cycles' float arithmetic. On a sliver (a twig segment 2.6 units by 0.02)
+      // that projection cancels catastrophically and lands the start anywhere along it, often
+      // within rounding of an edge — at the Douglas fir's twin rings back at the vertex, inside
+      // the next branch piece — and on a residue corner's triangle anywhere at all. Cycles'
+      // self-intersection test then offsets the rays from such a start (cycles_hits_self, in
+      // RayTracer::ao), which is what makes it reproducible (docs/DESIGN.md, 'Rays against
+      // Cycles' samples', "Slivers"). The face normal is Cycles' fused cross product: on a
+      // residue corner its rounding residue, with the corner backfacing where that opposes
+      // the smooth normal.
+      float w[3];
+      cycles_bake_offset(V, bc.slot, reach, w);
+      const Vec3 ng = normalize(cycles_cross(V[1] - V[0], V[2] - V[0]));
+      out->push_back(corner_at(tri, V, ng, w, nullptr, bc.residue));
     }
   }
 
@@ -755,12 +773,18 @@ struct RayTracer::Impl {
       if (backfacing) n = -n;
     }
     Corner cn;
-    cn.start = V[0] * w[0] + V[1] * w[1] + V[2] * w[2];
+    // Cycles' triangle_point_normal, u·v0 + v·v1 + t·v2 with both additions fused (its CPU
+    // kernels contract them): a start on a face lying in another face's plane stays in it.
+    const auto at = [&](float Vec3::*c) {
+      return std::fma(w[2], V[2].*c, std::fma(w[1], V[1].*c, w[0] * (V[0].*c)));
+    };
+    cn.start = Vec3{at(&Vec3::x), at(&Vec3::y), at(&Vec3::z)};
     cn.n = n;
     onb(n, &cn.t, &cn.b);
     cn.ng = ng;
     cn.lift = smooth_surface_offset(V, N, w, ng);
     cn.tri = static_cast<std::int32_t>(tri);
+    for (int j = 0; j < 3; ++j) cn.V[j] = V[j];
     return cn;
   }
 
@@ -1219,6 +1243,10 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
             org = c.start + c.lift * amount;
             if (!(ngl > 0.0f)) sk = -1;  // diving below its face: the face may stop it
           }
+          // Cycles' integrate_surface_ray_offset: a ray that skips its own triangle but would
+          // miss it by Cycles' own edge test (a start within rounding of an edge) leaves from
+          // ray_offset instead, where no neighbouring face stops it at t = 0.
+          if (sk >= 0 && !cycles_hits_self(org, d, c.V)) org = cycles_ray_offset(org, c.ng);
         } else {
           d = t * x + b * y + nn * z;
         }

@@ -75,10 +75,16 @@ def test_deterministic_and_scale_free(method):
     np.testing.assert_array_equal(a, b)
     big, _ = bake(items(scale=100.0), method)
     d = np.abs(big - a)
+    assert d.mean() < 1e-3, d.mean()
+    # Within one unit of the world origin Cycles' bake point (a move of 1e-4 × max(1, |x|)) and
+    # its self-intersection offset (2^-16 × Ng within 1/32 of it) are absolute lengths, which
+    # the exact rung reproduces: there a vertex's start is not scale-free (the vertex at the
+    # origin, inside the trunk's base, reads 0 here and 0.12 at 100 ×).
+    far = np.abs(np.concatenate([it.positions for it in items()])).max(axis=1) >= 1.0
+    assert (~far).sum() < 0.05 * far.size
     # The hybrid's near rays, as the exact rung's, may flip one grazing ray of 64 at a few
     # vertices (1/64 = 0.016; raytrace alone: 0.016 at 16 of 8,000 vertices here).
-    assert d.max() < (0.02 if method == "regression" else 1 / 64 + 0.01), d.max()
-    assert d.mean() < 1e-3, d.mean()
+    assert d[far].max() < (0.02 if method == "regression" else 1 / 64 + 0.01), d[far].max()
 
 
 @pytest.mark.parametrize("resolution", [32, 47, 56])

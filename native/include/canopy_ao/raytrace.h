@@ -39,21 +39,18 @@
 // tip Sapling collapses) one corner is so baked at the quad's fourth vertex. A corner whose
 // triangle starts with a zero edge (its first vertex coincides with another) has a NaN face
 // normal in Cycles, and so has every ray direction, which nothing stops: it counts as open
-// (1.0). A corner whose triangle's last two vertices coincide is baked as Cycles bakes it
-// (a *residue* corner): it starts at Cycles' own bake point — the moved point projected back
-// onto the triangle in Cycles' float arithmetic, each 2 × 2 determinant one fused
-// multiply-subtract (on such a triangle that lands anywhere along it) — its face normal is the
-// rounding residue of Cycles' fused cross product (e_a·e_b − fl(e_a·e_b) per component, e the
-// repeated edge: a direction at random), and where that opposes the smooth normal the corner
-// is backfacing, as Cycles shades it: both flip and the hemisphere turns into the surface. A
-// residue of exactly 0 (every product exact) is Cycles' NaN normal again: open. For each
-// other traced corner:
-//  - the start is the corner's vertex moved towards the corner triangle's centroid by
-//    min(distance to the centroid, 1e-4 × max(1, largest |coordinate| of the vertex)) — Cycles'
-//    bake_offset_towards_center; it depends on the distance from the world origin, as Cycles'
-//    does (1.2 mm for a vertex 12 m from it). Its barycentrics are the move's own, exact (Cycles
-//    projects the moved point back in float, which on a sliver lands it anywhere along the
-//    sliver: raytrace.cpp, RayTracer::Impl::corners);
+// (1.0). Every other corner starts at Cycles' own bake point: the vertex moved towards the
+// corner triangle's centroid by min(distance to the centroid, 1e-4 × max(1, largest
+// |coordinate| of the vertex)) — Cycles' bake_offset_towards_center; it depends on the distance
+// from the world origin, as Cycles' does (1.2 mm for a vertex 12 m from it) — and projected
+// back onto the triangle in Cycles' float arithmetic, each 2 × 2 determinant one fused
+// multiply-subtract (on a sliver that lands anywhere along it, often within rounding of an
+// edge). A corner whose triangle's last two vertices coincide (a *residue* corner) is baked as
+// Cycles bakes it: its face normal is the rounding residue of Cycles' fused cross product
+// (e_a·e_b − fl(e_a·e_b) per component, e the repeated edge: a direction at random), and where
+// that opposes the smooth normal the corner is backfacing, as Cycles shades it: both flip and
+// the hemisphere turns into the surface. A residue of exactly 0 (every product exact) is
+// Cycles' NaN normal again: open. For each traced corner:
 //  - the hemisphere is around the smooth normal interpolated there from the triangle's three
 //    vertex normals, the face normal taken on its side (where a vertex normal opposes its face,
 //    which Blender's own normals never do, Cycles would bake the other hemisphere);
@@ -61,6 +58,10 @@
 //    default shadow-terminator geometry offset, 0.1) starts lifted onto the smooth surface the
 //    vertex normals describe (Cycles' shadow_ray_smooth_surface_offset), and one that dives below
 //    the face keeps its own triangle as an occluder;
+//  - a ray that skips its triangle but would miss it by Cycles' own edge test (its start within
+//    rounding of an edge) leaves from Cycles' ray_offset instead, int(256 × the face normal)
+//    float spacings per coordinate (0.5 mm at 20 units from the origin): Cycles'
+//    integrate_surface_ray_offset, which Blender 3.4 and later apply to AO rays;
 //  - the scene is built ROBUST, as Cycles builds it: its hit test also counts a face through
 //    the ray's start (t = 0), so a start lying in another face's plane sees that face.
 // A vertex with no corner (only collinear faces of zero area with distinct corners) starts
@@ -69,7 +70,7 @@
 // corners cut the error to Cycles' 1024 samples at the Douglas fir's 4,372 vertices on one from
 // 0.129 to 0.038, and at its 1,791 tips (every face a residue one) from 0.121 to 0.042.
 // A texel (triangle_ids) on such a tracer starts at the texel itself with its own normal,
-// skips its triangle and gets the same terminator lift. Checked against Cycles
+// skips its triangle and gets the same terminator lift and ray offset. Checked against Cycles
 // (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
 // 1024 samples): a vertex of a branch piece lying 25–90 µm from another piece's face, an
 // isolated square tube (1.0 where a start inside a face without the lift gives 0.85–0.89), a
@@ -136,7 +137,7 @@ namespace canopy_ao {
 /// that AO cached from an earlier rule is recognised as stale (the benchmarks' reference caches
 /// key on it; Python: `_core.TRACER_RULE`). Change it with the rule.
 inline constexpr const char* kTracerRule =
-    "bake-point-per-corner-bake-split-exact-move-residue";
+    "bake-point-per-corner-bake-split-cycles-projection-self-offset";
 
 // === Options
 /// Each point's cosine-weighted sample set. Measured on Sapling Tree Gen trees (MAE against a
