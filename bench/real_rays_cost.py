@@ -8,11 +8,10 @@ does (vertex normals: each vertex at Cycles' bake point, a ROBUST scene, Cycles'
 tracer with `--samples` rays at every face corner (Cycles' deal, the add-on's rule before),
 `dealt` with `--samples` rays per vertex dealt out to its corners (per_corner=False, a k-th of
 the rays), `before` without normals (the rule before the bake point). Time
-them against each other with farm-bench, e.g.
+them against each other with hyperfine (Debian's package), e.g.
 
-    farm-bench -n 5 --timeout 400 \\
-        --vs "/usr/bin/python3 bench/real_rays_cost.py sap_white_birch dealt" \\
-        -- /usr/bin/python3 bench/real_rays_cost.py sap_white_birch bake
+    hyperfine -r 5 "/usr/bin/python3 bench/real_rays_cost.py sap_white_birch bake" \\
+        "/usr/bin/python3 bench/real_rays_cost.py sap_white_birch dealt"
 """
 import argparse
 import os
