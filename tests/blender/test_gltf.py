@@ -167,14 +167,20 @@ def _mesh_primitive(doc, name):
     return doc["meshes"][node["mesh"]]["primitives"]
 
 
-def test_texel_bake_exports_as_a_valid_occlusion_texture(tree, tmp_path):
+@pytest.mark.parametrize("packing", ["NONE", "HDRP_MASK"])
+def test_texel_bake_exports_as_a_valid_occlusion_texture(tree, tmp_path, packing):
+    """The grey AO image, and the AO packed into G of a mask map, both reach the exported
+    occlusionTexture's R (the exporter takes the channel our Separate Color node names)."""
     t = tree
     mat = t["ground"].active_material
+    img = _orm("Mask")[0] if packing != "NONE" else None
     r = bpy.ops.canopy_ao.bake(objects="Ground", mode='TEXEL', gltf=True, method="ellipsoid",
                                tau=2.0, distance=0.0, show_proxies=False, resolution=RES,
-                               image_dir=t["image_dir"])
+                               image_dir=t["image_dir"], packing=packing,
+                               pack_image=img.name if img else "")
     assert r == {'FINISHED'}
-    baked = _pixels(bpy.data.images["Ground_CanopyAO"])[:, 0]
+    baked = (_pixels(img)[:, 1] if img else
+             _pixels(bpy.data.images["Ground_CanopyAO"])[:, 0])
     assert baked.min() < 0.9
     # The user's base colour is as it was: the occlusion wiring feeds only the glTF group.
     assert not mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].is_linked
@@ -250,3 +256,24 @@ def test_vertex_bake_in_a_channel_exports_as_color_0(tree, tmp_path):
     assert np.abs(pos - verts[nearest]).max() < 1e-5
     # COLOR_0 is the attribute's every channel: the AO in R beside the user's G, B and A.
     assert np.abs(col - colors[nearest]).max() <= 1e-6
+
+
+def test_cli_packing_as_the_readme_spells_it(tree, capsys):
+    """--packing hdrp-mask --pack-image NAME on the command line: AO in G only; a channel
+    that contradicts the preset exits 1 with both named, the image untouched."""
+    from canopy_ao import cli
+    img, before = _orm("Mask")
+    base = ["--objects", "Ground", "--mode", "texel", "--resolution", str(RES), "--method",
+            "ellipsoid", "--tau", "2", "--distance", "0", "--no-proxies",
+            "--image-dir", tree["image_dir"], "--pack-image", "Mask"]
+    with pytest.raises(SystemExit) as exc:
+        cli.main(base + ["--packing", "orm", "--channel", "b"])
+    assert exc.value.code == 1
+    assert "Packing ORM puts the AO in channel R, but Channel is B" in capsys.readouterr().err
+    assert np.array_equal(_pixels(img), before)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(base + ["--packing", "hdrp-mask"])
+    assert exc.value.code == 0, capsys.readouterr().err
+    after = _pixels(img)
+    assert np.array_equal(after[:, [0, 2, 3]], before[:, [0, 2, 3]])
+    assert not np.array_equal(after[:, 1], before[:, 1])
