@@ -152,6 +152,8 @@ def _view(doc, blob, view):
 
 
 def _accessor(doc, blob, index):
+    """An accessor's values as float32 (count, components), normalized integers scaled to
+    0-1, and half the step between two of its values (0 for floats)."""
     a = doc["accessors"][index]
     comps = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[a["type"]]
     dtype = {5126: np.float32, 5123: np.uint16, 5121: np.uint8}[a["componentType"]]
@@ -159,7 +161,8 @@ def _accessor(doc, blob, index):
     vals = np.frombuffer(raw, dtype, a["count"] * comps).reshape(-1, comps).astype(np.float32)
     if a.get("normalized"):
         vals /= np.iinfo(dtype).max
-    return vals
+        return vals, 0.5 / np.iinfo(dtype).max
+    return vals, 0.0
 
 
 def _mesh_primitive(doc, name):
@@ -247,15 +250,17 @@ def test_vertex_bake_in_a_channel_exports_as_color_0(tree, tmp_path):
     _validate(path)
     doc, blob = _glb(path)
     prims = _mesh_primitive(doc, "Ground")
-    pos = np.concatenate([_accessor(doc, blob, p["attributes"]["POSITION"]) for p in prims])
-    col = np.concatenate([_accessor(doc, blob, p["attributes"]["COLOR_0"]) for p in prims])
+    pos = np.concatenate([_accessor(doc, blob, p["attributes"]["POSITION"])[0] for p in prims])
+    cols = [_accessor(doc, blob, p["attributes"]["COLOR_0"]) for p in prims]
+    col = np.concatenate([c for c, _half in cols])
+    half = max(h for _c, h in cols)  # 8- or 16-bit where an exporter writes integers
     verts = np.empty(len(me.vertices) * 3, np.float32)
     me.vertices.foreach_get("co", verts)
     verts = verts.reshape(-1, 3)
     nearest = np.argmin(((pos[:, None, :] - verts[None]) ** 2).sum(-1), axis=1)
     assert np.abs(pos - verts[nearest]).max() < 1e-5
-    # COLOR_0 is the attribute's every channel: the AO in R beside the user's G, B and A.
-    assert np.abs(col - colors[nearest]).max() <= 1e-6
+    # COLOR_0 is the attribute's channels (RGB or RGBA): the AO in R beside the user's own.
+    assert np.abs(col - colors[nearest, :col.shape[1]]).max() <= half + 1e-6
 
 
 def test_cli_packing_as_the_readme_spells_it(tree, capsys):
@@ -277,3 +282,35 @@ def test_cli_packing_as_the_readme_spells_it(tree, capsys):
     after = _pixels(img)
     assert np.array_equal(after[:, [0, 2, 3]], before[:, [0, 2, 3]])
     assert not np.array_equal(after[:, 1], before[:, 1])
+
+
+def test_a_failed_bake_leaves_no_gltf_wiring(tree, monkeypatch):
+    """A failure after the occlusion wiring rolls it back: the material as it was, no glTF
+    node group left, and per vertex the render color attribute as it was."""
+    from canopy_ao.blender import gltf_io
+    t = tree
+    mat = t["ground"].active_material
+    before = H.tree_snapshot(mat)
+    real = gltf_io.wire_occlusion
+
+    def wire_then_fail(*args):
+        real(*args)
+        raise RuntimeError("disk full")
+    monkeypatch.setattr(gltf_io, "wire_occlusion", wire_then_fail)
+    with pytest.raises(RuntimeError, match="disk full"):
+        run_bake(bpy.context, ["Ground"], opts(t, mode='TEXEL', gltf=True))
+    assert H.tree_snapshot(mat) == before
+    assert not [g for g in bpy.data.node_groups if g.name.startswith("glTF")]
+    me = t["ground"].data
+    me.color_attributes.new("Other", 'BYTE_COLOR', 'CORNER')
+    me.color_attributes.new("Paint", 'FLOAT_COLOR', 'POINT')  # kept by the rollback
+    me.color_attributes.render_color_index = me.color_attributes.find("Other")
+    real_set = gltf_io.set_color_export
+
+    def set_then_fail(*args):
+        real_set(*args)
+        raise RuntimeError("disk full")
+    monkeypatch.setattr(gltf_io, "set_color_export", set_then_fail)
+    with pytest.raises(RuntimeError, match="disk full"):
+        run_bake(bpy.context, ["Ground"], opts(t, gltf=True, attribute="Paint", channel="R"))
+    assert me.color_attributes[me.color_attributes.render_color_index].name == "Other"
