@@ -314,3 +314,14 @@ def test_a_failed_bake_leaves_no_gltf_wiring(tree, monkeypatch):
     with pytest.raises(RuntimeError, match="disk full"):
         run_bake(bpy.context, ["Ground"], opts(t, gltf=True, attribute="Paint", channel="R"))
     assert me.color_attributes[me.color_attributes.render_color_index].name == "Other"
+
+
+@pytest.mark.parametrize("flag", [["--gltf"], ["--packing", "orm"]])
+def test_frame_range_bake_refuses_gltf_and_packing(tree, capsys, flag):
+    from canopy_ao import cli
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "--method", "ellipsoid", "--tau", "2", "--no-proxies",
+                  "--frames", "1", "2"] + flag)
+    assert exc.value.code == 1
+    assert "For glTF and Packing are for single bakes" in capsys.readouterr().err
+    assert not [a for a in tree["ground"].data.attributes if a.name.startswith("CanopyAO")]
