@@ -95,6 +95,12 @@ def test_packing_refusals_name_the_image_and_change_nothing(tree):
                                             "Channel is G"):
         run_bake(bpy.context, ["Ground"], opts(t, mode='TEXEL', packing="ORM", channel="G",
                                                pack_image="Wide"))
+    gone = bpy.data.images.new("Gone", RES, RES)
+    gone.source = 'FILE'
+    gone.filepath = os.path.join(t["image_dir"], "moved_away.png")
+    with pytest.raises(CanopyAOError, match="image 'Gone' has no pixels .*moved_away.png"):
+        run_bake(bpy.context, ["Ground"], opts(t, mode='TEXEL', packing="ORM",
+                                               pack_image="Gone"))
     assert not os.path.exists(t["image_dir"]) or not os.listdir(t["image_dir"])
     mat = t["ground"].active_material
     assert not [n for n in mat.node_tree.nodes if n.get("canopy_ao")]
