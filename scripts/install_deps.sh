@@ -49,6 +49,7 @@ have_validator() {
 if ! have_validator; then
   if ! command -v npm >/dev/null; then
     echo "canopy-ao: installing npm"
+    if exec 9>>/tmp/canopy-ao-apt.lock 2>/dev/null; then flock 9; fi  # as above
     $SUDO env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
       --no-install-recommends npm >/dev/null
   fi
