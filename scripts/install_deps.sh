@@ -25,14 +25,42 @@ for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 
+SUDO=""
+[[ $(id -u) -eq 0 ]] || SUDO="sudo"
 if ((${#missing[@]})); then
   echo "canopy-ao: installing ${missing[*]}"
-  SUDO=""
-  [[ $(id -u) -eq 0 ]] || SUDO="sudo"
   export DEBIAN_FRONTEND=noninteractive
   # Wait for another apt (a chroot's set-up installing debootstrap: scripts/chroot.sh takes the
   # same lock) instead of failing on dpkg's.
   if exec 9>>/tmp/canopy-ao-apt.lock 2>/dev/null; then flock 9; fi  # no lock file: go on
   $SUDO apt-get -o DPkg::Lock::Timeout=600 update -qq
   $SUDO apt-get -o DPkg::Lock::Timeout=600 install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# The Khronos glTF validator, run by node in tests/blender/test_gltf.py: npm (Debian's, where
+# nodejs brought none) installs one pinned version into a project cache, once per version; the
+# lock keeps concurrent runs (host and chroots, several worktrees) from installing over each
+# other. Unreachable registry: a warning, and that test fails naming this script.
+gltf_validator=2.0.0-dev.3.10
+npm_dir=${CANOPY_AO_NPM:-/var/cache/canopy-ao/npm}
+have_validator() {
+  grep -qs "\"version\": \"$gltf_validator\"" "$npm_dir/node_modules/gltf-validator/package.json"
+}
+if ! have_validator; then
+  if ! command -v npm >/dev/null; then
+    echo "canopy-ao: installing npm"
+    if exec 9>>/tmp/canopy-ao-apt.lock 2>/dev/null; then flock 9; fi  # as above
+    $SUDO env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
+      --no-install-recommends npm >/dev/null
+  fi
+  $SUDO mkdir -p "$npm_dir"
+  (
+    flock 8
+    if ! have_validator; then
+      echo "canopy-ao: installing gltf-validator@$gltf_validator into $npm_dir"
+      $SUDO npm install --prefix "$npm_dir" --no-audit --no-fund --loglevel=error \
+        "gltf-validator@$gltf_validator" >/dev/null \
+        || echo "canopy-ao: warning: npm could not install gltf-validator into $npm_dir" >&2
+    fi
+  ) 8>>/tmp/canopy-ao-npm.lock
 fi

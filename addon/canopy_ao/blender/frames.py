@@ -39,6 +39,10 @@ class FrameBake:
         if end < start:
             raise CanopyAOError(f"the frame range {start}-{end} is empty (end before start)")
         live.check_request(opts)
+        if opts.get("gltf") or opts.get("packing", "NONE") != "NONE":
+            raise CanopyAOError("a frame-range bake caches grey AO per frame, read back by a "
+                                "modifier; For glTF and Packing are for single bakes: turn "
+                                "them off (nothing was changed)")
         self.context, self.scene = context, context.scene
         self.names, self.opts = list(object_names), dict(opts, live=False)
         self.frames = list(range(start, end + 1))

@@ -11,7 +11,7 @@ from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget, check_outputs
 from .. import core
-from ..core import maps, metrics, settings
+from ..core import maps, metrics, packing, settings
 from ..core.native import CanopyAOError
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
@@ -34,6 +34,7 @@ class BakeJob:
         opts = self.opts = dict(settings.defaults(), **opts)
         for o in settings.OPTIONS:  # every value in range before anything is read or written
             opts[o.name] = o.check(opts[o.name])
+        packing.apply(opts)  # a packing preset is its channel
         self.settings = settings.BakeSettings(**{o.name: opts[o.name] for o in settings.OPTIONS
                                                  if o.group == "bake"})
         self.scene = context.scene

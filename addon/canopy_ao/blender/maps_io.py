@@ -72,6 +72,22 @@ def write_attribute_channel(obj, name, values, channel):
     return attr
 
 
+def check_pack_image(image, resolution, channel):
+    """Why ``channel`` of Blender image ``image`` cannot take a bake at ``resolution`` texels
+    (None when it can): no pixels, not that square size, or no such channel."""
+    w, h = image.size
+    if w == 0 or h == 0:
+        return (f"image '{image.name}' has no pixels (its file "
+                f"'{image.filepath or '(none)'}' could not be read); reload or replace it")
+    if (w, h) != (resolution, resolution):
+        return (f"image '{image.name}' is {w}×{h} and the bake {resolution}×{resolution}; "
+                + (f"set Resolution to {w} to pack into it" if w == h else
+                   "the AO packs into a square image of Resolution texels"))
+    if channel_index(channel) >= image.channels:
+        return f"image '{image.name}' has {image.channels} channels, no {channel}"
+    return None
+
+
 def pack_image_channel(image, img, channel, txn):
     """Write img (float32 (H, W), row 0 = bottom) into channel 'R', 'G', 'B' or 'A' of a
     Blender image of the same size; the other channels keep their values (a byte image's
@@ -80,12 +96,9 @@ def pack_image_channel(image, img, channel, txn):
     from .files_io import keep_file
     w, h = image.size
     c = channel_index(channel)
-    if (h, w) != img.shape:
-        raise MeshIOError(f"image '{image.name}' is {w}×{h}; set Resolution to {w} (a square "
-                          "image of that size) to pack into it")
-    if c >= image.channels:
-        raise MeshIOError(f"image '{image.name}' has {image.channels} channels, no "
-                          f"{channel}")
+    why = check_pack_image(image, img.shape[0], channel)  # img: the bake's square
+    if why:
+        raise MeshIOError(why)
     buf = np.empty(w * h * image.channels, np.float32)
     image.pixels.foreach_get(buf)
     old = buf.copy()

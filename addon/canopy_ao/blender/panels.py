@@ -60,7 +60,10 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         col.prop(s, "mode")
         col.prop(s, "attribute")
         col.prop(s, "overwrite")
-        col.prop(s, "channel")
+        col.prop(s, "packing")
+        sub = col.row()
+        sub.enabled = s.packing == 'NONE'
+        sub.prop(s, "channel")
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
@@ -68,7 +71,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
             col.prop(s, "udim")
             col.prop(s, "atlas")
             sub = col.row()
-            sub.enabled = s.channel != 'RGBA'
+            sub.enabled = s.channel != 'RGBA' or s.packing != 'NONE'
             sub.prop(s, "pack_image")
         row = col.row(align=True)
         row.prop(s, "thickness")
@@ -83,6 +86,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         col.separator()
         col.prop(s, "show_proxies")
         col.prop(s, "wire_material")
+        col.prop(s, "gltf")
         row = col.row(align=True)
         row.prop(s, "add_aov")
         sub = row.row(align=True)
@@ -107,9 +111,9 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
+        "image_dir", "udim", "atlas", "channel", "packing", "pack_image", "thickness", "thickness_name",
         "bent_normals", "bent_normals_name",
-        "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples",
+        "show_proxies", "wire_material", "gltf", "add_aov", "aov_name", "check_cycles", "cycles_samples",
         "live"}
 
 

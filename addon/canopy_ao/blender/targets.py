@@ -7,7 +7,7 @@ import numpy as np
 
 from . import files_io
 from ..core.native import CanopyAOError
-from . import bent_io, maps_io, materials, mesh_io, texel_io, tiles_io
+from . import bent_io, gltf_io, maps_io, materials, mesh_io, texel_io, tiles_io
 
 
 class Target:
@@ -88,6 +88,8 @@ class VertexTarget(Target):
             txn.attribute(self.obj, opts["attribute"], last=last)
             mesh_io.write_ao_attribute(self.obj, opts["attribute"], self.ao,
                                        overwrite=opts["overwrite"], checked=checked)
+        if opts["gltf"]:  # the attribute exists now: make it the one exported as COLOR_0
+            gltf_io.set_color_export(self.obj, opts["attribute"], txn)
 
 
 class TexelTarget(Target):
@@ -113,12 +115,23 @@ class TexelTarget(Target):
             self.triangles = tris
         if opts["bent_normals"] == "TANGENT":
             self.frames = bent_io.texel_frames(obj, depsgraph, self.rx)
+        if opts["gltf"] and opts["udim"]:
+            raise CanopyAOError("For glTF wires one image per material; glTF has no UDIM "
+                                "tiles: turn off UDIM Tiles (nothing was changed)")
+        why = gltf_io.check(obj) if opts["gltf"] else None
+        if why:
+            raise CanopyAOError(why)
         if opts["channel"] != "RGBA":
+            what = (f"Packing {opts['packing']}" if opts["packing"] != "NONE"
+                    else f"Channel {opts['channel']}")
             self.pack = bpy.data.images.get(opts["pack_image"])
             if self.pack is None:
-                raise CanopyAOError(f"Channel {opts['channel']} per texel packs into an image: "
-                                    f"no image named '{opts['pack_image']}'; set Pack Image "
+                raise CanopyAOError(f"{what} per texel packs into an existing image: no image "
+                                    f"named '{opts['pack_image']}'; set Pack Image "
                                     "(nothing was changed)")
+            why = maps_io.check_pack_image(self.pack, opts["resolution"], opts["channel"])
+            if why:
+                raise CanopyAOError(f"{what} of '{obj.name}': {why} (nothing was changed)")
 
     def write(self, txn, opts):
         if opts["channel"] != "RGBA":
@@ -183,6 +196,9 @@ class TexelTarget(Target):
             if self.thickness is not None:
                 maps_io.wire_thickness(self.obj, "texel", timage, opts["thickness_name"],
                                        self.rx.uv_map)
+        if opts["gltf"]:
+            wire_undo(txn, self.obj)
+            gltf_io.wire_occlusion(self.obj, image, opts["channel"], self.rx.uv_map, txn)
 
     def report(self):
         """The texel stats as plain data for the JSON report."""

@@ -104,8 +104,8 @@ class Option:
         if self.none_prop and text.strip().lower() == "auto":
             return None
         if self.kind == "enum":
-            return self.check(text.upper() if text.upper() in [i[0] for i in self.items]
-                              else text)
+            key = text.upper().replace("-", "_")  # hdrp-mask as HDRP_MASK
+            return self.check(key if key in [i[0] for i in self.items] else text)
         if self.kind in ("int", "float"):
             try:
                 value = int(text) if self.kind == "int" else float(text)
@@ -193,6 +193,20 @@ OPTIONS = (
     Option("pack_image", "str", "", "Pack Image",
            "Texel mode with a channel: the Blender image (square, Resolution texels) whose "
            "channel gets the AO; saved to its file if it has one", group="output"),
+    Option("packing", "enum", "NONE", "Packing",
+           "Pack the AO where an engine reads it, into one channel of an existing image (Pack "
+           "Image, per texel) or color attribute (Attribute, per vertex), the other channels "
+           "untouched: it sets Channel (core/packing.py)", group="output",
+           items=(("NONE", "None", "Channel as set"),
+                  ("ORM", "glTF / Unreal ORM", "AO in R, beside roughness (G) and metallic (B)"),
+                  ("HDRP_MASK", "Unity HDRP Mask", "AO in G of a mask map (metallic R, "
+                                                  "detail B, smoothness A)"))),
+    Option("gltf", "bool", False, "For glTF",
+           "Make Blender's glTF exporter export the AO: per texel, the image wired into a "
+           "'glTF Material Output' node group's Occlusion input in each material "
+           "(occlusionTexture, from the AO's channel); per vertex, the attribute made the "
+           "render color attribute (COLOR_0; export with Use Vertex Color: Active, or "
+           "Colors in Blender 3.x)", group="output"),
     Option("thickness", "bool", False, "Canopy Thickness",
            "Also bake how deep each point lies in its tree's canopy (0 on the fitted crown "
            "ellipsoid's surface, 1 at its centre, scale-free; τ times it is the optical depth "
