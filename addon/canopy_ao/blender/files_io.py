@@ -202,14 +202,14 @@ def check_file(path, output, overwrite=False):
     theirs = Output(rec.get("owner"), rec.get("map"), rec.get("tile"), rec.get("atlas", False))
     if theirs != output:
         return f"'{path}' holds Canopy AO's {theirs}, not {output}; {fix}"
-    blend = blend_of(path)
-    if rec.get("blend") != blend:
-        who = (f"the .blend file '{rec['blend']}' (relative to the image's folder)"
-               if rec.get("blend") else "an unsaved .blend file" if "blend" in rec
-               else "a .blend file it did not record (written by an older Canopy AO)")
-        here = f"'{blend}'" if blend else "this unsaved one"
-        return (f"'{path}' holds {output} baked from {who}, not from {here}: its material "
-                f"would show this bake; {fix}")
+    if rec.get("blend") != blend_of(path):
+        theirs = rec.get("blend")
+        who = (f"the .blend file '{os.path.normpath(os.path.join(os.path.dirname(path), theirs))}'"
+               if theirs else "an unsaved .blend file" if "blend" in rec
+               else "a .blend file it did not record (an older Canopy AO's file)")
+        here = f"'{bpy.data.filepath}'" if bpy.data.filepath else "an unsaved one"
+        return (f"'{path}' holds {output} baked from {who}, not from this .blend file "
+                f"({here}), and that file's material may show it; {fix}")
     return None
 
 
