@@ -178,6 +178,7 @@ def test_a_batch_never_replaces_another_sources_image(tree, tmp_path, user_scrip
 # === A kill during a write
 
 KILL_SCRIPT = """
+import sys
 import canopy_ao.cli as c
 c.main(["--objects", "Ground", "--method", "ellipsoid", "--tau", sys.argv[-1], "--mode",
         "texel", "--resolution", "2048", "--image-dir", "//canopy_ao", "--no-proxies"])
