@@ -232,7 +232,7 @@ OPTIONS = (
            "atlas), values stored linearly (AO is data: Non-Color in Blender, no sRGB "
            "encoding)", group="output",
            items=(("EXR", "OpenEXR Float", "32-bit float EXR (exact)"),
-                  ("EXR_HALF", "OpenEXR Half", "16-bit float EXR (within 1/2048)"),
+                  ("EXR_HALF", "OpenEXR Half", "16-bit float EXR (within 1/4096)"),
                   ("PNG", "PNG 8-bit", "8-bit PNG (within 1/510)"),
                   ("PNG16", "PNG 16-bit", "16-bit PNG (within 1/131070)"),
                   ("TGA", "Targa 8-bit", "8-bit TGA (TGA's 16-bit mode is 5-5-5-1 colour, "
