@@ -156,16 +156,18 @@ def test_a_batch_never_replaces_another_sources_image(tree, tmp_path, user_scrip
     for name in ("one", "two"):
         bpy.ops.wm.save_as_mainfile(filepath=str(src / f"{name}.blend"), copy=True)
     out = tmp_path / "out"
-    # The batch's Blender task (plan.task_command's command line), both files in one task.
     files = [str(src / "one.blend"), str(src / "two.blend")]
-    r = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", "--addons", "canopy_ao",
-                        files[0], "--python-expr",
-                        "import canopy_ao.batch.worker as w; w.main()", "--", "--root", str(src),
-                        "--output", str(out), "--files", *files, "--", "--objects", "Ground",
-                        "--method", "ellipsoid", "--tau", "2", "--mode", "texel",
-                        "--resolution", "16", "--no-proxies"],
-                       env=dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts),
-                       capture_output=True, text=True, timeout=600)
+
+    def task(*bake):  # the batch's Blender task (plan.task_command's), both files in one
+        return subprocess.run(
+            [bpy.app.binary_path, "-b", "--factory-startup", "--addons", "canopy_ao", files[0],
+             "--python-expr", "import canopy_ao.batch.worker as w; w.main()", "--", "--root",
+             str(src), "--output", str(out), "--files", *files, "--", "--objects", "Ground",
+             "--method", "ellipsoid", "--tau", "2", "--mode", "texel", "--resolution", "16",
+             "--no-proxies", *bake],
+            env=dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts), capture_output=True,
+            text=True, timeout=600)
+    r = task()
     text = r.stdout + r.stderr
     assert r.returncode != 0, text
     image = out / "canopy_ao" / "Ground_CanopyAO.exr"
@@ -173,6 +175,12 @@ def test_a_batch_never_replaces_another_sources_image(tree, tmp_path, user_scrip
            f"('{out / 'two.blend'}')" in text, text[-3000:]
     assert files_io.file_record(str(image))["blend"] == "../one.blend"
     assert sorted(os.listdir(out / "canopy_ao")) == ["Ground_CanopyAO.exr"]
+    # A folder per .blend file: both bake.
+    r = task("--image-dir", "//canopy_ao/{blend}")
+    assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
+    for name in ("one", "two"):
+        assert files_io.file_record(str(out / "canopy_ao" / name / "Ground_CanopyAO.exr"))[
+            "blend"] == f"../../{name}.blend"
 
 
 # === A kill during a write
@@ -227,3 +235,22 @@ def test_a_kill_while_the_image_is_written_leaves_the_old_image_and_nothing_stra
     assert rc == 0, err
     assert os.listdir(folder) == ["Ground_CanopyAO.exr"]
     assert not np.array_equal(_core.read_image(path), old)
+
+
+def test_a_bake_removes_only_the_temporaries_of_writers_that_are_gone(tree):
+    """A killed write's temporary (its process gone) goes with the next write of that path;
+    one of a process still running (another bake writing now) stays, as do other files."""
+    from canopy_ao.blender import atomic_io
+    d = tree["image_dir"]
+    path = os.path.join(d, "Ground_CanopyAO.exr")
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    stale = atomic_io.temp_path(path).replace(f".{os.getpid()}.", f".{gone.pid}.")
+    live = atomic_io.temp_path(path).replace(f".{os.getpid()}.", ".1.")  # init: always running
+    other = os.path.join(d, ".Ground_CanopyAO.exr.notes")
+    for f in (stale, live, other):
+        with open(f, "wb") as fh:
+            fh.write(b"partial")
+    run_bake(bpy.context, ["Ground"], _texel(tree))
+    assert sorted(os.listdir(d)) == sorted(["Ground_CanopyAO.exr", os.path.basename(live),
+                                            os.path.basename(other)])

@@ -89,11 +89,11 @@ def replace_file(path, write):
     tmp = temp_path(path)
     try:
         write(tmp)
+        _fsync(tmp)
         try:
             os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
         except FileNotFoundError:
             pass
-        _fsync(tmp)
         os.replace(tmp, path)
     except BaseException:
         try:

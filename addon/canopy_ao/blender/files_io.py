@@ -17,10 +17,17 @@ from ..core.image_formats import FORMATS, quantised, stored
 from ..core.native import CanopyAOError, _core
 from .atomic_io import keep_file, remove_file, replace_file  # noqa: F401 (re-exported)
 
-# The header attribute of every image file Canopy AO writes: JSON {"owner": the object's (or
-# atlas's) exact name, "map": the map's suffix, "tile": the UDIM number or null, "pixels": the
-# pixels' fingerprint} (docs/DESIGN.md, 'Ownership of what a bake writes').
+# The header attribute of every EXR and PNG file Canopy AO writes: JSON {"owner": the object's
+# (or atlas's) exact name, "map": the map's suffix, "tile": the UDIM number or null, "atlas",
+# "blend": the owning .blend (blend_of), "format": the FORMATS key, "pixels": the stored codes'
+# fingerprint}. A TGA keeps only its comment: "canopy_ao:" and a digest of that JSON
+# (docs/DESIGN.md, 'Ownership of what a bake writes').
 FILE_RECORD = "canopy_ao"
+
+
+# In the Image Folder: the .blend file's name without '.blend' ("untitled" before it is
+# saved), so .blend files sharing a folder each get their own images.
+BLEND_TOKEN = "{blend}"
 
 
 class Output(NamedTuple):
@@ -51,6 +58,9 @@ def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True, fmt="EXR"):
     made unless make=False); a note says when it is a temporary one. obj: anything with a
     name (an atlas's is its own)."""
     fname = file_stem(f"{obj.name}_{suffix}") + FORMATS[fmt].ext
+    if image_dir and BLEND_TOKEN in image_dir:  # a folder of each .blend file's own
+        stem = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "untitled"
+        image_dir = image_dir.replace(BLEND_TOKEN, stem)
     if image_dir:
         if image_dir.startswith("//") and not bpy.data.filepath:
             d = os.path.join(tempfile.gettempdir(), "canopy_ao")
@@ -139,7 +149,9 @@ _RECORDS = {}
 def file_record(path):
     """The FILE_RECORD of an image file Canopy AO wrote and nobody changed since (its pixels
     still have the recorded fingerprint), else None: another program's file, an edited one,
-    or one written before files carried a record."""
+    or one written before files carried a record. A TGA's is {"digest", "format", "pixels":
+    the file's own codes' fingerprint}, for check_file to compare with the record it would
+    write."""
     try:
         st = os.stat(path)
     except OSError:
@@ -189,7 +201,8 @@ def check_file(path, output, overwrite=False):
     if os.path.isdir(path):
         return f"'{path}' is a folder; choose another Image Folder"
     rec = file_record(path)
-    fix = "choose another Image Folder or tick Overwrite"
+    fix = (f"choose another Image Folder (e.g. '//canopy_ao/{BLEND_TOKEN}', a folder per .blend "
+           "file) or tick Overwrite")
     if rec is None:
         return (f"'{path}' already exists and Canopy AO did not write it (or changed since, or "
                 f"written by a Canopy AO whose files carried no record); {fix}")

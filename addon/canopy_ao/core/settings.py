@@ -225,8 +225,9 @@ OPTIONS = (
            "Texel mode: bake every object into one image of this name, for objects sharing "
            "one UV atlas; texels two objects claim are reported (empty = an image per object)",
            group="output"),
-    Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder",
-           group="output", subtype='DIR_PATH'),
+    Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder "
+           "('//' = beside the .blend; {blend} stands for the .blend file's name, a folder per "
+           ".blend file when several share one)", group="output", subtype='DIR_PATH'),
     Option("image_format", "enum", "EXR", "Image Format",
            "Texel mode: the image files' format (AO, thickness, bent normals, UDIM tiles, "
            "atlas), values stored linearly (AO is data: Non-Color in Blender, no sRGB "
