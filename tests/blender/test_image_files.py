@@ -254,3 +254,25 @@ def test_a_bake_removes_only_the_temporaries_of_writers_that_are_gone(tree):
     run_bake(bpy.context, ["Ground"], _texel(tree))
     assert sorted(os.listdir(d)) == sorted(["Ground_CanopyAO.exr", os.path.basename(live),
                                             os.path.basename(other)])
+
+
+def test_a_failed_re_bake_puts_the_old_files_back_and_leaves_nothing_else(tree, monkeypatch):
+    """The old bytes a rollback needs are held in memory: a bake that fails after writing its
+    files (here, while wiring the material) puts each one back, in every format."""
+    from canopy_ao.blender import materials
+    d = tree["image_dir"]
+    run_bake(bpy.context, ["Ground"], _texel(tree, image_format="TGA", thickness=True))
+    before = {f: _bytes(os.path.join(d, f)) for f in os.listdir(d)}
+    assert sorted(before) == ["Ground_CanopyAO.tga", "Ground_CanopyThickness.tga"]
+
+    def broken(*_a, **_k):
+        raise RuntimeError("wiring failed")
+    monkeypatch.setattr(materials, "wire_texel_ao", broken)
+    with pytest.raises(RuntimeError, match="wiring failed"):
+        run_bake(bpy.context, ["Ground"], _texel(tree, image_format="TGA", thickness=True,
+                                                 tau=3.0, wire_material=True))
+    assert {f: _bytes(os.path.join(d, f)) for f in os.listdir(d)} == before
+    # A first bake that fails leaves no file at all.
+    with pytest.raises(RuntimeError, match="wiring failed"):
+        run_bake(bpy.context, ["Ground"], _texel(tree, image_format="PNG", wire_material=True))
+    assert {f: _bytes(os.path.join(d, f)) for f in os.listdir(d)} == before
