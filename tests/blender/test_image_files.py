@@ -276,3 +276,21 @@ def test_a_failed_re_bake_puts_the_old_files_back_and_leaves_nothing_else(tree, 
     with pytest.raises(RuntimeError, match="wiring failed"):
         run_bake(bpy.context, ["Ground"], _texel(tree, image_format="PNG", wire_material=True))
     assert {f: _bytes(os.path.join(d, f)) for f in os.listdir(d)} == before
+
+
+def test_a_file_whose_record_names_no_blend_file_needs_overwrite_once(tree):
+    """An older Canopy AO's EXR (record without the .blend): whose .blend it is cannot be
+    told, so it is refused, saying so, until Overwrite takes it over."""
+    import json
+    from canopy_ao.core.fingerprint import fingerprint
+    d = tree["image_dir"]
+    path = os.path.join(d, "Ground_CanopyAO.exr")
+    img = np.full((8, 8), 0.5, np.float32)
+    old = {"owner": "Ground", "map": "CanopyAO", "tile": None, "atlas": False,
+           "pixels": fingerprint(img, "pixels")}
+    _core.write_image(path, img, attributes={files_io.FILE_RECORD: json.dumps(old)})
+    assert files_io.file_record(path) is not None  # a true record, of the older kind
+    with pytest.raises(CanopyAOError, match="a .blend file it did not record"):
+        run_bake(bpy.context, ["Ground"], _texel(tree))
+    run_bake(bpy.context, ["Ground"], _texel(tree, overwrite=True))
+    run_bake(bpy.context, ["Ground"], _texel(tree, tau=3.0))  # now its own

@@ -98,15 +98,16 @@ def format_of(path):
 
 def blend_of(path):
     """The .blend that owns an image file written now at path: its path relative to the
-    image's folder ('/'-separated, so moving the project folder as a whole keeps it; absolute
-    when no relative path exists, e.g. another drive), '' when the .blend is not saved."""
+    image's folder, links resolved ('/'-separated, so moving the project folder as a whole
+    keeps it; absolute when no relative path exists, e.g. another drive), '' when the .blend
+    is not saved."""
     blend = bpy.data.filepath
     if not blend:
         return ""
     try:
-        rel = os.path.relpath(os.path.abspath(blend), os.path.dirname(os.path.abspath(path)))
+        rel = os.path.relpath(os.path.realpath(blend), os.path.dirname(os.path.realpath(path)))
     except ValueError:
-        rel = os.path.abspath(blend)
+        rel = os.path.realpath(blend)
     return os.path.normcase(rel).replace(os.sep, "/")
 
 
@@ -217,9 +218,11 @@ def check_file(path, output, overwrite=False):
         return f"'{path}' holds Canopy AO's {theirs}, not {output}; {fix}"
     if rec.get("blend") != blend_of(path):
         theirs = rec.get("blend")
-        who = (f"the .blend file '{os.path.normpath(os.path.join(os.path.dirname(path), theirs))}'"
-               if theirs else "an unsaved .blend file" if "blend" in rec
-               else "a .blend file it did not record (an older Canopy AO's file)")
+        where = os.path.dirname(os.path.realpath(path))
+        who = (f"the .blend file '{os.path.normpath(os.path.join(where, theirs))}'"
+               if theirs and isinstance(theirs, str) else "an unsaved .blend file"
+               if theirs == "" else
+               "a .blend file it did not record (an older Canopy AO's file)")
         here = f"'{bpy.data.filepath}'" if bpy.data.filepath else "an unsaved one"
         return (f"'{path}' holds {output} baked from {who}, not from this .blend file "
                 f"({here}), and that file's material may show it; {fix}")
