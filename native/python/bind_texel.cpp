@@ -440,7 +440,8 @@ void bind_texel(py::module_& m) {
       R"doc(
 Writes float32 pixels (H, W) or (H, W, C), C in 1..4 (1 = grey "Y", 3 = RGB, 4 = RGBA), with
 OpenImageIO; the format follows the extension. dtype "auto": .exr → 32-bit float, .png → 16-bit
-(values in [0, 1], clamped), others → float; or "float", "half" (EXR), "uint16", "uint8".
+(values in [0, 1], clamped), .tga → 8-bit, others → float; or "float", "half" (EXR), "uint16",
+"uint8" (the only one TGA holds).
 bottom_up=True: row 0 is the bottom (Blender's order), flipped on write so the file shows v = 1
 at the top. Raises CanopyAOError naming the path and OpenImageIO's message if the file cannot be
 written, ValueError for bad shapes, non-finite pixels (or beyond +-65504 for "half") or a dtype

@@ -61,6 +61,7 @@ std::string oiio_message(const OIIO::ImageInput* in) {
 PixelType default_pixel_type(const std::string& path) {
   const std::string ext = extension_of(path);
   if (ext == ".png") return PixelType::UInt16;
+  if (ext == ".tga") return PixelType::UInt8;
   return PixelType::Float;
 }
 
@@ -82,6 +83,12 @@ void write_image(const std::string& path, const float* pixels, int width, int he
   if (ext == ".png" && !integer) {
     throw std::invalid_argument("write_image: PNG holds uint8 or uint16, not " +
                                 std::string(type_name(type)) + " ('" + path + "')");
+  }
+  // OpenImageIO would write any other type to a TGA as 8 bits, silently.
+  if (ext == ".tga" && type != PixelType::UInt8) {
+    throw std::invalid_argument("write_image: TGA holds uint8 (its 16-bit mode is 5-5-5-1 "
+                                "colour), not " + std::string(type_name(type)) + " ('" + path +
+                                "')");
   }
   if (ext == ".exr" && integer) {
     throw std::invalid_argument("write_image: EXR holds float or half, not " +

@@ -219,12 +219,12 @@ def test_a_file_of_ours_that_was_edited_or_belongs_to_another_output_is_refused(
     with pytest.raises(CanopyAOError, match="did not write it \\(or changed since"):
         run_bake(bpy.context, ["Ground"], _texel(tree))
     # A true record, of another object (what a case-insensitive file system would give).
-    files_io.write_exr(path, img, files_io.Output("Leaves"))
+    files_io.write_file(path, img, files_io.Output("Leaves"))
     with pytest.raises(CanopyAOError, match="holds Canopy AO's 'CanopyAO' of 'Leaves', not "
                                             "'CanopyAO' of 'Ground'"):
         run_bake(bpy.context, ["Ground"], _texel(tree))
     # An atlas of the object's name is another output: its file is not the object's.
-    files_io.write_exr(path, img, files_io.Output("Ground", atlas=True))
+    files_io.write_file(path, img, files_io.Output("Ground", atlas=True))
     with pytest.raises(CanopyAOError, match="of atlas 'Ground', not 'CanopyAO' of 'Ground'"):
         run_bake(bpy.context, ["Ground"], _texel(tree))
     assert sorted(os.listdir(d)) == ["Ground_CanopyAO.exr"]

@@ -139,6 +139,25 @@ TEST_F(ImageIO, FormatAndTypeMismatchIsBadInput) {
   EXPECT_THROW(write_image(path("five.exr"), five), std::invalid_argument);
   EXPECT_EQ(default_pixel_type("A.PNG"), PixelType::UInt16);
   EXPECT_EQ(default_pixel_type("a.exr"), PixelType::Float);
+  // TGA: 8 bits or nothing (OpenImageIO would store 16-bit or float pixels as 8 bits).
+  for (PixelType t : {PixelType::UInt16, PixelType::Float, PixelType::Half}) {
+    o.type = t;
+    EXPECT_THROW(write_image(path("t.tga"), img, o), std::invalid_argument);
+  }
+  EXPECT_FALSE(fs::exists(path("t.tga")));
+  EXPECT_EQ(default_pixel_type("a.TGA"), PixelType::UInt8);
+}
+
+TEST_F(ImageIO, Tga8RoundTripWithinHalfAStep) {
+  const Image img = random_image(7, 5, 1, 0.f, 1.f, 4);
+  write_image(path("grey.tga"), img);  // Auto: uint8
+  const Image back = read_image(path("grey.tga"));
+  ASSERT_EQ(back.width, 7);
+  ASSERT_EQ(back.height, 5);
+  ASSERT_EQ(back.channels, 1);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) {
+    EXPECT_NEAR(back.pixels[i], img.pixels[i], 0.5f / 255.f + 1e-6f) << i;
+  }
 }
 
 TEST_F(ImageIO, HeaderAttributesRoundTripInExrAndPng) {

@@ -123,18 +123,18 @@ def write_attribute(obj, name, bent, overwrite=False):
     return attr
 
 
-def write_image(obj, rx, bent, space, image_dir, txn, suffix, overwrite=False):
+def write_image(obj, rx, bent, space, image_dir, txn, suffix, overwrite=False, fmt="EXR"):
     """Splat the encoded bent normals per texel (each channel with rx's margin; empty texels
-    BACKGROUND[space]) into an RGB EXR, loaded as obj's image of map ``suffix`` (Non-Color),
+    BACKGROUND[space]) into an RGB image file of format fmt, loaded as obj's image of map ``suffix`` (Non-Color),
     under the files' ownership rules (files_io.write_own_file). Returns (image, path)."""
     rgb = maps.encode(bent)
     res = rx.resolution
     planes = [texel_io.splat(rx.pixels, rgb[:, k], res, res, rx.margin, BACKGROUND[space][k])[0]
               for k in range(3)]
     notes = []
-    path = texel_io.image_path(obj, image_dir, notes, suffix)
+    path = texel_io.image_path(obj, image_dir, notes, suffix, fmt=fmt)
     files_io.write_own_file(path, np.stack(planes, axis=2), txn,
-                            files_io.Output(obj.name, suffix), overwrite)
+                            files_io.Output(obj.name, suffix), overwrite, fmt)
     image, undo = texel_io.load_image(obj, path, suffix)
     txn.add(undo)
     return image, path, notes

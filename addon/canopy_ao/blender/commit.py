@@ -1,7 +1,6 @@
 """Everything or nothing: a bake's writes go through a Transaction, which records how to undo
 each one; a failure part-way undoes them all, in reverse (docs/DESIGN.md, 'Data flow')."""
 
-import os
 import sys
 import traceback
 
@@ -68,9 +67,5 @@ class Transaction:
         self._undo.clear()
 
     def done(self):
-        """The writes stand: drop the files kept to undo them."""
-        for undo in self._undo:
-            keep = getattr(undo, "keep", None)
-            if keep and os.path.exists(keep):
-                os.remove(keep)
+        """The writes stand: drop their undos (and the old file bytes they hold)."""
         self._undo.clear()

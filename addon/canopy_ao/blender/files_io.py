@@ -1,7 +1,8 @@
 """Image files a bake writes (docs/DESIGN.md, 'Ownership of what a bake writes'): names no
 other output shares, a header record saying whose output each file is with its pixels'
-fingerprint, the checks that refuse a file that is not the bake's own, and the moved-aside
-copy that lets a failed bake put the old file back."""
+fingerprint, the checks that refuse a file that is not the bake's own (another output's, or
+another .blend file's), written in the chosen format (core/image_formats.py) and replaced
+atomically (atomic_io.py)."""
 
 import json
 import os
@@ -12,12 +13,21 @@ import bpy
 import numpy as np
 
 from ..core.fingerprint import fingerprint, name_digest
+from ..core.image_formats import FORMATS, quantised, stored
 from ..core.native import CanopyAOError, _core
+from .atomic_io import keep_file, remove_file, replace_file  # noqa: F401 (re-exported)
 
-# The header attribute of every image file Canopy AO writes: JSON {"owner": the object's (or
-# atlas's) exact name, "map": the map's suffix, "tile": the UDIM number or null, "pixels": the
-# pixels' fingerprint} (docs/DESIGN.md, 'Ownership of what a bake writes').
+# The header attribute of every EXR and PNG file Canopy AO writes: JSON {"owner": the object's
+# (or atlas's) exact name, "map": the map's suffix, "tile": the UDIM number or null, "atlas",
+# "blend": the owning .blend (blend_of), "format": the FORMATS key, "pixels": the stored codes'
+# fingerprint}. A TGA keeps only its comment: "canopy_ao:" and a digest of that JSON
+# (docs/DESIGN.md, 'Ownership of what a bake writes').
 FILE_RECORD = "canopy_ao"
+
+
+# In the Image Folder: the .blend file's name without '.blend' ("untitled" before it is
+# saved), so .blend files sharing a folder each get their own images.
+BLEND_TOKEN = "{blend}"
 
 
 class Output(NamedTuple):
@@ -43,10 +53,14 @@ def file_stem(name):
     return clean if clean == name else f"{clean}_{name_digest(name)}"
 
 
-def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True):
-    """Where obj's EXR goes (the folder is made unless make=False); a note says when it is a
-    temporary one. obj: anything with a name (an atlas's is its own)."""
-    fname = file_stem(f"{obj.name}_{suffix}") + ".exr"
+def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True, fmt="EXR"):
+    """Where obj's image file of format fmt (core/image_formats.FORMATS) goes (the folder is
+    made unless make=False); a note says when it is a temporary one. obj: anything with a
+    name (an atlas's is its own)."""
+    fname = file_stem(f"{obj.name}_{suffix}") + FORMATS[fmt].ext
+    if image_dir and BLEND_TOKEN in image_dir:  # a folder of each .blend file's own
+        stem = os.path.splitext(os.path.basename(bpy.data.filepath))[0] or "untitled"
+        image_dir = image_dir.replace(BLEND_TOKEN, stem)
     if image_dir:
         if image_dir.startswith("//") and not bpy.data.filepath:
             d = os.path.join(tempfile.gettempdir(), "canopy_ao")
@@ -71,20 +85,59 @@ def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True):
 def tile_path(path, number):
     """The file of UDIM tile ``number`` of the image whose untiled file is path (name.exr →
     name.<number>.exr, Blender's <UDIM> pattern)."""
-    return f"{path[:-len('.exr')]}.{number}.exr"
+    stem, ext = os.path.splitext(path)
+    return f"{stem}.{number}{ext}"
 
 
-def write_exr(path, ao, output=None):
-    """Write a float image (H, W) (grey) or (H, W, C), row 0 = bottom: the writer flips rows
-    so the file shows v = 1 on top. output (an Output): the header records it and the pixels'
-    fingerprint (FILE_RECORD), so a later bake knows the file as Canopy AO's."""
-    ao = np.ascontiguousarray(ao, dtype=np.float32)
+def format_of(path):
+    """The FORMATS key a file's record is read by, from its extension (EXR and PNG: the
+    record names the exact one), or None when no format writes that extension."""
+    ext = os.path.splitext(path)[1].lower()
+    return next((k for k, f in FORMATS.items() if f.ext == ext), None)
+
+
+def blend_of(path):
+    """The .blend that owns an image file written now at path: its path relative to the
+    image's folder, links resolved ('/'-separated, so moving the project folder as a whole
+    keeps it; absolute when no relative path exists, e.g. another drive), '' when the .blend
+    is not saved."""
+    blend = bpy.data.filepath
+    if not blend:
+        return ""
+    try:
+        rel = os.path.relpath(os.path.realpath(blend), os.path.dirname(os.path.realpath(path)))
+    except ValueError:
+        rel = os.path.realpath(blend)
+    return os.path.normcase(rel).replace(os.sep, "/")
+
+
+def _identity(path, output, fmt):
+    """What a file's record says: whose output, which .blend's, which format."""
+    return dict(output._asdict(), blend=blend_of(path), format=fmt)
+
+
+def _digest(record):
+    return "canopy_ao:" + name_digest(json.dumps(record, sort_keys=True), 32)
+
+
+def write_file(path, img, output=None, fmt="EXR"):
+    """Write a float image (H, W) (grey) or (H, W, C), row 0 = bottom, as format fmt (a
+    FORMATS key): the writer flips rows so the file shows v = 1 on top, quantises to the
+    format, and replaces path atomically (replace_file). output (an Output): the header
+    records it, the .blend's and the pixels' fingerprint (FILE_RECORD), so a later bake knows
+    the file as Canopy AO's."""
+    img = quantised(np.ascontiguousarray(img, dtype=np.float32), fmt)
+    f = FORMATS[fmt]
     attributes = None
     if output is not None:
-        attributes = {FILE_RECORD: json.dumps(dict(output._asdict(),
-                                                   pixels=fingerprint(ao, "pixels")))}
+        rec = dict(_identity(path, output, fmt), pixels=fingerprint(stored(img, fmt), "pixels"))
+        attributes = ({FILE_RECORD: json.dumps(rec)} if f.record == "attribute"
+                      else {"ImageDescription": _digest(rec)})
+
+    def write(tmp):
+        _core.write_image(tmp, img, dtype=f.dtype, bottom_up=True, attributes=attributes)
     try:
-        _core.write_image(path, ao, dtype="float", bottom_up=True, attributes=attributes)
+        replace_file(path, write)
     except (OSError, RuntimeError) as exc:
         raise CanopyAOError(f"Could not write '{path}': {exc}") from exc
 
@@ -97,7 +150,9 @@ _RECORDS = {}
 def file_record(path):
     """The FILE_RECORD of an image file Canopy AO wrote and nobody changed since (its pixels
     still have the recorded fingerprint), else None: another program's file, an edited one,
-    or one written before files carried a record."""
+    or one written before files carried a record. A TGA's is {"digest", "format", "pixels":
+    the file's own codes' fingerprint}, for check_file to compare with the record it would
+    write."""
     try:
         st = os.stat(path)
     except OSError:
@@ -111,33 +166,66 @@ def file_record(path):
 
 
 def _read_record(path):
-    try:
-        rec = json.loads(_core.read_image_attributes(path).get(FILE_RECORD, ""))
-        if not isinstance(rec, dict) or not isinstance(rec.get("pixels"), str):
-            return None
-        px = _core.read_image(path, bottom_up=True)
-    except (ValueError, RuntimeError, OSError):  # not an image, unreadable, no record
+    fmt = format_of(path)
+    if fmt is None:
         return None
-    # (H, W, C) as read holds the bytes of the (H, W) or (H, W, C) array written.
-    return rec if fingerprint(px, "pixels") == rec["pixels"] else None
+    try:
+        attrs = _core.read_image_attributes(path)
+        if FORMATS[fmt].record == "digest":  # TGA: the digest; check_file compares it
+            text = attrs.get("ImageDescription", "")
+            if not text.startswith("canopy_ao:"):
+                return None
+            rec = {"digest": text.strip(), "format": fmt}
+        else:
+            rec = json.loads(attrs.get(FILE_RECORD, ""))
+            if not isinstance(rec, dict) or not isinstance(rec.get("pixels"), str):
+                return None
+            rec.setdefault("format", "EXR")  # records from before formats: float EXR
+            if rec["format"] not in FORMATS or FORMATS[rec["format"]].ext != FORMATS[fmt].ext:
+                return None
+        px = _core.read_image(path, bottom_up=True)
+    except (ValueError, RuntimeError, OSError, TypeError):  # not an image, unreadable, no record
+        return None
+    # (H, W, C) as read holds the codes of the (H, W) or (H, W, C) array written.
+    pixels = fingerprint(stored(px, rec["format"]), "pixels")
+    if "digest" in rec:
+        return dict(rec, pixels=pixels)
+    return rec if pixels == rec["pixels"] else None
 
 
 def check_file(path, output, overwrite=False):
     """None when a bake may write path for output (an Output): no file there, Overwrite, or
-    Canopy AO's own unchanged file of that same output; else the reason it may not."""
+    Canopy AO's own unchanged file of that same output written from this .blend; else the
+    reason it may not."""
     if not os.path.lexists(path) or (overwrite and not os.path.isdir(path)):
         return None
     if os.path.isdir(path):
         return f"'{path}' is a folder; choose another Image Folder"
     rec = file_record(path)
+    fix = (f"choose another Image Folder (e.g. '//canopy_ao/{BLEND_TOKEN}', a folder per .blend "
+           "file) or tick Overwrite")
     if rec is None:
         return (f"'{path}' already exists and Canopy AO did not write it (or changed since, or "
-                "written by a Canopy AO whose files carried no record); choose another Image "
-                "Folder or tick Overwrite")
+                f"written by a Canopy AO whose files carried no record); {fix}")
+    if "digest" in rec:  # a format that holds only a digest of the record (TGA)
+        ours = dict(_identity(path, output, rec["format"]), pixels=rec["pixels"])
+        if rec["digest"] != _digest(ours):
+            return (f"'{path}' holds another Canopy AO output (another object's, map's or "
+                    f".blend file's: a {rec['format']} file records only a digest); {fix}")
+        return None
     theirs = Output(rec.get("owner"), rec.get("map"), rec.get("tile"), rec.get("atlas", False))
     if theirs != output:
-        return (f"'{path}' holds Canopy AO's {theirs}, not {output}; choose another Image "
-                "Folder or tick Overwrite")
+        return f"'{path}' holds Canopy AO's {theirs}, not {output}; {fix}"
+    if rec.get("blend") != blend_of(path):
+        theirs = rec.get("blend")
+        where = os.path.dirname(os.path.realpath(path))
+        who = (f"the .blend file '{os.path.normpath(os.path.join(where, theirs))}'"
+               if theirs and isinstance(theirs, str) else "an unsaved .blend file"
+               if theirs == "" else
+               "a .blend file it did not record (an older Canopy AO's file)")
+        here = f"'{bpy.data.filepath}'" if bpy.data.filepath else "an unsaved one"
+        return (f"'{path}' holds {output} baked from {who}, not from this .blend file "
+                f"({here}), and that file's material may show it; {fix}")
     return None
 
 
@@ -161,31 +249,13 @@ def check_outputs(outputs, overwrite):
             raise CanopyAOError(why + " (nothing was changed)")
 
 
-def write_own_file(path, img, txn, output, overwrite):
-    """Write img (H, W) to path as output (an Output), the old file kept in txn; refused
-    (CanopyAOError, nothing written) when path holds a file that is not this output's own and
-    overwrite is off (check_file: the bake checked before it began, this is the last look)."""
+def write_own_file(path, img, txn, output, overwrite, fmt="EXR"):
+    """Write img (H, W) to path as output (an Output) in format fmt, the old file's bytes
+    kept in txn for a rollback; refused (CanopyAOError, nothing written) when path holds a
+    file that is not this output's own and overwrite is off (check_file: the bake checked
+    before it began, this is the last look)."""
     why = check_file(path, output, overwrite)
     if why:
         raise CanopyAOError(why)
     txn.add(keep_file(path))
-    write_exr(path, img, output)
-
-
-def keep_file(path):
-    """Move an existing file at path aside; returns undo() that puts it back (or removes what
-    was written there). undo.keep is the moved-aside copy's path, or None."""
-    backup = None
-    if os.path.exists(path):
-        backup, k = path + ".canopy_ao-previous", 1
-        while os.path.lexists(backup):  # never over a file that is there already
-            backup, k = f"{path}.canopy_ao-previous{k}", k + 1
-        os.replace(path, backup)
-
-    def undo():
-        if backup is not None:
-            os.replace(backup, path)
-        elif os.path.exists(path):
-            os.remove(path)
-    undo.keep = backup
-    return undo
+    write_file(path, img, output, fmt)

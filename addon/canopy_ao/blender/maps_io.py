@@ -93,7 +93,7 @@ def pack_image_channel(image, img, channel, txn):
     Blender image of the same size; the other channels keep their values (a byte image's
     unchanged bytes write back as themselves). Recorded in txn: undo puts the old pixels back
     (and the image's file, when it is saved to one)."""
-    from .files_io import keep_file
+    from .atomic_io import keep_file, replace_file
     w, h = image.size
     c = channel_index(channel)
     why = check_pack_image(image, img.shape[0], channel)  # img: the bake's square
@@ -112,8 +112,16 @@ def pack_image_channel(image, img, channel, txn):
     image.update()
     if image.source == 'FILE' and image.filepath and image.packed_file is None:
         import bpy
-        txn.add(keep_file(bpy.path.abspath(image.filepath)))
-        image.save()
+        path, raw = bpy.path.abspath(image.filepath), image.filepath_raw
+        txn.add(keep_file(path))
+
+        def save(tmp):  # Blender saves beside, the rename replaces the file atomically
+            image.filepath_raw = tmp
+            try:
+                image.save()
+            finally:
+                image.filepath_raw = raw
+        replace_file(path, save)
     return image
 
 

@@ -68,6 +68,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
             col.prop(s, "image_dir")
+            col.prop(s, "image_format")
             col.prop(s, "udim")
             col.prop(s, "atlas")
             sub = col.row()
@@ -111,9 +112,10 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "image_dir", "udim", "atlas", "channel", "packing", "pack_image", "thickness", "thickness_name",
-        "bent_normals", "bent_normals_name",
-        "show_proxies", "wire_material", "gltf", "add_aov", "aov_name", "check_cycles", "cycles_samples",
+        "image_dir", "image_format", "udim", "atlas", "channel", "packing", "pack_image",
+        "thickness", "thickness_name", "bent_normals", "bent_normals_name",
+        "show_proxies", "wire_material", "gltf", "add_aov", "aov_name", "check_cycles",
+        "cycles_samples",
         "live"}
 
 

@@ -143,33 +143,37 @@ class TexelTarget(Target):
         elif opts["udim"]:
             image, st = tiles_io.write_tiled(self.obj, [(self.rx, self.ao)],
                                              opts["image_dir"] or None, txn, tiled=True,
-                                             overwrite=opts["overwrite"])
+                                             overwrite=opts["overwrite"],
+                                             fmt=opts["image_format"])
             self.stats = dict(self.rx.stats, path=st["paths"][0], paths=st["paths"],
                               tiles=sorted(st["tiles"]), image_tiles=st["tiles"],
                               notes=self.rx.stats["notes"] + st["notes"])
         else:
             image, self.stats = texel_io.write_texels(self.obj, self.rx, self.ao,
                                                       opts["image_dir"] or None, txn,
-                                                      overwrite=opts["overwrite"])
+                                                      overwrite=opts["overwrite"],
+                                                      fmt=opts["image_format"])
         timage = None
         if self.thickness is not None and opts["udim"]:
             timage, tstats = tiles_io.write_tiled(self.obj, [(self.rx, self.thickness)],
                                                   opts["image_dir"] or None, txn,
                                                   suffix=opts["thickness_name"], tiled=True,
-                                                  background=0.0, overwrite=opts["overwrite"])
+                                                  background=0.0, overwrite=opts["overwrite"],
+                                                  fmt=opts["image_format"])
             self.stats["thickness_path"] = tstats["paths"][0]
         elif self.thickness is not None:
             timage, tstats = texel_io.write_texels(self.obj, self.rx, self.thickness,
                                                    opts["image_dir"] or None, txn,
                                                    suffix=opts["thickness_name"],
-                                                   background=0.0, overwrite=opts["overwrite"])
+                                                   background=0.0, overwrite=opts["overwrite"],
+                                                   fmt=opts["image_format"])
             self.stats["thickness_path"] = tstats["path"]
         if self.bent is not None:
             _img, path, notes = bent_io.write_image(self.obj, self.rx, self.bent,
                                                     opts["bent_normals"],
                                                     opts["image_dir"] or None, txn,
                                                     opts["bent_normals_name"],
-                                                    opts["overwrite"])
+                                                    opts["overwrite"], opts["image_format"])
             self.stats["bent_normals_path"] = path
             said = self.stats.setdefault("notes", [])
             said += [n for n in notes if n not in said]  # the AO's image may have said it
@@ -222,6 +226,6 @@ def check_outputs(targets, opts):
             continue
         for o in t.outputs(opts):
             path = files_io.image_path(SimpleNamespace(name=o.owner), opts["image_dir"] or None,
-                                       [], o.map, make=False)
+                                       [], o.map, make=False, fmt=opts["image_format"])
             out.append((files_io.tile_path(path, o.tile) if o.tile is not None else path, o))
     files_io.check_outputs(out, opts["overwrite"])

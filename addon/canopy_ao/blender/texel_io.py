@@ -263,16 +263,17 @@ def bake_texel(context, obj, ao_fn, uv_map=None, resolution=1024, margin=4, imag
 
 
 def write_texels(obj, rx, ao, image_dir, txn, suffix="CanopyAO", background=1.0,
-                 overwrite=False):
-    """Splat AO (or another map: suffix names it) per texel into the image, write its EXR and
+                 overwrite=False, fmt="EXR"):
+    """Splat AO (or another map: suffix names it) per texel into the image, write its file
+    (format fmt, core/image_formats.py) and
     (re)load it as obj's image, each write recorded in txn (commit.Transaction; a replaced file
     is kept until txn.done()). Returns (image, stats)."""
     res = rx.resolution
     img_arr, mask = splat(rx.pixels, ao, res, res, rx.margin, background)
     stats = dict(rx.stats, margin_texels=int(np.count_nonzero(mask == 2)),
                  notes=list(rx.stats["notes"]))
-    path = image_path(obj, image_dir, stats["notes"], suffix)
-    write_own_file(path, img_arr, txn, Output(obj.name, suffix), overwrite)
+    path = image_path(obj, image_dir, stats["notes"], suffix, fmt=fmt)
+    write_own_file(path, img_arr, txn, Output(obj.name, suffix), overwrite, fmt)
     image, undo_image = load_image(obj, path, suffix)
     txn.add(undo_image)
     stats.update(path=path, writer="native", image=img_arr, mask=mask)

@@ -37,8 +37,9 @@ def split_tiles(uvs):
 
 
 def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, atlas=False,
-                background=1.0, overwrite=False):
-    """Splat every part's values per tile, write one EXR per tile and load them as one image.
+                background=1.0, overwrite=False, fmt="EXR"):
+    """Splat every part's values per tile, write one file per tile (format fmt) and load them
+    as one image.
 
     owner: the object (or, atlas=True, the atlas's name) the image belongs to; parts:
     [(TexelReceivers, values float32 (T,))] of the objects writing it (values in receiver
@@ -52,15 +53,15 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
 
     def out(tile):
         return files_io.Output(name, suffix, tile, atlas)
-    path0 = files_io.image_path(SimpleNamespace(name=name), image_dir, notes, suffix)
+    path0 = files_io.image_path(SimpleNamespace(name=name), image_dir, notes, suffix, fmt=fmt)
     numbers = sorted({n for rx, _v in parts for n, _a, _b in rx.tiles})
     if tiled:  # our tiles of an earlier bake that this one does not write go too (ours only)
-        d, stem = os.path.split(path0[:-len(".exr")])
+        (d, stem), ext = os.path.split(os.path.splitext(path0)[0]), os.path.splitext(path0)[1]
         for f in os.listdir(d):
-            rest = f[len(stem) + 1:-len(".exr")] if f.startswith(stem + ".") else ""
-            if (f.endswith(".exr") and rest.isdigit() and int(rest) not in numbers
+            rest = f[len(stem) + 1:-len(ext)] if f.startswith(stem + ".") else ""
+            if (f.endswith(ext) and rest.isdigit() and int(rest) not in numbers
                     and files_io.check_file(os.path.join(d, f), out(int(rest))) is None):
-                txn.add(files_io.keep_file(os.path.join(d, f)))
+                files_io.remove_file(os.path.join(d, f), txn)
     stats = {"tiles": {}, "paths": [], "claimed": {}, "notes": notes}
     # The image's undo is recorded before the files' so that a rollback runs it after theirs,
     # when the old tile files are back for it to find.
@@ -73,7 +74,7 @@ def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, at
         img, mask = texel_io.splat(np.concatenate(pix), np.concatenate(val), res, res, margin,
                                    background)
         path = files_io.tile_path(path0, n) if tiled else path0
-        files_io.write_own_file(path, img, txn, out(n if tiled else None), overwrite)
+        files_io.write_own_file(path, img, txn, out(n if tiled else None), overwrite, fmt)
         stats["tiles"][n], stats["claimed"][n] = (img, mask), claims
         stats["paths"].append(path)
     stats["shared_texels"] = int(sum(np.count_nonzero(c > 1) for c in stats["claimed"].values()))
@@ -98,13 +99,14 @@ def write_atlas(targets, txn, opts):
     each object wired to it; a note names the objects whose texels overlap."""
     name, tiled = opts["atlas"], opts["udim"]
     image, st = write_tiled(name, [(t.rx, t.ao) for t in targets], opts["image_dir"] or None,
-                            txn, tiled=tiled, atlas=True, overwrite=opts["overwrite"])
+                            txn, tiled=tiled, atlas=True, overwrite=opts["overwrite"],
+                            fmt=opts["image_format"])
     timage = None
     if targets[0].thickness is not None:
         timage, _ts = write_tiled(name, [(t.rx, t.thickness) for t in targets],
                                   opts["image_dir"] or None, txn, suffix=opts["thickness_name"],
                                   tiled=tiled, atlas=True, background=0.0,
-                                  overwrite=opts["overwrite"])
+                                  overwrite=opts["overwrite"], fmt=opts["image_format"])
     overlaps = []
     for i, t in enumerate(targets):
         shared = 0

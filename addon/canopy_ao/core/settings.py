@@ -239,8 +239,19 @@ OPTIONS = (
            "Texel mode: bake every object into one image of this name, for objects sharing "
            "one UV atlas; texels two objects claim are reported (empty = an image per object)",
            group="output"),
-    Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder",
-           group="output", subtype='DIR_PATH'),
+    Option("image_dir", "str", "//canopy_ao", "Image Folder", "Texel mode: output folder "
+           "('//' = beside the .blend; {blend} stands for the .blend file's name, a folder per "
+           ".blend file when several share one)", group="output", subtype='DIR_PATH'),
+    Option("image_format", "enum", "EXR", "Image Format",
+           "Texel mode: the image files' format (AO, thickness, bent normals, UDIM tiles, "
+           "atlas), values stored linearly (AO is data: Non-Color in Blender, no sRGB "
+           "encoding)", group="output",
+           items=(("EXR", "OpenEXR Float", "32-bit float EXR (exact)"),
+                  ("EXR_HALF", "OpenEXR Half", "16-bit float EXR (within 1/4096)"),
+                  ("PNG", "PNG 8-bit", "8-bit PNG (within 1/510)"),
+                  ("PNG16", "PNG 16-bit", "16-bit PNG (within 1/131070)"),
+                  ("TGA", "Targa 8-bit", "8-bit TGA (TGA's 16-bit mode is 5-5-5-1 colour, "
+                   "coarser than 8-bit grey)"))),
     Option("show_proxies", "bool", True, "Show Proxies", "Show the fitted shells as empties "
            "in a 'Canopy AO Proxies' collection", group="output", cli="--no-proxies"),
     Option("wire_material", "bool", False, "Wire Material",

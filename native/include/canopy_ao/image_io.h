@@ -31,11 +31,12 @@ struct Image {
 
 /// How pixels are stored in the file.
 enum class PixelType {
-  Auto,    ///< by extension: .exr → Float, .png → UInt16, anything else → Float
+  Auto,    ///< by extension: .exr → Float, .png → UInt16, .tga → UInt8, anything else → Float
   Float,   ///< 32-bit float (EXR, TIFF); exact round trip
   Half,    ///< 16-bit float (EXR)
   UInt16,  ///< 16-bit unsigned, [0, 1] ↦ 0..65535, values outside clamped (PNG, TIFF)
-  UInt8,   ///< 8-bit unsigned (PNG, TIFF)
+  UInt8,   ///< 8-bit unsigned (PNG, TGA, TIFF); TGA holds nothing finer (its 16-bit mode is
+           ///< 5-5-5-1 colour)
 };
 
 // === Options
@@ -55,7 +56,7 @@ struct ImageWriteOptions {
 /// format chosen by the extension (.exr, .png, .tif, ... anything OpenImageIO writes).
 /// PRE: pixels holds width*height*channels floats.
 /// Throws std::invalid_argument for bad sizes or a pixel type the format cannot hold (PNG
-/// float, EXR integer), canopy_ao::Error naming the path and OpenImageIO's message when the
+/// float, EXR integer, TGA anything but uint8), canopy_ao::Error naming the path and OpenImageIO's message when the
 /// file cannot be created or written (missing folder, no permission, unknown extension).
 void write_image(const std::string& path, const float* pixels, int width, int height,
                  int channels, const ImageWriteOptions& options = {});
