@@ -186,8 +186,16 @@ def test_a_batch_never_replaces_another_sources_image(tree, tmp_path, user_scrip
 # === A kill during a write
 
 KILL_SCRIPT = """
-import sys
+import sys, time
 import canopy_ao.cli as c
+if sys.argv[-2] == "hold":  # the temporary is written: wait there to be killed
+    import canopy_ao.blender.atomic_io as a
+    _fsync = a._fsync
+    def _held(path, directory=False):
+        _fsync(path, directory)
+        if not directory:
+            time.sleep(60)
+    a._fsync = _held
 c.main(["--objects", "Ground", "--method", "ellipsoid", "--tau", sys.argv[-1], "--mode",
         "texel", "--resolution", "2048", "--image-dir", "//canopy_ao", "--no-proxies"])
 """
@@ -195,9 +203,11 @@ c.main(["--objects", "Ground", "--method", "ellipsoid", "--tau", sys.argv[-1], "
 
 def _cli_bake(blend, user_scripts, tau, wait=True):
     """The command-line bake of blend in a Blender of its own: its exit code and error text,
-    or (wait=False) the running process."""
+    or (wait=False) the running process, held once its temporary file is written and flushed
+    (just before the rename), so that a kill lands mid-write whatever the machine's load."""
     argv = [bpy.app.binary_path, "-b", blend, "--factory-startup", "--addons", "canopy_ao",
-            "--python-exit-code", "1", "--python-expr", KILL_SCRIPT, "--", str(tau)]
+            "--python-exit-code", "1", "--python-expr", KILL_SCRIPT, "--",
+            "run" if wait else "hold", str(tau)]
     env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
     if not wait:
         return subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
@@ -217,10 +227,11 @@ def test_a_kill_while_the_image_is_written_leaves_the_old_image_and_nothing_stra
     old = _core.read_image(path)
     proc = _cli_bake(blend, user_scripts, 3.0, wait=False)  # killed as its temporary appears
     seen = []
-    while proc.poll() is None and not seen:
+    deadline = time.monotonic() + 240
+    while proc.poll() is None and not seen and time.monotonic() < deadline:
         seen = [f for f in os.listdir(folder) if f != "Ground_CanopyAO.exr"]
         if not seen:
-            time.sleep(0.0005)
+            time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=60)
     assert seen and ".canopy_ao-tmp." in seen[0], (seen, proc.returncode)
