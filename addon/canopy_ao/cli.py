@@ -109,11 +109,14 @@ def main(argv=None):
         parser.error(f"--threads must be >= 0, got {args.threads}")
     if args.report is not None and not args.report.strip():
         parser.error("--report needs a file name")
+    from .core.progress import Cancelled
     try:
         run(args)
         code = 0
     except BakeFailed as exc:
         _fail(str(exc))
+    except (Cancelled, KeyboardInterrupt) as exc:  # Ctrl-C: once (stopped cleanly) or twice
+        _fail(str(exc) or "interrupted (Ctrl-C)", 130)
     except SystemExit:
         raise
     except Exception as exc:  # an unexpected failure must still fail the process
@@ -161,10 +164,20 @@ def run(args):
             ob.select_set(False)
     if args.frames:
         return _run_frames(args, context, opts)
-    try:
-        bake_job, rep = job.run_bake(context, args.objects or [], opts)
-    except CanopyAOError as exc:
-        raise BakeFailed(str(exc)) from None
+    from .core.progress import Interrupt, Progress
+    bar = Progress()  # on stderr: stdout's lines below are what scripts read
+    with Interrupt() as stop:  # Ctrl-C stops the bake between steps, nothing written
+
+        def progress(*state):
+            stop.check()
+            bar.update(*state)
+        try:
+            bake_job, rep = job.run_bake(context, args.objects or [], opts, progress)
+        except CanopyAOError as exc:
+            raise BakeFailed(str(exc)) from None
+        finally:
+            bar.close()
+        stop.check()  # a Ctrl-C while the writes were kept: nothing saved or reported
     for r in bake_job.results:
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "

@@ -59,7 +59,7 @@ class BakeJob:
             raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
                                 "also the AO's attribute or AOV; give it a name of its own")
         if opts["bent_normals"] != "OFF":
-            _check_bent_request(opts)
+            bent_io.check_request(opts)
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -189,17 +189,34 @@ class BakeJob:
                                        frames)
         return ao
 
-    def run(self):
-        """prepare() and every step(), blocking."""
+    def progress(self):
+        """(stage, object, receivers done, receivers in all) for a progress report."""
+        if self.plan is None:
+            return "preparing", "", 0, 0
+        total = sum(t.count for t in self.targets)
+        if self._next >= len(self._chunks):
+            return "evaluating", "", total, total
+        t, a, _b = self._chunks[self._next]
+        done = sum(c.count for c in self.targets[:self.targets.index(t)]) + a
+        return "evaluating", t.item.name, done, total
+
+    def run(self, progress=None):
+        """prepare() and every step(), blocking. progress(stage, name, done, total) is called
+        before each; it may raise (core.progress.Cancelled) to stop the bake unwritten."""
+        report = progress or (lambda *a: None)
+        report(*self.progress())
         self.prepare()
-        while self.step() is not None:
+        while report(*self.progress()) or self.step() is not None:
             pass
 
-    def commit(self, context):
+    def commit(self, context, progress=None):
         """Write every result (attributes or images, the instances' attributes, the wiring and
         AOV), then run the Cycles check if asked: all of it or, on any failure, none (the
         Transaction undoes what was written, and the error goes on). Returns the JSON-ready
-        report, whose "stage_seconds" are this bake's times per stage."""
+        report, whose "stage_seconds" are this bake's times per stage. progress: as run()'s;
+        it may still stop the bake, and undo every write, until the writes are kept."""
+        report = progress or (lambda *a: None)
+        report("writing", "", 0, 0)
         o = self.opts
         if o["live"]:
             live.check_job(self)  # what auto chose, a frame cache: refused unwritten
@@ -235,7 +252,9 @@ class BakeJob:
                 rep["atlas"] = {"name": o["atlas"], "paths": rep_atlas["paths"],
                                 "shared_texels": rep_atlas["shared_texels"]}
             if o["check_cycles"]:
+                report("checking with Cycles", "", 0, 0)
                 self._check_cycles(context, rep)
+            report("writing", "", 0, 0)  # the last moment a stop undoes every write
         except BaseException:
             txn.rollback()
             raise
@@ -278,7 +297,7 @@ class BakeJob:
             if t.thickness is not None:
                 e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
             if t.bent is not None:
-                e["bent_normals"] = _bent_summary(t, o["bent_normals"])
+                e["bent_normals"] = bent_io.summary(t, o["bent_normals"])
             if t.kind == "texel":
                 e["texel"] = t.report()
                 rep["notes"].extend(t.stats.get("warnings", []))
@@ -316,34 +335,15 @@ class BakeJob:
             raise CanopyAOError(f"Cycles check: {exc}") from exc
 
 
-def _check_bent_request(opts):
-    """Refuse, before any work, bent normals the bake cannot give as asked."""
-    name = opts["bent_normals_name"]
-    if name in ("", opts["attribute"], opts["aov_name"]) or (
-            opts["thickness"] and name == opts["thickness_name"]):
-        raise CanopyAOError(f"the bent normals' name '{name}' is empty or also the AO's or the "
-                            "thickness's attribute or AOV; give it a name of its own")
-    if opts["live"]:
-        raise CanopyAOError("bent normals are baked once, not re-evaluated live; turn off "
-                            "Live or Bent Normals")
-
-
-def _bent_summary(t, space):
-    """The report's bent-normal figures of target t: space and the mean angle between the
-    bent normal and the receiver's normal (degrees), over receivers with a normal."""
-    b = t.bent.astype(np.float64)
-    cos = b[:, 2] if space == "TANGENT" else np.einsum("ij,ij->i", b, t.normals)
-    ok = np.einsum("ij,ij->i", b, b) > 0.5
-    tilt = np.degrees(np.arccos(np.clip(cos[ok], -1.0, 1.0)))
-    return {"space": space.lower(), "mean_tilt_degrees": float(tilt.mean()) if ok.any()
-            else None}
-
-
-def run_bake(context, object_names, opts):
-    """Synchronous bake for scripts and the CLI. Returns (job, report); raises CanopyAOError."""
+def run_bake(context, object_names, opts, progress=None):
+    """Synchronous bake for scripts and the CLI. Returns (job, report); raises CanopyAOError.
+    progress(stage, name, done, total), called at each stage and step, may raise to stop the
+    bake with nothing written (BakeJob.run, commit)."""
     t0 = time.perf_counter()
+    if progress is not None:
+        progress("gathering", "", 0, 0)
     job = BakeJob(context, object_names, opts, blocking=True)
-    job.run()
-    rep = job.commit(context)
+    job.run(progress)
+    rep = job.commit(context, progress)
     rep["seconds"] = time.perf_counter() - t0
     return job, rep
