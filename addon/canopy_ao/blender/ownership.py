@@ -100,6 +100,19 @@ def owned_attributes(obj):
     return [n for n in names if isinstance(n, str) and ownership(me, n) == 'ours']
 
 
+def linked(idblock):
+    """How ``idblock`` belongs to another .blend file, None when it is this file's own: linked
+    from a library, or a library override (Blender saves neither's meshes or node trees, so a
+    bake must not write to them: the result would be reported and lost on save)."""
+    if idblock.library is not None:
+        return f"linked from the library '{idblock.library.filepath}'"
+    ov = getattr(idblock, "override_library", None)
+    ref = ov.reference if ov is not None else None
+    if ref is not None and ref.library is not None:
+        return f"a library override of data in '{ref.library.filepath}'"
+    return None
+
+
 def set_record(mesh, name, fp):
     """Record (fp a fingerprint) or forget (fp None) attribute ``name`` as Canopy AO's; the
     pre-fingerprint record drops the name either way."""

@@ -7,7 +7,7 @@ import numpy as np
 
 from . import files_io
 from ..core.native import CanopyAOError
-from . import bent_io, maps_io, materials, mesh_io, texel_io, tiles_io
+from . import bent_io, maps_io, materials, mesh_io, ownership, texel_io, tiles_io
 
 
 class Target:
@@ -30,6 +30,21 @@ class Target:
 
     def write(self, txn, opts):
         raise NotImplementedError
+
+
+def check_wiring(obj, opts):
+    """Refuse, before anything is written, wiring into a material of another .blend file
+    (linked, or a library override): the nodes would be lost on save."""
+    if not opts["wire_material"]:
+        return
+    for slot in obj.material_slots:
+        why = slot.material is not None and ownership.linked(slot.material)
+        if why:
+            raise CanopyAOError(
+                f"{obj.name}: its material '{slot.material.name}' is {why}, so wiring the AO "
+                "into it would be lost on save; make it local (Object > Relations > Make "
+                "Local > Selected Objects, Data and Materials) or bake without Wire Material "
+                "(nothing was changed)")
 
 
 def wire_undo(txn, obj):
@@ -56,6 +71,7 @@ class VertexTarget(Target):
             why = mesh_io.check_attribute(obj, opts["bent_normals_name"], opts["overwrite"])
         if why:
             raise mesh_io.MeshIOError(why + " (nothing was changed)")
+        check_wiring(obj, opts)
         if opts["bent_normals"] == "TANGENT":
             self.frames = bent_io.vertex_frames(obj, depsgraph, opts["uv_map"] or None,
                                                 self.count)
@@ -103,6 +119,7 @@ class TexelTarget(Target):
             raise CanopyAOError("bent normals per texel go into one image of one object's 0–1 "
                                 "tile; turn off UDIM Tiles and Atlas, or bake them per vertex "
                                 "(nothing was changed)")
+        check_wiring(obj, opts)
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
                                      opts["resolution"], udim=opts["udim"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
