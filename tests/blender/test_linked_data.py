@@ -102,3 +102,35 @@ def test_wiring_into_a_linked_material_is_refused_before_anything_is_written(tmp
         _clear_scene()
         for lib_data in list(bpy.data.libraries):
             bpy.data.libraries.remove(lib_data)
+
+
+def test_packing_into_a_linked_image_is_refused_before_anything_is_written(tmp_path):
+    """A channel packed into another file's image would be lost on save (or saved into the
+    library's own image file): refused, naming the image and library."""
+    import helpers_materials as H
+    _clear_scene()
+    img = bpy.data.images.new("LibImg", 16, 16, alpha=True)
+    img.pack()
+    path = str(tmp_path / "images.blend")
+    bpy.data.libraries.write(path, {img})
+    bpy.data.images.remove(img)
+    ground = H.add_plane(size=6.0, subdivisions=3, name="Ground")
+    with bpy.data.libraries.load(path, link=True) as (_src, dst):
+        dst.images = ["LibImg"]
+    linked = dst.images[0]
+    before = np.empty(16 * 16 * 4, np.float32)
+    linked.pixels.foreach_get(before)
+    try:
+        with pytest.raises(RuntimeError, match="Ground: Pack Image 'LibImg' is linked from the "
+                                               "library '.*images.blend'"):
+            bpy.ops.canopy_ao.bake(objects="Ground", method="ellipsoid", tau=2.0, mode='TEXEL',
+                                   resolution=16, channel='R', pack_image="LibImg",
+                                   image_dir=str(tmp_path / "out"))
+        after = np.empty_like(before)
+        linked.pixels.foreach_get(after)
+        np.testing.assert_array_equal(after, before)
+        assert not (tmp_path / "out").exists()
+    finally:
+        _clear_scene()
+        for lib_data in list(bpy.data.libraries):
+            bpy.data.libraries.remove(lib_data)

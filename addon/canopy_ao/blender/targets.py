@@ -136,6 +136,11 @@ class TexelTarget(Target):
                 raise CanopyAOError(f"Channel {opts['channel']} per texel packs into an image: "
                                     f"no image named '{opts['pack_image']}'; set Pack Image "
                                     "(nothing was changed)")
+            why = ownership.linked(self.pack)
+            if why:  # its pixels would be lost on save, or saved into the library's file
+                raise CanopyAOError(f"{obj.name}: Pack Image '{self.pack.name}' is {why}; "
+                                    "make it local (or pick a local image) to pack into it "
+                                    "(nothing was changed)")
 
     def write(self, txn, opts):
         if opts["channel"] != "RGBA":
