@@ -53,7 +53,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         if s.method == "raytrace":
             col.prop(s, "samples")
         if s.method == "auto":
-            col.prop(s, "time_budget", text="Budget")
+            col.prop(s, "time_budget", text=SHORT["time_budget"])
             col.prop(s, "target_rmse")
         col.separator()
         col.prop(s, "mode")
@@ -63,7 +63,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
-            col.prop(s, "image_dir")
+            col.prop(s, "image_dir", text=SHORT["image_dir"])
             col.prop(s, "udim")
             col.prop(s, "atlas")
             _sub(col, s.channel != 'RGBA').prop(s, "pack_image")
@@ -107,6 +107,11 @@ def _checked_name(col, s, flag, name, heading, enabled=None):
     row.prop(s, flag, text="")
     _sub(row, getattr(s, flag) if enabled is None else enabled).prop(s, name, text="")
 
+
+# Labels shortened in the sidebar (its default width cuts the options' own names); the
+# tooltips keep the full names and descriptions.
+SHORT = {"time_budget": "Budget", "image_dir": "Folder", "calibration_points": "Cal. Points",
+         "calibration_samples": "Cal. Rays", "forest_epsilon": "Cut-off"}
 
 # Options the main panel lays out by hand; every other one is in Advanced, so each option of
 # core/settings.py is reachable from the panel.
@@ -159,7 +164,7 @@ class CANOPY_AO_PT_advanced(_Sidebar, bpy.types.Panel):
         s = context.scene.canopy_ao
         for o in OPTIONS:
             if o.name not in MAIN:
-                col.prop(s, o.name)
+                col.prop(s, o.name, **({"text": SHORT[o.name]} if o.name in SHORT else {}))
 
 
 class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
