@@ -92,3 +92,23 @@ def test_one_ctrl_c_stops_the_bake_with_nothing_saved(user_scripts, tmp_path):
     assert "canopy_ao: error: cancelled (Ctrl-C)" in text, text[-2000:]
     assert not re.search(r"^Ground: ", text, re.M) and "canopy_ao: saved" not in text, text
     assert _digest(blend) == before and not report.exists()
+
+
+def test_a_ray_bake_steps_every_few_seconds_with_the_same_ao():
+    """A blocking ray bake at 256 samples evaluates 2^14 vertices a step (so the progress and
+    Ctrl-C answer every few seconds, not every 2^18 vertices), and the AO is bit for bit the
+    one of a bake in other steps: a vertex's rays follow its id."""
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import BakeJob, run_bake
+    _grid_and_ball(n=140)  # 19,881 ground vertices
+    opts = dict(properties.scene_options(bpy.context.scene), method="raytrace", samples=256,
+                distance=0.0, show_proxies=False)
+    seen = []
+    job, _rep = run_bake(bpy.context, ["Ground"], opts, lambda *s: seen.append(s))
+    steps = [s for s in seen if s[0] == "evaluating" and s[1] == "Ground"]
+    assert [s[2] for s in steps] == [0, 16384], steps
+    split = job.targets[0].ao.copy()
+    other = BakeJob(bpy.context, ["Ground"], opts)  # modal steps: 2^16, one for the ground
+    other.run()
+    assert other.steps == 2
+    np.testing.assert_array_equal(other.targets[0].ao, split)

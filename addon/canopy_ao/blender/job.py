@@ -9,7 +9,8 @@ import numpy as np
 
 from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io, tiles_io
 from .commit import Transaction
-from .targets import TexelTarget, VertexTarget, check_outputs
+from .targets import TexelTarget, VertexTarget, check_outputs, chunks, chunks_done, \
+    split_vertex_chunks
 from .. import core
 from ..core import maps, metrics, settings
 from ..core.native import CanopyAOError
@@ -20,6 +21,9 @@ CHUNK = 1 << 16
 # this many chunks per step: fewer calls, each one's fixed cost paid less often; the progress
 # bar still moves every 2^18 receivers.
 BLOCKING_CHUNKS = 4
+# Rungs whose receivers cast rays, samples each: a blocking bake's vertex steps shrink as the
+# samples grow (2^14 vertices at 256), so progress and Ctrl-C answer every few seconds.
+RAY_METHODS = ("raytrace", "hybrid")
 
 
 class BakeJob:
@@ -76,9 +80,7 @@ class BakeJob:
         check_outputs(self.targets, opts)  # image files: none collide, none is the user's
         # (target, first, last receiver) per step; an empty target still gets its one step.
         self.blocking = blocking
-        chunk = CHUNK * (BLOCKING_CHUNKS if blocking else 1)
-        self._chunks = [(t, a, min(a + chunk, t.count)) for t in self.targets
-                        for a in range(0, max(t.count, 1), chunk)]
+        self._chunks = chunks(self.targets, CHUNK * (BLOCKING_CHUNKS if blocking else 1))
         self._next = 0
         self._lap("receivers", t0)
         t0 = time.perf_counter()
@@ -133,6 +135,9 @@ class BakeJob:
         if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)
+        if self.blocking and self.plan.method in RAY_METHODS:  # steps of a few seconds
+            self._chunks[self._next:] = split_vertex_chunks(self._chunks[self._next:], max(
+                4096, CHUNK * BLOCKING_CHUNKS * 16 // max(self.settings.samples, 16)))
 
     def step(self):
         """Evaluate the next chunk of receivers. Returns the line to report when it completes
@@ -193,12 +198,7 @@ class BakeJob:
         """(stage, object, receivers done, receivers in all) for a progress report."""
         if self.plan is None:
             return "preparing", "", 0, 0
-        total = sum(t.count for t in self.targets)
-        if self._next >= len(self._chunks):
-            return "evaluating", "", total, total
-        t, a, _b = self._chunks[self._next]
-        done = sum(c.count for c in self.targets[:self.targets.index(t)]) + a
-        return "evaluating", t.item.name, done, total
+        return ("evaluating", *chunks_done(self.targets, self._chunks, self._next))
 
     def run(self, progress=None):
         """prepare() and every step(), blocking. progress(stage, name, done, total) is called

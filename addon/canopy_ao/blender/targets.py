@@ -32,6 +32,33 @@ class Target:
         raise NotImplementedError
 
 
+def chunks(targets, size):
+    """(target, first, last receiver) per step of ``size`` receivers; an empty target still
+    gets its one step."""
+    return [(t, a, min(a + size, t.count)) for t in targets
+            for a in range(0, max(t.count, 1), size)]
+
+
+def split_vertex_chunks(steps, size):
+    """``steps`` (as chunks() gives) with each vertex chunk cut to ``size`` receivers: a
+    vertex's rays follow its id, so any split gives the same AO (a texel's follow its index
+    in the call, so texel chunks stay as they are)."""
+    out = []
+    for t, a, b in steps:
+        n = size if t.kind == "vertex" else max(b - a, 1)
+        out.extend((t, c, min(c + n, b)) for c in range(a, max(b, a + 1), n))
+    return out
+
+
+def chunks_done(targets, steps, k):
+    """(object, receivers done, receivers in all) before step k of ``steps``."""
+    total = sum(t.count for t in targets)
+    if k >= len(steps):
+        return "", total, total
+    t, a, _b = steps[k]
+    return t.item.name, sum(c.count for c in targets[:targets.index(t)]) + a, total
+
+
 def check_wiring(obj, opts):
     """Refuse, before anything is written, wiring into a material of another .blend file
     (linked, or a library override): the nodes would be lost on save."""
