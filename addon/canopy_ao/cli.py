@@ -164,20 +164,11 @@ def run(args):
             ob.select_set(False)
     if args.frames:
         return _run_frames(args, context, opts)
-    from .core.progress import Interrupt, Progress
-    bar = Progress()  # on stderr: stdout's lines below are what scripts read
-    with Interrupt() as stop:  # Ctrl-C stops the bake between steps, nothing written
-
-        def progress(*state):
-            stop.check()
-            bar.update(*state)
-        try:
-            bake_job, rep = job.run_bake(context, args.objects or [], opts, progress)
-        except CanopyAOError as exc:
-            raise BakeFailed(str(exc)) from None
-        finally:
-            bar.close()
-        stop.check()  # a Ctrl-C while the writes were kept: nothing saved or reported
+    try:
+        bake_job, rep = _with_progress(
+            lambda progress: job.run_bake(context, args.objects or [], opts, progress))
+    except CanopyAOError as exc:
+        raise BakeFailed(str(exc)) from None
     for r in bake_job.results:
         e = rep["objects"][r.name]
         line = (f"{r.name}: role {e['role']}, method {e['method']}, {e['vertices']} vertices, "
@@ -205,7 +196,8 @@ def _run_frames(args, context, opts):
     if args.live:
         raise BakeFailed("--frames and --live are two ways to animate AO: give one")
     try:
-        rep = frames.FrameBake(context, args.objects or [], opts, *args.frames).run()
+        rep = _with_progress(frames.FrameBake(context, args.objects or [], opts,
+                                              *args.frames).run)
     except CanopyAOError as exc:
         raise BakeFailed(str(exc)) from None
     print(f"canopy_ao: frames {rep['frames'][0]}-{rep['frames'][1]}, {rep['method']} tau "
@@ -214,6 +206,25 @@ def _run_frames(args, context, opts):
           flush=True)
     _finish(args, rep)
     return rep
+
+
+def _with_progress(bake):
+    """bake(progress) with its progress on stderr (stdout's lines are what scripts read) and
+    Ctrl-C as a clean stop: the bake polls progress, which raises Cancelled once SIGINT came,
+    and nothing is written, or what was is rolled back (core/progress.py)."""
+    from .core.progress import Interrupt, Progress
+    bar = Progress()
+    with Interrupt() as stop:
+
+        def progress(*state, **kw):
+            stop.check()
+            bar.update(*state, **kw)
+        try:
+            out = bake(progress)
+        finally:
+            bar.close()
+        stop.check()  # a Ctrl-C while the writes were kept: nothing saved or reported
+    return out
 
 
 def _finish(args, rep):

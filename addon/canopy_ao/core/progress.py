@@ -44,11 +44,12 @@ class Progress:
         self._eval_start = None  # (clock, done) when the evaluation began
         self._drawn = False
 
-    def text(self, stage, name, done, total):
-        """The progress line: stage, object, share of the receivers and the time left."""
+    def text(self, stage, name, done, total, unit="receivers"):
+        """The progress line: stage, object, share of the receivers (or frames, ...) done and
+        the time left."""
         parts = [stage + (f" {name}" if name else "")]
         if total > 0:
-            parts.append(f"{done}/{total} receivers ({100.0 * done / total:.0f} %)")
+            parts.append(f"{done}/{total} {unit} ({100.0 * done / total:.0f} %)")
             left = self.seconds_left(done, total)
             parts.append("time left " + (duration(left) if left is not None else "unknown"))
         return ", ".join(parts)
@@ -62,13 +63,13 @@ class Progress:
             return None
         return (self.clock() - t0) * (total - done) / (done - d0)
 
-    def update(self, stage, name="", done=0, total=0):
+    def update(self, stage, name="", done=0, total=0, unit="receivers"):
         now = self.clock()
         if total > 0 and self._eval_start is None:
             self._eval_start = (now, done)
         new_stage = stage != self._stage
         self._stage = stage
-        text = self.text(stage, name, done, total)
+        text = self.text(stage, name, done, total, unit)
         if self.tty:
             if not new_stage and self._last is not None and now - self._last < 0.1:
                 return
