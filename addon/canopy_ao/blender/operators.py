@@ -109,7 +109,11 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         where = f"'{rep['attribute']}'" if rep["attribute"] else "images"
         if lines_reported and rep["attribute"] and rep["channel"] == "RGBA":
             # A bake from the panel: the artist sees the AO at once (the toggle goes back).
-            viewport.show(context, [t.obj for t in job.targets], rep["attribute"])
+            try:
+                viewport.show(context, [t.obj for t in job.targets], rep["attribute"])
+            except Exception as exc:  # noqa: BLE001 - the bake stands; only the view lags
+                self.report({'WARNING'}, f"Canopy AO: the viewport could not show the AO ({exc});"
+                                         " set Viewport Shading > Color > Attribute")
         self.report({'INFO'}, f"Canopy AO: {rep['method']}, τ {rep['tau']:.3g}, "
                               f"{len(job.results)} object(s) baked into {where}")
         for note in rep["notes"]:
