@@ -9,6 +9,7 @@ import subprocess
 
 import bpy
 import numpy as np
+import pytest
 
 from conftest import _clear_scene, add_mesh
 
@@ -63,7 +64,8 @@ def test_progress_lines_come_before_the_object_lines_in_a_log(user_scripts, tmp_
                         r"mean AO [\d.]+", lines[ground[0]]), lines[ground[0]]
 
 
-def test_one_ctrl_c_stops_the_bake_with_nothing_saved(user_scripts, tmp_path):
+@pytest.mark.parametrize("stage", ["gathering", "evaluating"])
+def test_one_ctrl_c_stops_the_bake_with_nothing_saved(stage, user_scripts, tmp_path):
     _grid_and_ball()
     blend = str(tmp_path / "scene.blend")
     bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True)
@@ -75,9 +77,9 @@ def test_one_ctrl_c_stops_the_bake_with_nothing_saved(user_scripts, tmp_path):
                          env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     out, sent = [], False
     try:
-        for line in p.stdout:  # Ctrl-C once the rays are being cast
+        for line in p.stdout:  # Ctrl-C once, as the bake reaches the stage
             out.append(line)
-            if not sent and line.startswith("canopy_ao: progress: evaluating"):
+            if not sent and line.startswith(f"canopy_ao: progress: {stage}"):
                 p.send_signal(signal.SIGINT)
                 sent = True
         code = p.wait(timeout=300)
