@@ -6,7 +6,8 @@
 Prints one line per object (role, method, vertices, seconds, and the error against Cycles when
 asked), writes a JSON report, and exits non-zero with the message on stderr: 2 on bad arguments
 (every number is checked against its option's range, core/settings.py), 1 on missing objects
-or a failed bake. Run ``... -- --help`` for every option.
+or a failed bake, 130 when Ctrl-C stopped it (nothing written or saved). Progress goes to
+stderr (core/progress.py). Run ``... -- --help`` for every option.
 """
 
 import argparse
