@@ -34,7 +34,7 @@ def test_a_log_gets_a_line_per_stage_and_at_most_one_per_interval_within_it():
 
 def test_a_terminal_gets_one_bar_redrawn_in_place_and_cleared_at_the_end():
     out, clock = io.StringIO(), Clock()
-    p = Progress(out, tty=True, clock=clock)
+    p = Progress(out, tty=True, clock=clock, columns=200)
     p.update("evaluating", "Tree", 0, 400)
     clock.t = 30.0
     p.update("evaluating", "Tree", 100, 400)
@@ -45,6 +45,11 @@ def test_a_terminal_gets_one_bar_redrawn_in_place_and_cleared_at_the_end():
     assert "[######..................] evaluating Tree, 100/400 receivers (25 %), " \
            "time left 1 min 30 s" in text
     assert text.endswith("\r\x1b[K")
+    # Never wider than the terminal: a wrapped line would not redraw in place.
+    narrow = io.StringIO()
+    p = Progress(narrow, tty=True, clock=clock, columns=40)
+    p.update("evaluating", "Tree", 100, 400)
+    assert max(len(part) for part in narrow.getvalue().split("\r\x1b[K")) == 39
 
 
 def test_durations_read_as_a_person_would_say_them():

@@ -6,6 +6,7 @@ the stage changes (gathering, preparing, evaluating, writing) and otherwise at m
 left (receivers of one bake cost about the same), so it is given once some are done.
 """
 
+import shutil
 import signal
 import sys
 import time
@@ -31,14 +32,17 @@ class Progress:
     """Report a bake's progress on ``stream`` (stderr by default).
 
     update(stage, name, done, total) with done/total receivers of the whole bake (0/0 outside
-    the evaluation). ``clock`` is time.monotonic unless a test gives its own."""
+    the evaluation). ``clock`` is time.monotonic unless a test gives its own; ``columns``, the
+    terminal's width (a bar longer than it would wrap and not redraw in place)."""
 
-    def __init__(self, stream=None, interval=5.0, tty=None, clock=time.monotonic):
+    def __init__(self, stream=None, interval=5.0, tty=None, clock=time.monotonic,
+                 columns=None):
         self.stream = stream if stream is not None else sys.stderr
         if tty is None:
             isatty = getattr(self.stream, "isatty", None)
             tty = bool(isatty and isatty())
         self.tty, self.interval, self.clock = tty, float(interval), clock
+        self.columns = columns or shutil.get_terminal_size((80, 24)).columns
         self._stage = None
         self._last = None  # clock of the last line (log) or redraw (tty)
         self._eval_start = None  # (clock, done) when the evaluation began
@@ -76,7 +80,8 @@ class Progress:
             width = 24
             filled = int(width * done / total) if total > 0 else 0
             bar = f"[{'#' * filled}{'.' * (width - filled)}] " if total > 0 else ""
-            self.stream.write(f"\r\x1b[K{PREFIX} {bar}{text}")
+            line = f"{PREFIX} {bar}{text}"
+            self.stream.write("\r\x1b[K" + line[:max(self.columns - 1, 20)])
             self._drawn = True
         else:
             if not new_stage and self._last is not None and now - self._last < self.interval:
