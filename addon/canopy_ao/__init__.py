@@ -16,8 +16,8 @@ bl_info = {
     "category": "Render",
 }
 
-_MODULES = ("blender.properties", "blender.operators", "blender.panels", "blender.live",
-            "blender.frames")
+_MODULES = ("blender.properties", "blender.viewport", "blender.operators", "blender.panels",
+            "blender.live", "blender.frames")
 
 
 def _modules():

@@ -6,7 +6,8 @@
 Prints one line per object (role, method, vertices, seconds, and the error against Cycles when
 asked), writes a JSON report, and exits non-zero with the message on stderr: 2 on bad arguments
 (every number is checked against its option's range, core/settings.py), 1 on missing objects
-or a failed bake. Run ``... -- --help`` for every option.
+or a failed bake, 130 when Ctrl-C stopped it (nothing written or saved). Progress goes to
+stderr (core/progress.py). Run ``... -- --help`` for every option.
 """
 
 import argparse
@@ -109,11 +110,14 @@ def main(argv=None):
         parser.error(f"--threads must be >= 0, got {args.threads}")
     if args.report is not None and not args.report.strip():
         parser.error("--report needs a file name")
+    from .core.progress import Cancelled
     try:
         run(args)
         code = 0
     except BakeFailed as exc:
         _fail(str(exc))
+    except (Cancelled, KeyboardInterrupt) as exc:  # Ctrl-C: once (stopped cleanly) or twice
+        _fail(str(exc) or "interrupted (Ctrl-C)", 130)
     except SystemExit:
         raise
     except Exception as exc:  # an unexpected failure must still fail the process
@@ -162,7 +166,8 @@ def run(args):
     if args.frames:
         return _run_frames(args, context, opts)
     try:
-        bake_job, rep = job.run_bake(context, args.objects or [], opts)
+        bake_job, rep = _with_progress(
+            lambda progress: job.run_bake(context, args.objects or [], opts, progress))
     except CanopyAOError as exc:
         raise BakeFailed(str(exc)) from None
     for r in bake_job.results:
@@ -192,7 +197,8 @@ def _run_frames(args, context, opts):
     if args.live:
         raise BakeFailed("--frames and --live are two ways to animate AO: give one")
     try:
-        rep = frames.FrameBake(context, args.objects or [], opts, *args.frames).run()
+        rep = _with_progress(frames.FrameBake(context, args.objects or [], opts,
+                                              *args.frames).run)
     except CanopyAOError as exc:
         raise BakeFailed(str(exc)) from None
     print(f"canopy_ao: frames {rep['frames'][0]}-{rep['frames'][1]}, {rep['method']} tau "
@@ -201,6 +207,25 @@ def _run_frames(args, context, opts):
           flush=True)
     _finish(args, rep)
     return rep
+
+
+def _with_progress(bake):
+    """bake(progress) with its progress on stderr (stdout's lines are what scripts read) and
+    Ctrl-C as a clean stop: the bake polls progress, which raises Cancelled once SIGINT came,
+    and nothing is written, or what was is rolled back (core/progress.py)."""
+    from .core.progress import Interrupt, Progress
+    bar = Progress()
+    with Interrupt() as stop:
+
+        def progress(*state, **kw):
+            stop.check()
+            bar.update(*state, **kw)
+        try:
+            out = bake(progress)
+        finally:
+            bar.close()
+        stop.check()  # a Ctrl-C while the writes were kept: nothing saved or reported
+    return out
 
 
 def _finish(args, rep):

@@ -259,6 +259,8 @@ def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_pa
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "canopy_ao: frames 3-4, sphere" in out.stdout
+    # Its progress, per frame, on stderr (core/progress.py).
+    assert "canopy_ao: progress: baking, 0/2 frames (0 %), time left unknown" in out.stderr
     bpy.ops.wm.open_mainfile(filepath=path)
     names = {a.name for a in bpy.context.scene.objects["Leaves"].data.attributes}
     assert {"CanopyAO_3", "CanopyAO_4"} <= names

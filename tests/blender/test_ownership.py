@@ -34,7 +34,7 @@ def _colors(mesh, name=ATTR):
     return buf.reshape(-1, 4)
 
 
-def _refused(names, match="did not make|no longer what Canopy AO wrote", **kw):
+def _refused(names, match="did not make|no longer what Canopy AO wrote|claimed only", **kw):
     with pytest.raises(CanopyAOError, match=match):
         run_bake(bpy.context, names, opts(**kw))
 
@@ -117,18 +117,35 @@ def test_a_modal_bake_checks_again_what_was_painted_while_it_ran(tree):
 
 
 
-def test_a_file_from_before_fingerprints_migrates_when_its_content_is_ours(tree):
-    """A pre-fingerprint record (a name list on object and mesh) is honoured for the mesh's
-    grey AO only, and replaced by a fingerprint record on the next bake."""
+def test_a_record_from_before_fingerprints_never_vouches_for_an_attribute(tree):
+    """A pre-fingerprint record (a name list on object and mesh) proves nothing: a user's grey
+    colour attribute or float mask of that name is refused through bpy.ops and the command
+    line's path, unchanged, with a message naming the object; Overwrite replaces it once and
+    the fingerprint record takes the list's place."""
     g = tree["ground"]
-    run_bake(bpy.context, ["Ground"], opts())
+    n = len(g.data.vertices)
+    grey = np.repeat(np.linspace(0.2, 0.9, n, dtype=np.float32)[:, None], 4, axis=1)
+    grey[:, 3] = 1.0  # R = G = B, A = 1: what the old add-on wrote, painted by the user
+    g.data.color_attributes.new(ATTR, 'FLOAT_COLOR', 'POINT').data.foreach_set(
+        "color", grey.ravel())
+    mask = np.linspace(0.0, 1.0, n, dtype=np.float32)  # a weight-like mask in [0, 1]
+    g.data.attributes.new("Mask", 'FLOAT', 'POINT').data.foreach_set("value", mask)
     for idb in (g, g.data):
-        idb[ownership.LEGACY_OWNED_PROP] = json.dumps([ATTR])
-    del g.data[ownership.OWNED_PROP]
+        idb[ownership.LEGACY_OWNED_PROP] = json.dumps([ATTR, "Mask"])
+    assert ownership.ownership(g.data, ATTR) == ownership.ownership(g.data, "Mask") == 'unproven'
+    assert mesh_io.owned_attributes(g) == []
+    with pytest.raises(RuntimeError, match="Ground: its attribute 'CanopyAO' is claimed only"):
+        bpy.ops.canopy_ao.bake(objects="Ground", method="ellipsoid", tau=2.0)
+    _refused(["Ground"], match="Ground: its attribute 'Mask' is claimed only by the record of "
+                               "a Canopy AO without fingerprints", attribute="Mask")
+    np.testing.assert_array_equal(_colors(g.data), grey)
+    got = np.empty(n, np.float32)
+    g.data.attributes["Mask"].data.foreach_get("value", got)
+    np.testing.assert_array_equal(got, mask)
+    run_bake(bpy.context, ["Ground"], opts(overwrite=True))
+    assert json.loads(g.data[ownership.LEGACY_OWNED_PROP]) == ["Mask"]  # the other stays
     assert mesh_io.owned_attributes(g) == [ATTR]
-    run_bake(bpy.context, ["Ground"], opts(tau=3.0))
-    assert ownership.LEGACY_OWNED_PROP not in g.data
-    assert ATTR in json.loads(g.data[ownership.OWNED_PROP])
+    run_bake(bpy.context, ["Ground"], opts(tau=3.0))  # proven ours now: no Overwrite needed
 
 
 def test_a_duplicated_mesh_keeps_ownership_of_the_copy(tree):

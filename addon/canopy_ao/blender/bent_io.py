@@ -138,3 +138,26 @@ def write_image(obj, rx, bent, space, image_dir, txn, suffix, overwrite=False, f
     image, undo = texel_io.load_image(obj, path, suffix)
     txn.add(undo)
     return image, path, notes
+
+
+def check_request(opts):
+    """Refuse, before any work, bent normals the bake cannot give as asked."""
+    name = opts["bent_normals_name"]
+    if name in ("", opts["attribute"], opts["aov_name"]) or (
+            opts["thickness"] and name == opts["thickness_name"]):
+        raise CanopyAOError(f"the bent normals' name '{name}' is empty or also the AO's or the "
+                            "thickness's attribute or AOV; give it a name of its own")
+    if opts["live"]:
+        raise CanopyAOError("bent normals are baked once, not re-evaluated live; turn off "
+                            "Live or Bent Normals")
+
+
+def summary(t, space):
+    """The report's bent-normal figures of target t: space and the mean angle between the
+    bent normal and the receiver's normal (degrees), over receivers with a normal."""
+    b = t.bent.astype(np.float64)
+    cos = b[:, 2] if space == "TANGENT" else np.einsum("ij,ij->i", b, t.normals)
+    ok = np.einsum("ij,ij->i", b, b) > 0.5
+    tilt = np.degrees(np.arccos(np.clip(cos[ok], -1.0, 1.0)))
+    return {"space": space.lower(), "mean_tilt_degrees": float(tilt.mean()) if ok.any()
+            else None}

@@ -137,11 +137,16 @@ class FrameBake:
             f"{ms:.0f} ms per frame")
         return self.report
 
-    def run(self):
+    def run(self, progress=None):
+        """Every frame, then the commit. progress(stage, name, done, total, unit=...) is called
+        before each frame; it may raise to stop the bake with nothing written."""
         t0 = time.perf_counter()
         try:
-            while self.step():
-                pass
+            while True:
+                if progress is not None:
+                    progress("baking", "", len(self.results), len(self.frames), unit="frames")
+                if not self.step():
+                    break
         except BaseException:
             self.cancel()
             raise

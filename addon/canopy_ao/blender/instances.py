@@ -23,7 +23,7 @@ import time
 import bpy
 import numpy as np
 
-from . import gather, materials, mesh_io
+from . import gather, materials, mesh_io, ownership
 from .. import core
 from ..core import forest, roles
 
@@ -97,6 +97,14 @@ class Prototypes:
         self.realized_objects = {}  # prototype object name -> original object
         self.mesh_only = set()  # trees too big to realise: traced by the exact rung alone
         self.notes = []
+        for name in sorted(self.writable):  # another file's mesh: it occludes, unwritten
+            why = ownership.linked(self.objects[name].data) if name in self.objects else None
+            if why:
+                self.writable.discard(name)
+                self.notes.append(
+                    f"instanced {name}: its mesh '{self.objects[name].data.name}' is {why}, "
+                    "so its AO was not written (Blender would not save it); it still "
+                    "occludes. Make it local (Object > Relations > Make Local) to bake it")
         leafless = [t for t, its in self.items.items() if not any(i.role == "CANOPY" for i in its)]
         for tree in leafless:
             grass = self._realized_field(tree)

@@ -9,7 +9,8 @@ import numpy as np
 
 from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io, tiles_io
 from .commit import Transaction
-from .targets import TexelTarget, VertexTarget, check_outputs
+from .targets import TexelTarget, VertexTarget, check_outputs, chunks, chunks_done, \
+    split_vertex_chunks
 from .. import core
 from ..core import maps, metrics, packing, settings
 from ..core.native import CanopyAOError
@@ -20,6 +21,9 @@ CHUNK = 1 << 16
 # this many chunks per step: fewer calls, each one's fixed cost paid less often; the progress
 # bar still moves every 2^18 receivers.
 BLOCKING_CHUNKS = 4
+# Rungs whose receivers cast rays, samples each: a blocking bake's vertex steps shrink as the
+# samples grow (2^14 vertices at 256), so progress and Ctrl-C answer every few seconds.
+RAY_METHODS = ("raytrace", "hybrid")
 
 
 class BakeJob:
@@ -60,7 +64,7 @@ class BakeJob:
             raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
                                 "also the AO's attribute or AOV; give it a name of its own")
         if opts["bent_normals"] != "OFF":
-            _check_bent_request(opts)
+            bent_io.check_request(opts)
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -77,9 +81,7 @@ class BakeJob:
         check_outputs(self.targets, opts)  # image files: none collide, none is the user's
         # (target, first, last receiver) per step; an empty target still gets its one step.
         self.blocking = blocking
-        chunk = CHUNK * (BLOCKING_CHUNKS if blocking else 1)
-        self._chunks = [(t, a, min(a + chunk, t.count)) for t in self.targets
-                        for a in range(0, max(t.count, 1), chunk)]
+        self._chunks = chunks(self.targets, CHUNK * (BLOCKING_CHUNKS if blocking else 1))
         self._next = 0
         self._lap("receivers", t0)
         t0 = time.perf_counter()
@@ -134,6 +136,9 @@ class BakeJob:
         if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)
+        if self.blocking and self.plan.method in RAY_METHODS:  # steps of a few seconds
+            self._chunks[self._next:] = split_vertex_chunks(self._chunks[self._next:], max(
+                4096, CHUNK * BLOCKING_CHUNKS * 16 // max(self.settings.samples, 16)))
 
     def step(self):
         """Evaluate the next chunk of receivers. Returns the line to report when it completes
@@ -190,17 +195,29 @@ class BakeJob:
                                        frames)
         return ao
 
-    def run(self):
-        """prepare() and every step(), blocking."""
+    def progress(self):
+        """(stage, object, receivers done, receivers in all) for a progress report."""
+        if self.plan is None:
+            return "preparing", "", 0, 0
+        return ("evaluating", *chunks_done(self.targets, self._chunks, self._next))
+
+    def run(self, progress=None):
+        """prepare() and every step(), blocking. progress(stage, name, done, total) is called
+        before each; it may raise (core.progress.Cancelled) to stop the bake unwritten."""
+        report = progress or (lambda *a: None)
+        report(*self.progress())
         self.prepare()
-        while self.step() is not None:
+        while report(*self.progress()) or self.step() is not None:
             pass
 
-    def commit(self, context):
+    def commit(self, context, progress=None):
         """Write every result (attributes or images, the instances' attributes, the wiring and
         AOV), then run the Cycles check if asked: all of it or, on any failure, none (the
         Transaction undoes what was written, and the error goes on). Returns the JSON-ready
-        report, whose "stage_seconds" are this bake's times per stage."""
+        report, whose "stage_seconds" are this bake's times per stage. progress: as run()'s;
+        it may still stop the bake, and undo every write, until the writes are kept."""
+        report = progress or (lambda *a: None)
+        report("writing", "", 0, 0)
         o = self.opts
         if o["live"]:
             live.check_job(self)  # what auto chose, a frame cache: refused unwritten
@@ -236,7 +253,9 @@ class BakeJob:
                 rep["atlas"] = {"name": o["atlas"], "paths": rep_atlas["paths"],
                                 "shared_texels": rep_atlas["shared_texels"]}
             if o["check_cycles"]:
+                report("checking with Cycles", "", 0, 0)
                 self._check_cycles(context, rep)
+            report("writing", "", 0, 0)  # the last moment a stop undoes every write
         except BaseException:
             txn.rollback()
             raise
@@ -279,7 +298,7 @@ class BakeJob:
             if t.thickness is not None:
                 e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
             if t.bent is not None:
-                e["bent_normals"] = _bent_summary(t, o["bent_normals"])
+                e["bent_normals"] = bent_io.summary(t, o["bent_normals"])
             if t.kind == "texel":
                 e["texel"] = t.report()
                 rep["notes"].extend(t.stats.get("warnings", []))
@@ -317,34 +336,15 @@ class BakeJob:
             raise CanopyAOError(f"Cycles check: {exc}") from exc
 
 
-def _check_bent_request(opts):
-    """Refuse, before any work, bent normals the bake cannot give as asked."""
-    name = opts["bent_normals_name"]
-    if name in ("", opts["attribute"], opts["aov_name"]) or (
-            opts["thickness"] and name == opts["thickness_name"]):
-        raise CanopyAOError(f"the bent normals' name '{name}' is empty or also the AO's or the "
-                            "thickness's attribute or AOV; give it a name of its own")
-    if opts["live"]:
-        raise CanopyAOError("bent normals are baked once, not re-evaluated live; turn off "
-                            "Live or Bent Normals")
-
-
-def _bent_summary(t, space):
-    """The report's bent-normal figures of target t: space and the mean angle between the
-    bent normal and the receiver's normal (degrees), over receivers with a normal."""
-    b = t.bent.astype(np.float64)
-    cos = b[:, 2] if space == "TANGENT" else np.einsum("ij,ij->i", b, t.normals)
-    ok = np.einsum("ij,ij->i", b, b) > 0.5
-    tilt = np.degrees(np.arccos(np.clip(cos[ok], -1.0, 1.0)))
-    return {"space": space.lower(), "mean_tilt_degrees": float(tilt.mean()) if ok.any()
-            else None}
-
-
-def run_bake(context, object_names, opts):
-    """Synchronous bake for scripts and the CLI. Returns (job, report); raises CanopyAOError."""
+def run_bake(context, object_names, opts, progress=None):
+    """Synchronous bake for scripts and the CLI. Returns (job, report); raises CanopyAOError.
+    progress(stage, name, done, total), called at each stage and step, may raise to stop the
+    bake with nothing written (BakeJob.run, commit)."""
     t0 = time.perf_counter()
+    if progress is not None:
+        progress("gathering", "", 0, 0)
     job = BakeJob(context, object_names, opts, blocking=True)
-    job.run()
-    rep = job.commit(context)
+    job.run(progress)
+    rep = job.commit(context, progress)
     rep["seconds"] = time.perf_counter() - t0
     return job, rep

@@ -135,6 +135,10 @@ def check_attribute(obj, name, overwrite):
     state = ownership(obj.data, name)
     if state == 'ours':
         return None
+    if state == 'unproven':
+        return (f"{obj.name}: its attribute '{name}' is claimed only by the record of a Canopy "
+                "AO without fingerprints, which cannot tell it from an attribute of yours; "
+                "check it and tick Overwrite (--overwrite) to replace it, once")
     if state == 'changed':
         return (f"{obj.name}: its attribute '{name}' is no longer what Canopy AO wrote (painted "
                 "or edited since, or the mesh changed); choose another name or tick Overwrite")

@@ -7,7 +7,7 @@ import traceback
 import bpy
 from bpy.props import StringProperty
 
-from . import mesh_io
+from . import mesh_io, viewport
 from .job import BakeJob
 from .properties import option_properties, raw_values, resolve
 from ..core import roles
@@ -26,7 +26,16 @@ def start_modal(op, context, steps, status):
     op._timer = wm.event_timer_add(0.01, window=context.window)
     wm.modal_handler_add(op)
     context.workspace.status_text_set(status)
+    viewport.set_status(context, "Baking: starting", 'TIME')
     return {'RUNNING_MODAL'}
+
+
+def bake_status(job):
+    """'Baking Ground: 37 %' (the share of the receivers evaluated), or the stage before."""
+    stage, name, done, total = job.progress()
+    if not total:
+        return f"Baking: {stage}"
+    return f"Baking {name}: {100.0 * done / total:.0f} %" if name else "Baking: writing"
 
 
 # === The operator ============================================================================
@@ -98,6 +107,13 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         for line in job.lines if not lines_reported else ():
             self.report({'INFO'}, line)
         where = f"'{rep['attribute']}'" if rep["attribute"] else "images"
+        if lines_reported and rep["attribute"] and rep["channel"] == "RGBA":
+            # A bake from the panel: the artist sees the AO at once (the toggle goes back).
+            try:
+                viewport.show(context, [t.obj for t in job.targets], rep["attribute"])
+            except Exception as exc:  # noqa: BLE001 - the bake stands; only the view lags
+                self.report({'WARNING'}, f"Canopy AO: the viewport could not show the AO ({exc});"
+                                         " set Viewport Shading > Color > Attribute")
         self.report({'INFO'}, f"Canopy AO: {rep['method']}, τ {rep['tau']:.3g}, "
                               f"{len(job.results)} object(s) baked into {where}")
         for note in rep["notes"]:
@@ -140,10 +156,12 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         context.workspace.status_text_set(None)
+        viewport.set_status(context, "")
 
     def modal(self, context, event):
         if event.type == 'ESC' and event.value == 'PRESS':
             self._stop(context)
+            viewport.set_status(context, "Cancelled (Esc): nothing was changed", 'CANCEL')
             self.report({'WARNING'}, "Canopy AO bake cancelled; nothing was changed")
             return {'CANCELLED'}
         if event.type != 'TIMER':
@@ -167,6 +185,9 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
                     if time.perf_counter() >= t_end:
                         break
             context.window_manager.progress_update(job.steps_done)
+            text = bake_status(job)
+            context.workspace.status_text_set(f"Canopy AO: {text} (Esc to cancel)")
+            viewport.set_status(context, text, 'TIME')
         except Exception as exc:  # whatever it is, the timer and the status text go
             self._stop(context)
             return self._report_error(exc)

@@ -13,8 +13,10 @@ from ..core.fingerprint import fingerprint
 # Only an attribute whose content still has that fingerprint may be replaced without the
 # user's say-so.
 OWNED_PROP = "canopy_ao_owned"
-# Before fingerprints: a JSON list of names on the object and on its mesh. Read, on the mesh
-# only, for files saved then (see _legacy_content); never written.
+# Before fingerprints: a JSON list of names on the object and on its mesh. A name in it proves
+# nothing (any attribute of that name, the user's included, would match), so it never lets a
+# bake replace an attribute: ownership() says 'unproven' and the bake asks for Overwrite, after
+# which the fingerprint record replaces it. Never written.
 LEGACY_OWNED_PROP = "canopy_ao_attributes"
 
 # foreach_get key, values per element and dtype of each attribute type that can be read whole
@@ -70,26 +72,11 @@ def attribute_fingerprint(attr, values=None):
     return fingerprint(values, f"{attr.data_type} {attr.domain}")
 
 
-def _legacy_content(attr, values):
-    """Whether an attribute named in a mesh's pre-fingerprint record holds what Canopy AO wrote
-    then: grey AO or thickness (R = G = B finite and >= 0, A = 1) on vertices, or a frame's AO
-    (finite, in [0, 1]) on vertices. A user's painted or edited attribute is almost never
-    that; an object-level record is ignored (it did not follow a swapped mesh)."""
-    if attr.domain != 'POINT' or values is None:
-        return False
-    if attr.data_type == 'FLOAT_COLOR':
-        c = values.reshape(-1, 4)
-        return bool(np.all(np.isfinite(c)) and np.all(c[:, 0] >= 0) and np.all(c[:, 3] == 1)
-                    and np.array_equal(c[:, 0], c[:, 1]) and np.array_equal(c[:, 0], c[:, 2]))
-    if attr.data_type == 'FLOAT':
-        return bool(np.all((values >= 0) & (values <= 1)))
-    return False
-
-
 def ownership(mesh, name):
     """'ours' when mesh's attribute ``name`` is exactly what Canopy AO wrote there, 'changed'
     when Canopy AO's record of it no longer matches (painted, edited, a record copied or typed
-    by hand), None when there is no such attribute or no record."""
+    by hand), 'unproven' when only a pre-fingerprint name list claims it, None when there is
+    no such attribute or no record."""
     attr = mesh.attributes.get(name)
     if attr is None:
         return None
@@ -97,11 +84,10 @@ def ownership(mesh, name):
     legacy = name in _json(mesh, LEGACY_OWNED_PROP, list)
     if record is None and not legacy:
         return None
+    if record is None:
+        return 'unproven'
     values = read_attribute(attr, scratch=True)
-    if record is not None:
-        ok = values is not None and record == attribute_fingerprint(attr, values)
-    else:
-        ok = _legacy_content(attr, values)
+    ok = values is not None and record == attribute_fingerprint(attr, values)
     return 'ours' if ok else 'changed'
 
 
@@ -112,6 +98,19 @@ def owned_attributes(obj):
     names = list(_json(me, OWNED_PROP, dict))
     names += [n for n in _json(me, LEGACY_OWNED_PROP, list) if n not in names]
     return [n for n in names if isinstance(n, str) and ownership(me, n) == 'ours']
+
+
+def linked(idblock):
+    """How ``idblock`` belongs to another .blend file, None when it is this file's own: linked
+    from a library, or a library override (Blender saves neither's meshes or node trees, so a
+    bake must not write to them: the result would be reported and lost on save)."""
+    if idblock.library is not None:
+        return f"linked from the library '{idblock.library.filepath}'"
+    ov = getattr(idblock, "override_library", None)
+    ref = ov.reference if ov is not None else None
+    if ref is not None and ref.library is not None:
+        return f"a library override of data in '{ref.library.filepath}'"
+    return None
 
 
 def set_record(mesh, name, fp):

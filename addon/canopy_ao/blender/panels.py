@@ -2,6 +2,7 @@
 
 import bpy
 
+from . import viewport
 from .gather import world_ao_distance
 from ..core.native import core_status
 from ..core.settings import OPTIONS
@@ -36,25 +37,23 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
                 col.label(text=line)
             return
         s = context.scene.canopy_ao
+        # Blender's own layout: labels in a column of their own, so none is cut at the
+        # sidebar's default width.
+        layout.use_property_split = True
+        layout.use_property_decorate = False
         col = layout.column()
         col.prop(s, "method")
-        row = col.row(align=True)
-        row.prop(s, "calibrate_tau", toggle=True)
-        sub = row.row(align=True)
-        sub.enabled = not s.calibrate_tau
-        sub.prop(s, "tau")
-        row = col.row(align=True)
-        row.prop(s, "use_world_distance", toggle=True)
-        sub = row.row(align=True)
-        sub.enabled = not s.use_world_distance
-        sub.prop(s, "distance")
+        col.prop(s, "calibrate_tau")
+        _sub(col, not s.calibrate_tau).prop(s, "tau")
+        col.row(heading="Distance").prop(s, "use_world_distance", text="World")
+        _sub(col, not s.use_world_distance).prop(s, "distance", text=" ")
         if s.use_world_distance:
             d = world_ao_distance(context.scene)
             col.label(text=f"World AO distance: {d:g}" if d > 0 else "No world: unlimited")
         if s.method == "raytrace":
             col.prop(s, "samples")
         if s.method == "auto":
-            col.prop(s, "time_budget")
+            col.prop(s, "time_budget", text=SHORT["time_budget"])
             col.prop(s, "target_rmse")
         col.separator()
         col.prop(s, "mode")
@@ -67,46 +66,57 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
-            col.prop(s, "image_dir")
+            col.prop(s, "image_dir", text=SHORT["image_dir"])
             col.prop(s, "image_format")
             col.prop(s, "udim")
             col.prop(s, "atlas")
-            sub = col.row()
-            sub.enabled = s.channel != 'RGBA' or s.packing != 'NONE'
-            sub.prop(s, "pack_image")
-        row = col.row(align=True)
-        row.prop(s, "thickness")
-        sub = row.row(align=True)
-        sub.enabled = s.thickness
-        sub.prop(s, "thickness_name", text="")
-        row = col.row(align=True)
-        row.prop(s, "bent_normals")
-        sub = row.row(align=True)
-        sub.enabled = s.bent_normals != 'OFF'
-        sub.prop(s, "bent_normals_name", text="")
+            _sub(col, s.channel != 'RGBA' or s.packing != 'NONE').prop(s, "pack_image")
+        _checked_name(col, s, "thickness", "thickness_name", "Thickness")
+        col.prop(s, "bent_normals", text="Bent")
+        _sub(col, s.bent_normals != 'OFF').prop(s, "bent_normals_name", text="Name")
         col.separator()
         col.prop(s, "show_proxies")
         col.prop(s, "wire_material")
         col.prop(s, "gltf")
-        row = col.row(align=True)
-        row.prop(s, "add_aov")
-        sub = row.row(align=True)
-        sub.enabled = s.add_aov or s.wire_material
-        sub.prop(s, "aov_name", text="")
-        row = col.row(align=True)
-        row.prop(s, "check_cycles")
-        sub = row.row(align=True)
-        sub.enabled = s.check_cycles
-        sub.prop(s, "cycles_samples", text="Samples")
-        col.prop(s, "live")  # the Animation subpanel shows its state and the range bake
+        _checked_name(col, s, "add_aov", "aov_name", "AOV", s.add_aov or s.wire_material)
+        col.row(heading="Check").prop(s, "check_cycles", text="Cycles")
+        _sub(col, s.check_cycles).prop(s, "cycles_samples", text="Samples")
+        col.row(heading="Animation").prop(s, "live", text="Live")  # the Animation subpanel shows its state and the range bake
+        col = layout.column()
+        col.use_property_split = False
         col.separator()
         n_sel = sum(1 for o in context.selected_objects if o.type == 'MESH')
         label = f"Bake {n_sel} Selected" if n_sel else "Bake All Visible"
         col.operator("canopy_ao.bake", text=label, icon='RENDER_STILL')
+        if context.screen is not None:
+            col.operator("canopy_ao.show_ao", icon='SHADING_SOLID',
+                         depress=viewport.shown(context),
+                         text="Showing AO" if viewport.shown(context) else "Show AO")
         col.operator("canopy_ao.remove_wiring", icon='NODETREE')
+        if viewport.STATUS["text"]:
+            col.label(text=viewport.STATUS["text"], icon=viewport.STATUS["icon"])
         if s.last_report:
             col.label(text=f"Last: {s.last_report}", icon='INFO')
 
+
+def _sub(col, enabled):
+    """A column under col whose properties are greyed out unless ``enabled``."""
+    sub = col.column()
+    sub.enabled = bool(enabled)
+    return sub
+
+
+def _checked_name(col, s, flag, name, heading, enabled=None):
+    """A switch and the name it writes under, on one row headed ``heading``."""
+    row = col.row(heading=heading)
+    row.prop(s, flag, text="")
+    _sub(row, getattr(s, flag) if enabled is None else enabled).prop(s, name, text="")
+
+
+# Labels shortened in the sidebar (its default width cuts the options' own names); the
+# tooltips keep the full names and descriptions.
+SHORT = {"time_budget": "Budget", "image_dir": "Folder", "calibration_points": "Cal. Points",
+         "calibration_samples": "Cal. Rays", "forest_epsilon": "Cut-off"}
 
 # Options the main panel lays out by hand; every other one is in Advanced, so each option of
 # core/settings.py is reachable from the panel.
@@ -154,11 +164,13 @@ class CANOPY_AO_PT_advanced(_Sidebar, bpy.types.Panel):
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
+        self.layout.use_property_split = True
+        self.layout.use_property_decorate = False
         col = self.layout.column()
         s = context.scene.canopy_ao
         for o in OPTIONS:
             if o.name not in MAIN:
-                col.prop(s, o.name)
+                col.prop(s, o.name, **({"text": SHORT[o.name]} if o.name in SHORT else {}))
 
 
 class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
@@ -172,6 +184,8 @@ class CANOPY_AO_PT_object(_Sidebar, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
         obj = context.active_object
         layout.label(text=obj.name, icon='OBJECT_DATA')
         layout.prop(obj.canopy_ao, "role")

@@ -7,7 +7,7 @@ import numpy as np
 
 from . import files_io
 from ..core.native import CanopyAOError
-from . import bent_io, gltf_io, maps_io, materials, mesh_io, texel_io, tiles_io
+from . import bent_io, gltf_io, maps_io, materials, mesh_io, ownership, texel_io, tiles_io
 
 
 class Target:
@@ -30,6 +30,48 @@ class Target:
 
     def write(self, txn, opts):
         raise NotImplementedError
+
+
+def chunks(targets, size):
+    """(target, first, last receiver) per step of ``size`` receivers; an empty target still
+    gets its one step."""
+    return [(t, a, min(a + size, t.count)) for t in targets
+            for a in range(0, max(t.count, 1), size)]
+
+
+def split_vertex_chunks(steps, size):
+    """``steps`` (as chunks() gives) with each vertex chunk cut to ``size`` receivers: a
+    vertex's rays follow its id, so any split gives the same AO (a texel's follow its index
+    in the call, so texel chunks stay as they are)."""
+    out = []
+    for t, a, b in steps:
+        n = size if t.kind == "vertex" else max(b - a, 1)
+        out.extend((t, c, min(c + n, b)) for c in range(a, max(b, a + 1), n))
+    return out
+
+
+def chunks_done(targets, steps, k):
+    """(object, receivers done, receivers in all) before step k of ``steps``."""
+    total = sum(t.count for t in targets)
+    if k >= len(steps):
+        return "", total, total
+    t, a, _b = steps[k]
+    return t.item.name, sum(c.count for c in targets[:targets.index(t)]) + a, total
+
+
+def check_wiring(obj, opts):
+    """Refuse, before anything is written, wiring into a material of another .blend file
+    (linked, or a library override): the nodes would be lost on save."""
+    if not opts["wire_material"]:
+        return
+    for slot in obj.material_slots:
+        why = slot.material is not None and ownership.linked(slot.material)
+        if why:
+            raise CanopyAOError(
+                f"{obj.name}: its material '{slot.material.name}' is {why}, so wiring the AO "
+                "into it would be lost on save; make it local (Object > Relations > Make "
+                "Local > Selected Objects, Data and Materials) or bake without Wire Material "
+                "(nothing was changed)")
 
 
 def wire_undo(txn, obj):
@@ -56,6 +98,7 @@ class VertexTarget(Target):
             why = mesh_io.check_attribute(obj, opts["bent_normals_name"], opts["overwrite"])
         if why:
             raise mesh_io.MeshIOError(why + " (nothing was changed)")
+        check_wiring(obj, opts)
         if opts["bent_normals"] == "TANGENT":
             self.frames = bent_io.vertex_frames(obj, depsgraph, opts["uv_map"] or None,
                                                 self.count)
@@ -105,6 +148,7 @@ class TexelTarget(Target):
             raise CanopyAOError("bent normals per texel go into one image of one object's 0–1 "
                                 "tile; turn off UDIM Tiles and Atlas, or bake them per vertex "
                                 "(nothing was changed)")
+        check_wiring(obj, opts)
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
                                      opts["resolution"], udim=opts["udim"])
         super().__init__(item, obj, self.rx.positions, self.rx.normals)
@@ -132,6 +176,11 @@ class TexelTarget(Target):
             why = maps_io.check_pack_image(self.pack, opts["resolution"], opts["channel"])
             if why:
                 raise CanopyAOError(f"{what} of '{obj.name}': {why} (nothing was changed)")
+            why = ownership.linked(self.pack)
+            if why:  # its pixels would be lost on save, or saved into the library's file
+                raise CanopyAOError(f"{obj.name}: Pack Image '{self.pack.name}' is {why}; "
+                                    "make it local (or pick a local image) to pack into it "
+                                    "(nothing was changed)")
 
     def write(self, txn, opts):
         if opts["channel"] != "RGBA":
