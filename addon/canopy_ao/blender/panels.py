@@ -50,7 +50,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         if s.use_world_distance:
             d = world_ao_distance(context.scene)
             col.label(text=f"World AO distance: {d:g}" if d > 0 else "No world: unlimited")
-        if s.method == "raytrace":
+        if s.method in {"raytrace", "hybrid", "auto"}:  # auto: the most rays it may cast
             col.prop(s, "samples")
         if s.method == "auto":
             col.prop(s, "time_budget", text=SHORT["time_budget"])
