@@ -95,6 +95,19 @@ def _argv(argv):
     return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 
 
+# Blender's own arguments that render when Blender reaches them, after this script.
+RENDER_FLAGS = ("-a", "--render-anim", "-f", "--render-frame")
+
+
+def _render_flags(blender_argv):
+    """Blender's render arguments that follow the script (--python-expr / --python) and come
+    before '--' in Blender's command line."""
+    cut = blender_argv.index("--") if "--" in blender_argv else len(blender_argv)
+    head = blender_argv[:cut]
+    starts = [i for i, a in enumerate(head) if a in ("--python-expr", "--python", "-P")]
+    return [a for a in head[starts[0] + 2:] if a in RENDER_FLAGS] if starts else []
+
+
 def _fail(message, code=1):
     sys.stdout.flush()
     print(f"canopy_ao: error: {message}", file=sys.stderr, flush=True)
@@ -109,6 +122,12 @@ def main(argv=None):
         parser.error(f"--threads must be >= 0, got {args.threads}")
     if args.report is not None and not args.report.strip():
         parser.error("--report needs a file name")
+    render = _render_flags(sys.argv) if argv is None else []
+    if render and not args.live:
+        parser.error(f"Blender's {' '.join(render)} before '--' renders after this script only "
+                     "with --live (live AO, re-evaluated at every frame); without it the bake "
+                     "exits Blender first and nothing is rendered: add --live, or render in a "
+                     "second command (blender -b FILE.blend -a)")
     try:
         run(args)
         code = 0
