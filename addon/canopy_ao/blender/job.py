@@ -7,7 +7,8 @@ import time
 import bpy
 import numpy as np
 
-from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io, tiles_io
+from . import (bent_io, checks, cycles_check, gather, instances, live, materials, mesh_io,
+               tiles_io)
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget, check_outputs
 from .. import core
@@ -42,24 +43,7 @@ class BakeJob:
         self.timings = {}
         t_start = time.perf_counter()
         self.lines = []
-        ok, msg = core.core_status()
-        if not ok:
-            raise CanopyAOError(msg)
-        if opts["live"]:
-            live.check_request(opts)  # texels or a non-live rung: refused before any work
-        if opts["wire_material"] or opts["add_aov"]:
-            try:
-                materials.check_aov_name(opts["aov_name"])
-                if opts["thickness"] and opts["wire_material"]:
-                    materials.check_aov_name(opts["thickness_name"])
-            except ValueError as exc:
-                raise CanopyAOError(str(exc)) from None
-        if opts["thickness"] and opts["thickness_name"] in ("", opts["attribute"],
-                                                            opts["aov_name"]):
-            raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
-                                "also the AO's attribute or AOV; give it a name of its own")
-        if opts["bent_normals"] != "OFF":
-            _check_bent_request(opts)
+        checks.check_request(opts)  # what needs no geometry: refused before any work
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -212,6 +196,7 @@ class BakeJob:
                        and not o["add_aov"] and not o["check_cycles"])
         try:
             rep = self._report() if vertex_only else None
+            texts = self._result_texts(rep) if vertex_only else None
             if o["atlas"] and o["mode"] == 'TEXEL':  # one image for every object
                 rep_atlas = tiles_io.write_atlas(self.targets, txn, o)
             else:
@@ -236,30 +221,38 @@ class BakeJob:
                                 "shared_texels": rep_atlas["shared_texels"]}
             if o["check_cycles"]:
                 self._check_cycles(context, rep)
+            if texts is None:
+                texts = self._result_texts(rep)
         except BaseException:
             txn.rollback()
             raise
-        txn.done()
+        txn.done()  # from here on, only what cannot fail for a bake's data (the texts are made)
         t0 = self._lap("report, extras", t0)
+        self.scene.canopy_ao.last_report = texts.pop(None)
+        for name, text in texts.items():
+            self.objects[name].canopy_ao.last_result = text
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, core.proxy_dicts(self.plan))
         elif mesh_io.PROXY_COLLECTION in bpy.data.collections:
             mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
-        for r in self.results:
-            e = rep["objects"][r.name]
-            text = (f"{e['role']}, {e['method']}, {e['vertices']} verts, {e['seconds']:.3f} s, "
-                    f"mean AO {e['ao_mean']:.3f}")
-            if "cycles" in e:
-                text += f", vs Cycles MAE {e['cycles'].get('mae', float('nan')):.3f}"
-            self.objects[r.name].canopy_ao.last_result = text
-        self.scene.canopy_ao.last_report = (
-            f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)")
         self._lap("proxies", t0)
         if o["live"]:
             live.begin(self)  # every frame change from now on re-evaluates (live.py)
         rep["stage_seconds"] = dict(self.timings)
         self.report_dict = rep
         return rep
+
+    def _result_texts(self, rep):
+        """{object name: its panel line, None: the scene's}, made from rep before the commit's
+        last write (a failure here still undoes every write)."""
+        texts = {None: f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)"}
+        for r in self.results:
+            e = rep["objects"][r.name]
+            texts[r.name] = (f"{e['role']}, {e['method']}, {e['vertices']} verts, "
+                             f"{e['seconds']:.3f} s, mean AO {e['ao_mean']:.3f}")
+            if "cycles" in e:
+                texts[r.name] += f", vs Cycles MAE {e['cycles'].get('mae', float('nan')):.3f}"
+        return texts
 
     def _report(self):
         o = self.opts
@@ -314,18 +307,6 @@ class BakeJob:
             raise
         except ValueError as exc:  # the check's refusals (an empty material slot, ...)
             raise CanopyAOError(f"Cycles check: {exc}") from exc
-
-
-def _check_bent_request(opts):
-    """Refuse, before any work, bent normals the bake cannot give as asked."""
-    name = opts["bent_normals_name"]
-    if name in ("", opts["attribute"], opts["aov_name"]) or (
-            opts["thickness"] and name == opts["thickness_name"]):
-        raise CanopyAOError(f"the bent normals' name '{name}' is empty or also the AO's or the "
-                            "thickness's attribute or AOV; give it a name of its own")
-    if opts["live"]:
-        raise CanopyAOError("bent normals are baked once, not re-evaluated live; turn off "
-                            "Live or Bent Normals")
 
 
 def _bent_summary(t, space):

@@ -33,6 +33,13 @@ def refusals_are_user_errors(fn):
     return wrapper
 
 
+# The native module's accepted input range (native/python/arrays.h; _core.LIMITS, and
+# tests/python/test_limits.py holds these to it): known here so that options and meshes are
+# checked, and refused by name, with or without the module.
+LIMITS = {"coordinate": 1e9, "min_length": 1e-9, "max_length": 1e10, "tau": 1e4,
+          "samples": 1 << 16, "threads": 1 << 16}
+
+
 # What the add-on calls. A module built from older sources lacks some: it is then reported as
 # not loaded (with "rebuild") instead of failing in the middle of a bake.
 _REQUIRED = ("Ellipsoid", "fit_sphere", "fit_ellipsoid", "fit_shells", "ao_occluders",
