@@ -72,11 +72,23 @@ def role_of(obj, positions, triangles):
     return role, f"guessed: {why}"
 
 
-def world_ao_distance(scene):
-    """The AO distance Cycles uses for this scene (World > Ambient Occlusion > Distance, applied
-    by the AO bake even with the checkbox off; docs/DESIGN.md, 'Facts measured in Blender');
-    0 (unlimited) without a world."""
-    return float(scene.world.light_settings.distance) if scene.world else 0.0
+# Cycles' AO distance when the scene has no World (its sync_world; measured in 3.4's AO bake).
+NO_WORLD_DISTANCE = 10.0
+
+
+def world_ao_distance(scene, bake=False):
+    """The AO distance Cycles' AO bake uses for this scene: World > Ambient Occlusion >
+    Distance, even with the checkbox off, and NO_WORLD_DISTANCE without a World (docs/DESIGN.md,
+    'Facts measured in Blender'). The World's 0 means no occlusion (Cycles reads 1.0
+    everywhere), not the add-on's 'unlimited': bake=True (the distance a bake will use) refuses
+    it with a message instead of baking all-white or a different AO from Cycles'."""
+    d = float(scene.world.light_settings.distance) if scene.world else NO_WORLD_DISTANCE
+    if bake and d <= 0.0:
+        raise CanopyAOError(f"World '{scene.world.name}' has AO distance 0, with which Cycles' AO "
+                            "bake reads 1.0 everywhere (nothing is within reach); set World > "
+                            "Ambient Occlusion > Distance, or turn off From World (on the "
+                            "command line: --distance) and give a distance (0 = unlimited)")
+    return d
 
 
 def is_candidate(obj):

@@ -2,6 +2,7 @@
 check (nothing changed on failure), prepare, evaluate receivers in chunks (one per step, so
 progress and Esc cover vertices and texels alike), commit everything or nothing."""
 
+import math
 import time
 
 import bpy
@@ -14,6 +15,7 @@ from .targets import TexelTarget, VertexTarget, check_outputs
 from .. import core
 from ..core import maps, metrics, settings
 from ..core.native import CanopyAOError
+from ..core.scene import ray_length
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
 CHUNK = 1 << 16
@@ -280,8 +282,7 @@ class BakeJob:
     def _check_cycles(self, context, rep):
         """Cycles' AO bake of the same objects, compared receiver by receiver: per vertex (one
         Cycles bake for every vertex target), or per texel of the image just written."""
-        d = self.opts["distance"]
-        d = d if d > 0 else 1.0e6
+        d = cycles_distance(context.evaluated_depsgraph_get(), self.opts["distance"])
         samples = self.opts["cycles_samples"]
         vertex = [t for t in self.targets if t.kind == "vertex"]
         try:
@@ -307,6 +308,22 @@ class BakeJob:
             raise
         except ValueError as exc:  # the check's refusals (an empty material slot, ...)
             raise CanopyAOError(f"Cycles check: {exc}") from exc
+
+
+def cycles_distance(depsgraph, distance):
+    """The World AO distance with which Cycles bakes what this bake baked: the bake's own, or
+    for its unlimited (core.scene.ray_length) twice the diagonal of the bounds of everything
+    that renders, which no ray starting inside reaches past: unlimited for this scene, at any
+    scale. Cycles' own 0 would mean no occlusion at all."""
+    if math.isfinite(ray_length(distance)):
+        return float(distance)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for inst in depsgraph.object_instances:
+        m = np.array(inst.matrix_world)
+        box = np.array(inst.object.bound_box) @ m[:3, :3].T + m[:3, 3]
+        lo, hi = np.minimum(lo, box.min(axis=0)), np.maximum(hi, box.max(axis=0))
+    diagonal = float(np.linalg.norm(hi - lo)) if np.isfinite(hi - lo).all() else 0.0
+    return 2.0 * diagonal if diagonal > 0 else 1.0
 
 
 def _bent_summary(t, space):
