@@ -192,6 +192,31 @@ def test_bad_batch_arguments_exit_2_before_any_bake(tmp_path, env, scenes):
     assert not os.path.exists(tmp_path / "o")
 
 
+@pytest.mark.parametrize("args, bake, message", [
+    (["--timeout", "nan"], BAKE, "--timeout: must be a finite number of seconds >= 0"),
+    (["--timeout", "-1"], BAKE, "--timeout: must be a finite number of seconds >= 0"),
+    (["--poll", "inf"], BAKE, "--poll: must be a finite number of seconds >= 0"),
+    # bake options each file's bake would refuse: refused here, before any Blender starts
+    ([], ["--tau", "1e300"], "tau must be a finite number in (0, 10000]"),
+    ([], ["--distance", "1e-30"], "distance must be a finite number 0 or in [1e-09, 1e+10]"),
+    ([], ["--method", "bogus"], "method must be one of"),
+    (["--threads", "100000"], BAKE, "--threads must be an integer in [0, 65536]"),
+])
+def test_bad_numbers_and_bake_options_exit_2_before_any_blender(tmp_path, args, bake, message):
+    marker = tmp_path / "blender_started"
+    fake = tmp_path / "blender.sh"  # a Blender that only says it was started
+    fake.write_text(f"#!/bin/sh\ntouch {shlex.quote(str(marker))}\n")
+    fake.chmod(0o755)
+    src = tmp_path / "in" / "a.blend"
+    src.parent.mkdir()
+    src.write_bytes(b"BLENDER")
+    env = dict(os.environ, PYTHONPATH=ADDON_PARENT)
+    code, log = batch(env, str(src), "--output", str(tmp_path / "o"), "--blender", str(fake),
+                      *args, bake=bake)
+    assert code == 2 and message in log and "Traceback" not in log, log
+    assert not marker.exists() and not os.path.exists(tmp_path / "o")
+
+
 # tgkill(2), to hand a signal to one thread of another process as the kernel may hand Ctrl-C's.
 _TGKILL = {"x86_64": 234, "aarch64": 131}.get(os.uname().machine)
 

@@ -11,6 +11,7 @@ arguments.
 """
 
 import argparse
+import math
 import os
 import shlex
 import signal
@@ -50,11 +51,11 @@ def build_parser():
                    help="native-core threads per bake (default: cores / -j locally, 1 on "
                         "Slurm, where it is also the task's --cpus-per-task)")
     p.add_argument("--blender", default="blender", help="the Blender executable")
-    p.add_argument("--timeout", type=float, default=3600.0, metavar="S",
+    p.add_argument("--timeout", type=_seconds, default=3600.0, metavar="S",
                    help="seconds one file may take before its Blender is stopped (0 = none)")
     p.add_argument("--sbatch-arg", action="append", default=[], metavar="ARG",
                    help="extra sbatch option, e.g. --sbatch-arg=--partition=bake (repeatable)")
-    p.add_argument("--poll", type=float, default=2.0, metavar="S",
+    p.add_argument("--poll", type=_seconds, default=2.0, metavar="S",
                    help="Slurm: seconds between queue checks while waiting")
     p.add_argument("--dry-run", action="store_true",
                    help="print the plan (skipped files, one command line per task) and stop")
@@ -66,6 +67,33 @@ def _positive(text):
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
     return v
+
+
+def _seconds(text):
+    """A time in seconds: a finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not (v >= 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text}")
+    return v
+
+
+def check_bake_options(bake_args, threads):
+    """Parse the bake options as each file's bake will (canopy_ao.cli: every number against
+    its option's range), so that bad ones exit 2 here, before any Blender starts. Skipped in
+    a Python without numpy (the core's import needs it): each file's bake then refuses them."""
+    try:
+        from .. import cli
+    except ImportError:
+        return
+    parser = cli.build_parser()
+
+    def refuse(message):
+        raise plan.BatchError(f"bake option after '--': {message}")
+    parser.error = refuse
+    cli.check_args(parser, parser.parse_args([*bake_args, "--threads", str(threads)]))
 
 
 def split_argv(argv):
@@ -108,6 +136,7 @@ def run(args, bake_args):
         1 if slurm else max(1, (os.cpu_count() or 1) // args.jobs))
     if threads < 0:
         raise plan.BatchError(f"--threads must be >= 0, got {threads}")
+    check_bake_options(bake_args, threads)
     key = plan.options_key(bake_args, args.in_place)
 
     todo, skipped = [], []
