@@ -80,20 +80,29 @@ def _seconds(text):
     return v
 
 
-def check_bake_options(bake_args, threads):
-    """Parse the bake options as each file's bake will (canopy_ao.cli: every number against
-    its option's range), so that bad ones exit 2 here, before any Blender starts. Skipped in
-    a Python without numpy (the core's import needs it): each file's bake then refuses them."""
-    try:
-        from .. import cli
-    except ImportError:
-        return
-    parser = cli.build_parser()
+# Parses bake options as each file's bake will, in a child Python: the command line's parser
+# imports the core, whose native module starts threads, and the batch's own process must keep
+# only its pool's (Ctrl-C handling, run_local) and import neither bpy nor the native core.
+_CHECK = """import sys
+from canopy_ao import cli
+parser = cli.build_parser()
+def refuse(message):
+    print(message, file=sys.stderr)
+    sys.exit(2)
+parser.error = refuse
+cli.check_args(parser, parser.parse_args(sys.argv[1:]))
+"""
 
-    def refuse(message):
-        raise plan.BatchError(f"bake option after '--': {message}")
-    parser.error = refuse
-    cli.check_args(parser, parser.parse_args([*bake_args, "--threads", str(threads)]))
+
+def check_bake_options(bake_args, threads):
+    """Refuse (BatchError, exit 2) bake options each file's bake would refuse (canopy_ao.cli:
+    every number against its option's range), before any Blender starts. A Python that cannot
+    import the core (no numpy) skips the check: each file's bake then refuses them."""
+    r = subprocess.run([sys.executable, "-c", _CHECK, *bake_args, "--threads", str(threads)],
+                       env=_package_env(), capture_output=True, text=True)
+    if r.returncode == 2:
+        lines = r.stderr.strip().splitlines()
+        raise plan.BatchError(f"bake option after '--': {lines[-1] if lines else '?'}")
 
 
 def split_argv(argv):
@@ -216,6 +225,12 @@ def _addon_parent():
     return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+def _package_env():
+    """This environment with the canopy_ao package first on PYTHONPATH (for a child python3)."""
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [_addon_parent()] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])))
+
+
 def runner_command(plan_path, python=sys.executable):
     return [python, "-m", "canopy_ao.batch.runner", plan_path]
 
@@ -223,8 +238,7 @@ def runner_command(plan_path, python=sys.executable):
 def run_parallel(p, args):
     """GNU parallel running -j runners at once, one per task, as the Slurm array does."""
     plan_path = runner.save_plan(p)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [_addon_parent()] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])))
+    env = _package_env()
     cmd = ["parallel", "--will-cite", "--halt", "never", "-j", str(args.jobs),
            *runner_command(plan_path), ":::", *map(str, range(len(p["tasks"])))]
     try:
