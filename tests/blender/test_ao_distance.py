@@ -88,3 +88,13 @@ def test_the_cycles_check_of_an_unlimited_bake_is_unlimited_at_any_scale(disk_ov
     assert bpy.context.scene.world.light_settings.distance == 0.0
     np.testing.assert_allclose(mesh_io.read_ao_attribute(disk_over_plane, ATTR).mean(),
                                e["ao_mean"], atol=1e-6)
+
+
+def test_the_cycles_bake_refuses_a_distance_of_zero(disk_over_plane):
+    """Cycles' 0 is no occlusion: its bake is never run with it (a caller's unlimited must
+    become a length first)."""
+    from canopy_ao.blender import cycles_check
+    engine = bpy.context.scene.render.engine
+    with pytest.raises(ValueError, match="Cycles would read 1.0 everywhere"):
+        cycles_check.bake_cycles_vertex_ao(bpy.context, [disk_over_plane], 0.0, 4)
+    assert bpy.context.scene.render.engine == engine and bpy.context.scene.world is None
