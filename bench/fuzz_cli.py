@@ -34,7 +34,7 @@ import fuzz  # noqa: E402  (bench/fuzz.py: the value pools, the runner and the t
 REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
 METHODS = ["auto", "sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid", "raytrace"]
 NUMBERS = ["0", "1", "0.5", "2", "-1", "nan", "inf", "-inf", "1e400", "1e-45", "1e4", "1e5",
-           "abc", ""]
+           "abc", "", "1e-30", "1e300", "1e11"]
 COUNTS = ["1", "4", "16", "0", "-1", "2.5", "65536", "99999999999", "abc"]
 NAMES = ["CanopyAO", "X", "", "UVMap", "position", "a" * 80, "\u00fcml\u00e4ut", "Col/or",
          "CanopyAO_Error"]
@@ -59,6 +59,7 @@ def draw_argv(seed, case, tmp):
         ("--samples", lambda: value(["1", "4", "16"], COUNTS)),
         ("--time-budget", lambda: value(["0.5", "1", "0"], NUMBERS)),
         ("--target-error", lambda: value(["0.05", "0.01"], NUMBERS)),
+        ("--threads", lambda: value(["1", "2", "0"], COUNTS + ["100000"])),
         ("--attribute", lambda: value(["CanopyAO", "AO2"], NAMES)),
         ("--aov", lambda: g.pick(["BakedAO", "AO", "", "x" * 70])),
         ("--report", lambda: g.pick([os.path.join(tmp, "r.json"), "/nonexistent/dir/r.json",
@@ -125,7 +126,12 @@ BAD_VALUES = {
     **{f: {"0", "-1", "-5", "2.5", "99999999999", "abc", ""}
        for f in ("--samples", "--resolution", "--cycles-samples")},
     "--report": {""},  # an empty path names no file: silently writing nothing is a lie
+    # Values argparse's own type takes but the native core refuses (its accepted range,
+    # core.native.LIMITS): the option's range holds them, so they exit 2 too.
+    "--threads": {"-1", "2.5", "100000", "99999999999", "abc", ""},
 }
+BAD_VALUES["--tau"] |= {"1e5", "1e300", "1e11"}
+BAD_VALUES["--distance"] |= {"1e-45", "1e-30", "1e300", "1e11"}
 
 
 def bad_argument(argv):

@@ -1,6 +1,6 @@
 """A forest in Blender: thousands of instanced trees on a 1M-vertex ground, baked headless.
 
-    blender -b --factory-startup --python examples/forest_scene.py -- \
+    blender -b --factory-startup --python-exit-code 1 --python examples/forest_scene.py -- \
         [--trees 10000] [--ground-vertices 1e6] [--side 1000] [--method ellipsoid] \
         [--tau auto|T] [--epsilon 1e-2] [--save /tmp/forest.blend]
 

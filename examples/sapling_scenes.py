@@ -1,6 +1,6 @@
 """Real-generator benchmark scenes: Blender's own Sapling Tree Gen trees, a grass field, a grove.
 
-    blender -b --factory-startup --python examples/sapling_scenes.py -- [--scenes NAME ...]
+    blender -b --factory-startup --python-exit-code 1 --python examples/sapling_scenes.py -- [--scenes NAME ...]
         [--quick] [--out-dir bench/out/real] [--bake-cycles N ...] [--cycles-seed K] [--blend DIR]
         [--force] [--list]
 

@@ -40,7 +40,7 @@ if ((cycles)); then
   for s in ideal_sphere ideal_ellipsoid round_tree columnar_tree weeping_tree conifer grass_field grove; do
     samples=(1 4 16 64 256)
     [[ $s == ideal_* ]] && samples+=(1024)   # convergence check where it is cheap
-    blender -b --factory-startup --python bench/cycles_reference.py -- \
+    blender -b --factory-startup --python-exit-code 1 --python bench/cycles_reference.py -- \
       --scene "$s" "${quick[@]}" --samples "${samples[@]}" 2>&1 | grep "cycles_reference" || {
         echo "bench.sh: Cycles bake of $s failed" >&2; exit 1; }
   done

@@ -90,10 +90,34 @@ def options_from_args(args, world_distance):
     return opts
 
 
+def check_args(parser, args):
+    """What parse_args cannot check by one argument's type: parser.error (exit 2) names it.
+    The batch runs it too, before any Blender starts."""
+    from .core.native import LIMITS
+    if not 0 <= args.threads <= LIMITS["threads"]:
+        parser.error(f"--threads must be an integer in [0, {LIMITS['threads']}], got "
+                     f"{args.threads}")
+    if args.report is not None and not args.report.strip():
+        parser.error("--report needs a file name")
+
+
 def _argv(argv):
     if argv is not None:
         return list(argv)
     return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+
+
+# Blender's own arguments that render when Blender reaches them, after this script.
+RENDER_FLAGS = ("-a", "--render-anim", "-f", "--render-frame")
+
+
+def _render_flags(blender_argv):
+    """Blender's render arguments that follow the script (--python-expr / --python) and come
+    before '--' in Blender's command line."""
+    cut = blender_argv.index("--") if "--" in blender_argv else len(blender_argv)
+    head = blender_argv[:cut]
+    starts = [i for i, a in enumerate(head) if a in ("--python-expr", "--python", "-P")]
+    return [a for a in head[starts[0] + 2:] if a in RENDER_FLAGS] if starts else []
 
 
 def _fail(message, code=1):
@@ -106,10 +130,13 @@ def main(argv=None):
     """Parse the args after ``--``, bake, report; sys.exit with 0 on success."""
     parser = build_parser()
     args = parser.parse_args(_argv(argv))  # exits 2 with usage on bad arguments
-    if args.threads < 0:
-        parser.error(f"--threads must be >= 0, got {args.threads}")
-    if args.report is not None and not args.report.strip():
-        parser.error("--report needs a file name")
+    check_args(parser, args)
+    render = _render_flags(sys.argv) if argv is None else []
+    if render and not args.live:
+        parser.error(f"Blender's {' '.join(render)} before '--' renders after this script only "
+                     "with --live (live AO, re-evaluated at every frame); without it the bake "
+                     "exits Blender first and nothing is rendered: add --live, or render in a "
+                     "second command (blender -b FILE.blend -a)")
     from .core.progress import Cancelled
     try:
         run(args)
@@ -157,7 +184,12 @@ def run(args):
     require().set_max_threads(args.threads)  # 0 also lifts a cap an earlier bake here set
     if args.save and not bpy.data.filepath:
         raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
-    opts = options_from_args(args, gather.world_ao_distance(bpy.context.scene))
+    try:
+        world = None if args.distance is not None else gather.world_ao_distance(
+            bpy.context.scene, bake=True)
+    except CanopyAOError as exc:
+        raise BakeFailed(str(exc)) from None
+    opts = options_from_args(args, world)
     context = bpy.context
     if args.objects is None:
         # Headless: "the selection" means nothing here, so bake every visible mesh.

@@ -21,6 +21,9 @@ void bind_mesh_arrays(py::module_& m);
 void bind_scene_plan(py::module_& m);
 }  // namespace canopy_ao::py_bind
 
+// Most worker threads set_max_threads takes.
+constexpr long long kMaxThreadCap = 1 << 16;
+
 PYBIND11_MODULE(_core, m) {
   using namespace canopy_ao;
   m.doc() =
@@ -28,6 +31,17 @@ PYBIND11_MODULE(_core, m) {
       "models and an Embree ray-traced reference. Arrays: float32 (N, 3) positions/normals, "
       "int32 (M, 3) triangles; results float32 (N,) in [0, 1], 1 = open sky.";
   m.attr("__version__") = CANOPY_AO_VERSION;
+  // The accepted input range (arrays.h), for the add-on's own checks: a value outside it is
+  // refused with the option's or the object's name before any call (core/settings.py,
+  // blender/mesh_io.py), and tests hold those to these numbers.
+  py::dict limits;
+  limits["coordinate"] = py_bind::kMaxCoordinate;
+  limits["min_length"] = py_bind::kMinLength;
+  limits["max_length"] = py_bind::kMaxLength;
+  limits["tau"] = py_bind::kMaxTau;
+  limits["samples"] = py_bind::kMaxSamples;
+  limits["threads"] = kMaxThreadCap;
+  m.attr("LIMITS") = limits;
 
   // register_exception: translation and the Python type in one call, the same in pybind11 2.10
   // and 3.x (a static py::exception called as error(msg) is deprecated in 3.x). The translator
@@ -64,7 +78,7 @@ PYBIND11_MODULE(_core, m) {
   m.def(
       "set_max_threads",
       [](const py::object& n) {
-        return set_max_threads(static_cast<int>(py_bind::int_arg(n, "n", 0, 1 << 16)));
+        return set_max_threads(static_cast<int>(py_bind::int_arg(n, "n", 0, kMaxThreadCap)));
       },
       py::arg("n"),
       "Caps worker threads for later calls (0 = all cores; n in [0, 65536], else ValueError). "

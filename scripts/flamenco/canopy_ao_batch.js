@@ -34,7 +34,8 @@ const JOB_TYPE = {
 
 // Kept identical to plan.py's WORKER_EXPR and BLENDER_ARGS (the tests check it).
 const WORKER_EXPR = "import canopy_ao.batch.worker as w; w.main()";
-const BLENDER_ARGS = ["-b", "--factory-startup", "--addons", "canopy_ao"];
+// --python-exit-code 1: a worker without the add-on fails the task instead of exiting 0.
+const BLENDER_ARGS = ["-b", "--factory-startup", "--addons", "canopy_ao", "--python-exit-code", "1"];
 
 function compileJob(job) {
     const settings = job.settings;

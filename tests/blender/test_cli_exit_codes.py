@@ -1,7 +1,7 @@
 """The command line as documented, run as a pipeline would: when the add-on is not installed
 the failure must reach the exit code (Blender exits 0 when a --python-expr fails unless it is
-given --python-exit-code). The commands are read from README.md, addon/README.md and
-scripts/run_example.sh, so the test checks what the documents say."""
+given --python-exit-code). The commands are read from README.md, addon/README.md,
+scripts/run_example.sh and docs/DESIGN.md, so the test checks what the documents say."""
 import os
 import re
 import shlex
@@ -33,7 +33,7 @@ def as_argv(command, blend):
     return argv
 
 
-SOURCES = ["README.md", "addon/README.md", "scripts/run_example.sh"]
+SOURCES = ["README.md", "addon/README.md", "scripts/run_example.sh", "docs/DESIGN.md"]
 
 
 @pytest.mark.parametrize("source", SOURCES)
@@ -56,3 +56,21 @@ def test_the_documented_command_fails_with_a_message_without_the_addon(source, t
         # It stopped at the failure: Blender went on to nothing else (a command that renders
         # with -a after the bake must not render when the bake could not even start).
         assert "Fra:" not in out, f"{source}: Blender went on after the failure: {command}"
+
+
+@pytest.mark.parametrize("render", [["-a"], ["-f", "1"]])
+def test_render_arguments_without_live_are_refused(render, tmp_path, user_scripts):
+    """-a (or -f) before '--' renders after the script only when --live hands back to Blender:
+    without --live the bake would exit Blender first, 0 and nothing rendered."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    blend = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True)
+    argv = [bpy.app.binary_path, "-b", blend, "--factory-startup", "--addons", "canopy_ao",
+            "--python-exit-code", "1", "--python-expr", "import canopy_ao.cli as c; c.main()",
+            *render, "--", "--all", "--method", "sphere", "--tau", "1.5", "--save"]
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
+    r = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
+    out = r.stdout + r.stderr
+    assert r.returncode == 2 and "with --live" in out and render[0] in out, out[-2000:]
+    assert "Fra:" not in out and "canopy_ao: saved" not in out, out[-2000:]

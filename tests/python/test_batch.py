@@ -192,6 +192,31 @@ def test_bad_batch_arguments_exit_2_before_any_bake(tmp_path, env, scenes):
     assert not os.path.exists(tmp_path / "o")
 
 
+@pytest.mark.parametrize("args, bake, message", [
+    (["--timeout", "nan"], BAKE, "--timeout: must be a finite number of seconds >= 0"),
+    (["--timeout", "-1"], BAKE, "--timeout: must be a finite number of seconds >= 0"),
+    (["--poll", "inf"], BAKE, "--poll: must be a finite number of seconds >= 0"),
+    # bake options each file's bake would refuse: refused here, before any Blender starts
+    ([], ["--tau", "1e300"], "tau must be a finite number in (0, 10000]"),
+    ([], ["--distance", "1e-30"], "distance must be a finite number 0 or in [1e-09, 1e+10]"),
+    ([], ["--method", "bogus"], "method must be one of"),
+    (["--threads", "100000"], BAKE, "--threads must be an integer in [0, 65536]"),
+])
+def test_bad_numbers_and_bake_options_exit_2_before_any_blender(tmp_path, args, bake, message):
+    marker = tmp_path / "blender_started"
+    fake = tmp_path / "blender.sh"  # a Blender that only says it was started
+    fake.write_text(f"#!/bin/sh\ntouch {shlex.quote(str(marker))}\n")
+    fake.chmod(0o755)
+    src = tmp_path / "in" / "a.blend"
+    src.parent.mkdir()
+    src.write_bytes(b"BLENDER")
+    env = dict(os.environ, PYTHONPATH=ADDON_PARENT)
+    code, log = batch(env, str(src), "--output", str(tmp_path / "o"), "--blender", str(fake),
+                      *args, bake=bake)
+    assert code == 2 and message in log and "Traceback" not in log, log
+    assert not marker.exists() and not os.path.exists(tmp_path / "o")
+
+
 # tgkill(2), to hand a signal to one thread of another process as the kernel may hand Ctrl-C's.
 _TGKILL = {"x86_64": 234, "aarch64": 131}.get(os.uname().machine)
 
@@ -314,3 +339,54 @@ def test_flamenco_job_type_is_valid_and_authors_the_batch_command_lines(tmp_path
         assert all(t["type"] == "blender" and len(t["commands"]) == 1 for t in job["tasks"])
         assert len(ours) == -(-len(srcs) // per_task)
         assert theirs == ours
+
+
+def _no_addon_env(env, tmp_path):
+    """env of a farm worker whose Blender lacks the add-on: a BLENDER_USER_SCRIPTS without it
+    and no PYTHONPATH (Blender's Python would find the package there)."""
+    empty = tmp_path / "no_addon_scripts"
+    (empty / "addons").mkdir(parents=True)
+    bare = dict(env, BLENDER_USER_SCRIPTS=str(empty))
+    bare.pop("PYTHONPATH", None)
+    return bare
+
+
+def _fails_loudly(argv, env, what, timeout=300):
+    r = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=timeout)
+    out = r.stdout + r.stderr
+    assert r.returncode != 0, f"{what}: exit 0 without the add-on:\n{out[-2000:]}"
+    return out
+
+
+def test_every_generated_task_command_fails_without_the_addon(tmp_path, env, scenes):
+    """The command lines the batch generates (its own tasks, the runner GNU parallel and each
+    Slurm array element run, Flamenco's job type) exit non-zero on a worker whose Blender
+    lacks the add-on, and no output is left that looks like a result."""
+    from canopy_ao.batch import runner
+    srcs = _inputs(scenes, str(tmp_path / "in"), 1)
+    out = str(tmp_path / "out")
+    bare = _no_addon_env(env, tmp_path)
+    code, log = batch(env, *srcs, "--output", out, "--dry-run")
+    (task,) = [shlex.split(ln) for ln in log.splitlines() if ln.startswith(BLENDER + " ")
+               or ln.startswith("blender ")]
+    text = _fails_loudly(task, bare, "the batch's task command")
+    assert "No module named 'canopy_ao'" in text, text[-2000:]
+    # The runner (GNU parallel's and Slurm's command) on the saved plan: python3 finds the
+    # package by its own sys.path, the Blender it starts does not.
+    p = runner.make_plan(srcs, os.path.dirname(srcs[0]), out, BAKE, [srcs], blender=BLENDER)
+    plan_path = runner.save_plan(p)
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); from canopy_ao.batch import runner; "
+            "sys.exit(runner.main(sys.argv[2:]))")
+    _fails_loudly([sys.executable, "-c", code, ADDON_PARENT, plan_path, "0"], bare,
+                  "the runner of GNU parallel and Slurm")
+    assert not os.path.exists(os.path.join(out, os.path.basename(srcs[0])))
+    if shutil.which("node") is None:
+        pytest.skip("node is not installed (scripts/install_deps.sh installs nodejs)")
+    with open(tmp_path / "settings.json", "w") as f:
+        json.dump(dict(files=srcs[0] + "\n", output=out, bake_args=" ".join(BAKE), threads=0,
+                       files_per_task=1, in_place=False), f)
+    r = subprocess.run(["node", HARNESS, JOB_TYPE, str(tmp_path / "settings.json"), BLENDER],
+                       capture_output=True, text=True, check=True)
+    (flamenco,) = [c["argv"] for t in json.loads(r.stdout)["tasks"] for c in t["commands"]]
+    text = _fails_loudly(flamenco, bare, "the Flamenco task")
+    assert "No module named 'canopy_ao'" in text, text[-2000:]

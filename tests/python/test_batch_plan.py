@@ -139,7 +139,7 @@ def test_groups_and_the_task_command_line():
     cmd = plan.task_command("/opt/blender", ["/r/a.blend", "/r/b.blend"], "/r", "/o",
                             ["--method", "sphere"], threads=2, in_place=True)
     assert cmd == ["/opt/blender", "-b", "--factory-startup", "--addons", "canopy_ao",
-                   "/r/a.blend", "--python-expr", plan.WORKER_EXPR, "--", "--root", "/r",
+                   "--python-exit-code", "1", "/r/a.blend", "--python-expr", plan.WORKER_EXPR, "--", "--root", "/r",
                    "--output", "/o", "--threads", "2", "--in-place", "--files", "/r/a.blend",
                    "/r/b.blend", "--", "--method", "sphere"]
     assert "--threads" not in plan.task_command("b", ["/r/a.blend"], "/r", "/o", [])

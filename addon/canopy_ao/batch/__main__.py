@@ -11,6 +11,7 @@ arguments.
 """
 
 import argparse
+import math
 import os
 import shlex
 import signal
@@ -50,11 +51,11 @@ def build_parser():
                    help="native-core threads per bake (default: cores / -j locally, 1 on "
                         "Slurm, where it is also the task's --cpus-per-task)")
     p.add_argument("--blender", default="blender", help="the Blender executable")
-    p.add_argument("--timeout", type=float, default=3600.0, metavar="S",
+    p.add_argument("--timeout", type=_seconds, default=3600.0, metavar="S",
                    help="seconds one file may take before its Blender is stopped (0 = none)")
     p.add_argument("--sbatch-arg", action="append", default=[], metavar="ARG",
                    help="extra sbatch option, e.g. --sbatch-arg=--partition=bake (repeatable)")
-    p.add_argument("--poll", type=float, default=2.0, metavar="S",
+    p.add_argument("--poll", type=_seconds, default=2.0, metavar="S",
                    help="Slurm: seconds between queue checks while waiting")
     p.add_argument("--dry-run", action="store_true",
                    help="print the plan (skipped files, one command line per task) and stop")
@@ -66,6 +67,42 @@ def _positive(text):
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
     return v
+
+
+def _seconds(text):
+    """A time in seconds: a finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not (v >= 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text}")
+    return v
+
+
+# Parses bake options as each file's bake will, in a child Python: the command line's parser
+# imports the core, whose native module starts threads, and the batch's own process must keep
+# only its pool's (Ctrl-C handling, run_local) and import neither bpy nor the native core.
+_CHECK = """import sys
+from canopy_ao import cli
+parser = cli.build_parser()
+def refuse(message):
+    print(message, file=sys.stderr)
+    sys.exit(2)
+parser.error = refuse
+cli.check_args(parser, parser.parse_args(sys.argv[1:]))
+"""
+
+
+def check_bake_options(bake_args, threads):
+    """Refuse (BatchError, exit 2) bake options each file's bake would refuse (canopy_ao.cli:
+    every number against its option's range), before any Blender starts. A Python that cannot
+    import the core (no numpy) skips the check: each file's bake then refuses them."""
+    r = subprocess.run([sys.executable, "-c", _CHECK, *bake_args, "--threads", str(threads)],
+                       env=_package_env(), capture_output=True, text=True)
+    if r.returncode == 2:
+        lines = r.stderr.strip().splitlines()
+        raise plan.BatchError(f"bake option after '--': {lines[-1] if lines else '?'}")
 
 
 def split_argv(argv):
@@ -108,6 +145,7 @@ def run(args, bake_args):
         1 if slurm else max(1, (os.cpu_count() or 1) // args.jobs))
     if threads < 0:
         raise plan.BatchError(f"--threads must be >= 0, got {threads}")
+    check_bake_options(bake_args, threads)
     key = plan.options_key(bake_args, args.in_place)
 
     todo, skipped = [], []
@@ -187,6 +225,12 @@ def _addon_parent():
     return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+def _package_env():
+    """This environment with the canopy_ao package first on PYTHONPATH (for a child python3)."""
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [_addon_parent()] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])))
+
+
 def runner_command(plan_path, python=sys.executable):
     return [python, "-m", "canopy_ao.batch.runner", plan_path]
 
@@ -194,8 +238,7 @@ def runner_command(plan_path, python=sys.executable):
 def run_parallel(p, args):
     """GNU parallel running -j runners at once, one per task, as the Slurm array does."""
     plan_path = runner.save_plan(p)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [_addon_parent()] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])))
+    env = _package_env()
     cmd = ["parallel", "--will-cite", "--halt", "never", "-j", str(args.jobs),
            *runner_command(plan_path), ":::", *map(str, range(len(p["tasks"])))]
     try:

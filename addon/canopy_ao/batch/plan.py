@@ -16,8 +16,9 @@ import os
 
 # The Blender-side entry every task runs (worker.py); Flamenco's job type uses the same string.
 WORKER_EXPR = "import canopy_ao.batch.worker as w; w.main()"
-# Blender's own options before the script: no user preferences, the add-on enabled.
-BLENDER_ARGS = ("-b", "--factory-startup", "--addons", "canopy_ao")
+# Blender's own options before the script: no user preferences, the add-on enabled, and a
+# script that fails (no add-on, no module) fails the process (Blender exits 0 without it).
+BLENDER_ARGS = ("-b", "--factory-startup", "--addons", "canopy_ao", "--python-exit-code", "1")
 # Bake options the batch sets itself per file; passing them through would fight it.
 RESERVED_BAKE_OPTIONS = ("--save", "--report", "--threads")
 REPORT_SUFFIX = ".canopy_ao.json"

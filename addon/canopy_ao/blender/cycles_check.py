@@ -50,6 +50,9 @@ def render_settings_snapshot(scene):
 def _cycles_bake_settings(context, objects, distance, samples, seed=None):
     """Switch the scene to a Cycles AO bake of `objects`, restore everything afterwards.
     seed: Cycles' sampling seed (None: the scene's)."""
+    if not float(distance) > 0:  # Cycles' 0 is no occlusion, not the add-on's unlimited
+        raise ValueError(f"AO distance {distance}: Cycles would read 1.0 everywhere; give a "
+                         "length (for an unlimited bake: gather.cycles_distance)")
     scene = context.scene
     view_layer = context.view_layer
     saved = render_settings_snapshot(scene)

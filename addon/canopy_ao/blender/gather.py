@@ -1,6 +1,7 @@
 """Scene → items: which objects a bake reads and writes, their role and tree, their world-space
 arrays (the core's SceneItems). Nothing here changes the scene."""
 
+import math
 import time
 
 import numpy as np
@@ -8,7 +9,7 @@ import numpy as np
 from . import mesh_io
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
-from ..core.scene import SceneItem
+from ..core.scene import SceneItem, ray_length
 
 
 def tree_of(obj):
@@ -72,11 +73,23 @@ def role_of(obj, positions, triangles):
     return role, f"guessed: {why}"
 
 
-def world_ao_distance(scene):
-    """The AO distance Cycles uses for this scene (World > Ambient Occlusion > Distance, applied
-    by the AO bake even with the checkbox off; docs/DESIGN.md, 'Facts measured in Blender');
-    0 (unlimited) without a world."""
-    return float(scene.world.light_settings.distance) if scene.world else 0.0
+# Cycles' AO distance when the scene has no World (its sync_world; measured in 3.4's AO bake).
+NO_WORLD_DISTANCE = 10.0
+
+
+def world_ao_distance(scene, bake=False):
+    """The AO distance Cycles' AO bake uses for this scene: World > Ambient Occlusion >
+    Distance, even with the checkbox off, and NO_WORLD_DISTANCE without a World (docs/DESIGN.md,
+    'Facts measured in Blender'). The World's 0 means no occlusion (Cycles reads 1.0
+    everywhere), not the add-on's 'unlimited': bake=True (the distance a bake will use) refuses
+    it with a message instead of baking all-white or a different AO from Cycles'."""
+    d = float(scene.world.light_settings.distance) if scene.world else NO_WORLD_DISTANCE
+    if bake and d <= 0.0:
+        raise CanopyAOError(f"World '{scene.world.name}' has AO distance 0, with which Cycles' AO "
+                            "bake reads 1.0 everywhere (nothing is within reach); set World > "
+                            "Ambient Occlusion > Distance, or turn off From World (on the "
+                            "command line: --distance) and give a distance (0 = unlimited)")
+    return d
 
 
 def is_candidate(obj):
@@ -183,3 +196,19 @@ def scene_items(context, depsgraph, targets, opts, timings):
         objects[name] = obj
         how[name] = why
     return items, objects, how
+
+
+def cycles_distance(depsgraph, distance):
+    """The World AO distance with which Cycles bakes what this bake baked: the bake's own, or
+    for its unlimited (core.scene.ray_length) twice the diagonal of the bounds of everything
+    that renders, which no ray starting inside reaches past: unlimited for this scene, at any
+    scale. Cycles' own 0 would mean no occlusion at all."""
+    if math.isfinite(ray_length(distance)):
+        return float(distance)
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for inst in depsgraph.object_instances:
+        m = np.array(inst.matrix_world)
+        box = np.array(inst.object.bound_box) @ m[:3, :3].T + m[:3, 3]
+        lo, hi = np.minimum(lo, box.min(axis=0)), np.maximum(hi, box.max(axis=0))
+    diagonal = float(np.linalg.norm(hi - lo)) if np.isfinite(hi - lo).all() else 0.0
+    return 2.0 * diagonal if diagonal > 0 else 1.0

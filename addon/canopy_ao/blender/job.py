@@ -7,7 +7,8 @@ import time
 import bpy
 import numpy as np
 
-from . import bent_io, cycles_check, gather, instances, live, materials, mesh_io, tiles_io
+from . import (bent_io, checks, cycles_check, gather, instances, live, materials, mesh_io,
+               tiles_io)
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget, check_outputs, chunks, chunks_done, \
     split_vertex_chunks
@@ -47,24 +48,7 @@ class BakeJob:
         self.timings = {}
         t_start = time.perf_counter()
         self.lines = []
-        ok, msg = core.core_status()
-        if not ok:
-            raise CanopyAOError(msg)
-        if opts["live"]:
-            live.check_request(opts)  # texels or a non-live rung: refused before any work
-        if opts["wire_material"] or opts["add_aov"]:
-            try:
-                materials.check_aov_name(opts["aov_name"])
-                if opts["thickness"] and opts["wire_material"]:
-                    materials.check_aov_name(opts["thickness_name"])
-            except ValueError as exc:
-                raise CanopyAOError(str(exc)) from None
-        if opts["thickness"] and opts["thickness_name"] in ("", opts["attribute"],
-                                                            opts["aov_name"]):
-            raise CanopyAOError(f"the thickness's name '{opts['thickness_name']}' is empty or "
-                                "also the AO's attribute or AOV; give it a name of its own")
-        if opts["bent_normals"] != "OFF":
-            bent_io.check_request(opts)
+        checks.check_request(opts)  # what needs no geometry: refused before any work
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
@@ -230,6 +214,7 @@ class BakeJob:
                        and not o["add_aov"] and not o["check_cycles"])
         try:
             rep = self._report() if vertex_only else None
+            texts = self._result_texts(rep) if vertex_only else None
             if o["atlas"] and o["mode"] == 'TEXEL':  # one image for every object
                 rep_atlas = tiles_io.write_atlas(self.targets, txn, o)
             else:
@@ -255,31 +240,39 @@ class BakeJob:
             if o["check_cycles"]:
                 report("checking with Cycles", "", 0, 0)
                 self._check_cycles(context, rep)
+            if texts is None:
+                texts = self._result_texts(rep)
             report("writing", "", 0, 0)  # the last moment a stop undoes every write
         except BaseException:
             txn.rollback()
             raise
-        txn.done()
+        txn.done()  # from here on, only what cannot fail for a bake's data (the texts are made)
         t0 = self._lap("report, extras", t0)
+        self.scene.canopy_ao.last_report = texts.pop(None)
+        for name, text in texts.items():
+            self.objects[name].canopy_ao.last_result = text
         if o["show_proxies"]:
             mesh_io.show_proxies(self.scene, core.proxy_dicts(self.plan))
         elif mesh_io.PROXY_COLLECTION in bpy.data.collections:
             mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
-        for r in self.results:
-            e = rep["objects"][r.name]
-            text = (f"{e['role']}, {e['method']}, {e['vertices']} verts, {e['seconds']:.3f} s, "
-                    f"mean AO {e['ao_mean']:.3f}")
-            if "cycles" in e:
-                text += f", vs Cycles MAE {e['cycles'].get('mae', float('nan')):.3f}"
-            self.objects[r.name].canopy_ao.last_result = text
-        self.scene.canopy_ao.last_report = (
-            f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)")
         self._lap("proxies", t0)
         if o["live"]:
             live.begin(self)  # every frame change from now on re-evaluates (live.py)
         rep["stage_seconds"] = dict(self.timings)
         self.report_dict = rep
         return rep
+
+    def _result_texts(self, rep):
+        """{object name: its panel line, None: the scene's}, made from rep before the commit's
+        last write (a failure here still undoes every write)."""
+        texts = {None: f"{rep['method']}, τ {rep['tau']:.3g}, {len(self.results)} object(s)"}
+        for r in self.results:
+            e = rep["objects"][r.name]
+            texts[r.name] = (f"{e['role']}, {e['method']}, {e['vertices']} verts, "
+                             f"{e['seconds']:.3f} s, mean AO {e['ao_mean']:.3f}")
+            if "cycles" in e:
+                texts[r.name] += f", vs Cycles MAE {e['cycles'].get('mae', float('nan')):.3f}"
+        return texts
 
     def _report(self):
         o = self.opts
@@ -307,8 +300,7 @@ class BakeJob:
     def _check_cycles(self, context, rep):
         """Cycles' AO bake of the same objects, compared receiver by receiver: per vertex (one
         Cycles bake for every vertex target), or per texel of the image just written."""
-        d = self.opts["distance"]
-        d = d if d > 0 else 1.0e6
+        d = gather.cycles_distance(context.evaluated_depsgraph_get(), self.opts["distance"])
         samples = self.opts["cycles_samples"]
         vertex = [t for t in self.targets if t.kind == "vertex"]
         try:

@@ -55,7 +55,8 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     triangles=False skips the loop triangulation (the analytic models need none; it costs more
     than positions and normals together) and returns an empty (0, 3) array.
     With same_count, raises MeshIOError when the evaluated mesh has a different vertex count
-    from the original (a per-vertex result could not be stored on the original mesh).
+    from the original (a per-vertex result could not be stored on the original mesh); always,
+    when a vertex's world position is not finite or outside the native module's range.
     timings: a dict to which the seconds of each stage are added ("fetch", "positions",
     "normals", "triangles", "transform").
     polygons: a list to which each triangle's face index, int32 (F,), is appended (with
@@ -96,6 +97,13 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
         if ob_eval is not None:
             ob_eval.to_mesh_clear()
     pos, nor = _to_world(co, nor, obj.matrix_world)
+    limit = native.LIMITS["coordinate"]
+    bad = n - np.count_nonzero((np.abs(pos) <= limit).all(axis=1))  # NaN compares False
+    if bad:
+        raise MeshIOError(f"Object '{obj.name}': {bad} of its {n} vertices have no finite "
+                          f"world position within ±{limit:g} (NaN or infinite coordinates, or "
+                          "a transform that makes them so); fix the mesh or its transform, or "
+                          "set its role to Ignore (nothing was changed)")
     _lap(timings, "transform", t)
     return pos, nor, tris
 

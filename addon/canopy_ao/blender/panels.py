@@ -49,7 +49,10 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         _sub(col, not s.use_world_distance).prop(s, "distance", text=" ")
         if s.use_world_distance:
             d = world_ao_distance(context.scene)
-            col.label(text=f"World AO distance: {d:g}" if d > 0 else "No world: unlimited")
+            col.label(text=(f"World AO distance: {d:g}" if context.scene.world and d > 0 else
+                            f"No World: Cycles' {d:g}" if d > 0 else
+                            "World AO distance 0: Cycles sees no AO"),
+                      icon='NONE' if d > 0 else 'ERROR')
         if s.method in {"raytrace", "hybrid", "auto"}:  # auto: the most rays it may cast
             col.prop(s, "samples")
         if s.method == "auto":

@@ -53,13 +53,13 @@ def option_properties():
 def resolve(values, scene):
     """Options as a bake takes them, from raw property values: an optional number is None when
     its switch is on (calibrate_tau: τ None), and the AO distance is the World's when
-    use_world_distance is on."""
+    use_world_distance is on (CanopyAOError when the World's is 0, gather.world_ao_distance)."""
     opts = {o.name: values[o.name] for o in OPTIONS}
     for o in OPTIONS:
         if o.none_prop and values[o.none_prop]:
             opts[o.name] = None
     if values["use_world_distance"]:
-        opts["distance"] = world_ao_distance(scene)
+        opts["distance"] = world_ao_distance(scene, bake=True)
     return opts
 
 

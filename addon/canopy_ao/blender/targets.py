@@ -88,6 +88,10 @@ class VertexTarget(Target):
 
     def __init__(self, item, obj, opts, depsgraph=None):
         super().__init__(item, obj, item.positions, item.normals)
+        if not self.count:
+            raise CanopyAOError(f"Object '{obj.name}': its mesh has no vertices, so nothing "
+                                "can be baked into it; give it geometry, set its role to "
+                                "Ignore, or leave it out of the bake (nothing was changed)")
         if opts["channel"] != "RGBA":  # one channel: any color attribute, when asked
             why = maps_io.check_channel_attribute(obj, opts["attribute"])
         else:

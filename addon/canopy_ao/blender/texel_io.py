@@ -119,7 +119,8 @@ class TexelReceivers:
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False):
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
     UVs use, tile by tile, tiles_io.split_tiles). Raises CanopyAOError before reading anything
-    when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
+    when obj is not a mesh, has no (such) UV map, or the sizes are wrong, and after reading
+    when no texel centre falls inside a face of the UV map."""
     if obj.type != "MESH":
         raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
                             "texel")
@@ -161,10 +162,12 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
             f"Object '{obj.name}': UV map '{uv_map}' overlaps ({stats['overlapping_texels']} "
             "texels lie in two or more faces); those texels show one face's AO. Unwrap without "
             "overlaps (UV > Smart UV Project) for a correct bake")
-    if len(pixels) == 0:
-        stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
-                                 f"map '{uv_map}' at {res}×{res}; raise the resolution or "
-                                 "check the UVs lie in the 0–1 square")
+    if len(pixels) == 0:  # nothing to bake: refused, before anything is written
+        raise CanopyAOError(f"Object '{obj.name}': no texel centre falls inside a face of its "
+                            f"UV map '{uv_map}' at {res}×{res} (its UVs lie outside the "
+                            f"{'UDIM tiles' if udim else '0–1 square'} or enclose no area); "
+                            "unwrap it (UV > Smart UV Project), raise the resolution or bake "
+                            "per vertex (nothing was changed)")
     return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles, uvs)
 
 

@@ -18,13 +18,13 @@ non-uniform scale and shear need no refit and no approximation.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .lighting import _scene_triangles, tau_of
 from .native import CanopyAOError, _core, require
+from .scene import ray_length
 
 DEFAULT_EPSILON = 1e-3  # the core's default cut-off (occluders.h)
 
@@ -148,8 +148,7 @@ class Forest:
                   for c, p in zip(self._crowns, self.prototypes)]
         # No instance beyond the AO distance along a ray occludes.
         self.native = _core.ForestOccluders(crowns, self._solids, epsilon=self.epsilon,
-                                            distance=self.distance if self.distance > 0
-                                            else math.inf)
+                                            distance=ray_length(self.distance))
 
     def scaled(self, scale: float) -> "Forest":
         """The same instances with every prototype's τ times ``scale`` (the shells are not

@@ -40,6 +40,7 @@ import numpy as np
 
 from .native import _core
 from .roles import connected_components
+from .scene import ray_length
 from .trees import _Cells
 
 
@@ -161,7 +162,7 @@ def grass_layer(name, positions, triangles, ground, blade, max_triangles=20000,
     cr = 0.5 * np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
     lai = float(np.linalg.norm(cr, axis=1).sum() / footprint)
     sub = cr[:: max(1, len(cr) // max_triangles)]
-    reach = float(distance) / float(blade) if distance and distance > 0 else math.inf
+    reach = ray_length(distance) / float(blade)
     layer = blade_layer(lai, sub, area_above(p, t, float(ground), float(blade)), reach)
     # An upward-facing ground point is the layer's root facing up: V = 2 ∫ exp(−L Ḡ/μ) μ dμ
     # without an AO distance, the part of the layer within reach with one.

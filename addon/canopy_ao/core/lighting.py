@@ -24,7 +24,7 @@ import numpy as np
 
 from . import ray_budget
 from .native import CanopyAOError, _core
-from .scene import Plan
+from .scene import Plan, ray_length
 
 
 # The rungs the scene plan lights (scene_plan.h's PlanMethod; ladder.TAU_METHODS).
@@ -60,7 +60,7 @@ class Lights:
         d = plan.settings.distance
         self.native = _core.ScenePlan([plan.fits.get(t) for t in self.trees],
                                       [list(plan.trunks.get(t, ())) for t in self.trees],
-                                      distance=float(d) if d > 0 else math.inf,
+                                      distance=ray_length(d),
                                       grass_covers=[g.native for g in plan.grass_layers])
         self.forest = None  # the forest.Forest attached to self.native (lights)
         self.key = _lights_key(plan)
@@ -223,7 +223,7 @@ def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra
     does (docs/DESIGN.md, 'The method ladder'). distance: the AO distance (default: the
     settings'; 0 = unlimited). extra: more RayTracer.ao arguments (bent_normals=True)."""
     d = plan.settings.distance if distance is None else distance
-    return _tracer(plan).ao(p, n, samples=int(samples), distance=float(d) if d > 0 else math.inf,
+    return _tracer(plan).ao(p, n, samples=int(samples), distance=ray_length(d),
                           seed=plan.settings.seed if seed is None else int(seed), **(own or {}),
                           **extra)
 
@@ -231,8 +231,8 @@ def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra
 def _grid_ao(plan, p, n):
     if plan.grid is None:  # no leaves or branches to voxelise (a grass field): nothing above
         return np.ones(len(p), np.float32)
-    d = plan.settings.distance
-    kw = {"distance": float(d)} if d > 0 else {}
+    far = ray_length(plan.settings.distance)
+    kw = {"distance": far} if far < math.inf else {}
     return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
 
 
@@ -248,8 +248,7 @@ def _hybrid_ao(plan, p, n, own=None):
     vertex at Cycles' bake point), times the density grid's transmittance beyond
     (docs/DESIGN.md, 'The near/far hybrid'). A scene with no leaves or branches has no grid:
     the caller traces the whole distance instead (the rays see the grass themselves)."""
-    d = plan.settings.distance
-    far = float(d) if d > 0 else math.inf
+    far = ray_length(plan.settings.distance)
     near = min(HYBRID_VOXELS * float(plan.grid.voxel_size), far)
     return np.asarray(_core.ao_near_far(_tracer(plan), plan.grid, p, n, near,
                                         samples=int(plan.settings.samples), distance=far,

@@ -8,6 +8,8 @@ to build it), so a missing or stale build is detected once, here, not at each ca
 from __future__ import annotations
 
 import functools
+import os
+import re
 import sys
 
 
@@ -31,6 +33,13 @@ def refusals_are_user_errors(fn):
         except ValueError as exc:
             raise CanopyAOError(str(exc)) from exc
     return wrapper
+
+
+# The native module's accepted input range (native/python/arrays.h; _core.LIMITS, and
+# tests/python/test_limits.py holds these to it): known here so that options and meshes are
+# checked, and refused by name, with or without the module.
+LIMITS = {"coordinate": 1e9, "min_length": 1e-9, "max_length": 1e10, "tau": 1e4,
+          "samples": 1 << 16, "threads": 1 << 16}
 
 
 # What the add-on calls. A module built from older sources lacks some: it is then reported as
@@ -60,15 +69,61 @@ except Exception as exc:  # ImportError, or an undefined symbol from a stale bui
     _CORE_ERROR = f"{type(exc).__name__}: {exc}"
 
 
+# The package folder, symlinks resolved (scripts/install_addon.sh links the source tree's).
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
+
+
 def core_status() -> tuple[bool, str]:
     """(available, message). The message says how to fix a missing or broken module."""
     if _core is not None:
         return True, f"native core loaded ({_core.__file__})"
-    return False, (
-        f"Canopy AO's native module could not be loaded ({_CORE_ERROR}). It must be built for "
-        f"this Blender's Python {sys.version_info.major}.{sys.version_info.minor}: run "
-        "'cmake -S . -B build-addon && cmake --build build-addon -j2' in the Canopy AO source "
-        "tree (it copies _core*.so into addon/canopy_ao/), then restart Blender.")
+    return False, load_failure(_CORE_ERROR, _PACKAGE)
+
+
+def load_failure(error: str, package: str, python: tuple = sys.version_info[:2]) -> str:
+    """What to tell a user whose native module did not load (error): which Python this Blender
+    runs and which Python the package's module files were built for, and the fix that fits
+    where the package lives. In the source tree (package = <repo>/addon/canopy_ao, beside
+    CMakeLists.txt): build it with CMake. Anywhere else (an installed extension or add-on): the
+    extension zip for this Python, named as scripts/build_extension.sh names it."""
+    here = f"{python[0]}.{python[1]}"
+    try:
+        names = sorted(f for f in os.listdir(package) if re.match(r"_core\..*(so|pyd)$", f))
+    except OSError:
+        names = []
+    built = sorted({f"{m.group(1)[0]}.{m.group(1)[1:]}" for m in
+                    (re.search(r"(?:cpython-|cp)(3\d+)", f) for f in names) if m})
+    repo = os.path.dirname(os.path.dirname(package))
+    if os.path.isfile(os.path.join(repo, "CMakeLists.txt")) and os.path.isdir(
+            os.path.join(repo, "native")):
+        fix = ("run 'cmake -S . -B build-addon && cmake --build build-addon -j2' in the Canopy AO "
+               "source tree (it copies _core*.so into addon/canopy_ao/), then restart Blender")
+    else:
+        fix = (f"install the Canopy AO extension built for Python {here}, "
+               f"{_zip_name(package, python)} (Edit > Preferences > Get Extensions > Install "
+               "from Disk; or from the source tree: scripts/build_extension.sh), then restart "
+               "Blender")
+    if built and here not in built:
+        why = (f"this Blender runs Python {here}, and this copy of Canopy AO carries a module "
+               f"built for Python {', '.join(built)} ({', '.join(names)}), which it cannot load")
+    elif not names:
+        why = f"this copy of Canopy AO has no module built for this Blender's Python {here}"
+    else:
+        why = f"{error}; it must be built for this Blender's Python {here}"
+    return f"Canopy AO's native module could not be loaded: {why}. To fix it, {fix}."
+
+
+def _zip_name(package: str, python: tuple) -> str:
+    """canopy_ao-<version>-cp<XY>.zip, the extension zip for Python X.Y (the version from the
+    package's blender_manifest.toml)."""
+    version = "<version>"
+    try:
+        with open(os.path.join(package, "blender_manifest.toml"), encoding="utf-8") as f:
+            m = re.search(r'^version\s*=\s*"([^"]+)"', f.read(), re.M)
+        version = m.group(1) if m else version
+    except OSError:
+        pass
+    return f"canopy_ao-{version}-cp{python[0]}{python[1]}.zip"
 
 
 def require():

@@ -24,6 +24,7 @@ import math
 import numpy as np
 
 from . import cost
+from .scene import ray_length
 
 
 def spreads(plan) -> bool:
@@ -112,7 +113,7 @@ def trace(plan, name, p, n, own, **extra):
     """The exact rung's AO float32 (N,) of object ``name``'s vertex receivers (own: the
     tracer-mesh ids, lighting.own_ids) at the plan's samples, spread evenly (module doc)."""
     s = plan.settings
-    d = float(s.distance) if s.distance > 0 else math.inf
+    d = ray_length(s.distance)
     ids = own["vertex_ids"]
     corners = object_corners(plan, name)[ids.astype(np.int64) - plan.tracer_bases[name][0]]
     return trace_even(plan.tracer, p, n, ids, s.samples, s.samples * mean_corners(plan),

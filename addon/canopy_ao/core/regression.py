@@ -31,7 +31,7 @@ from .ladder import BURIED_RAYS as LADDER_BURIED_RAYS, BURIED_SCALE
 from .leaf_features import LeafTable
 from .native import CanopyAOError
 from .regression_fit import NATIVE, Model
-from .scene import RECEIVER_ROLES
+from .scene import RECEIVER_ROLES, ray_length
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
 # Meshes whose connected pieces (a leaf card, a branch tube) give a receiver piece features.
@@ -183,7 +183,7 @@ class RegressionRung:
             groups.setdefault((it.tree, it.role), []).append(it)
         picks = _sample({g: sum(len(it.positions) for it in its) for g, its in groups.items()},
                         points, seed)
-        d = float(distance) if distance and distance > 0 else float("inf")
+        d = ray_length(distance)
         sample = {}
         for g, idx in picks.items():
             its = groups[g]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -60,6 +61,15 @@ class SceneItem:
         if len(self.positions) != len(self.normals):
             raise CanopyAOError(f"{self.name}: {len(self.positions)} positions but "
                                 f"{len(self.normals)} normals")
+
+
+def ray_length(distance) -> float:
+    """The bake's AO distance as a ray length: 0 (or None), the add-on's spelling of
+    'unlimited', is math.inf. Every model and tracer takes its cut-off from here. Cycles' World
+    distance 0 means something else (no occlusion at all: AO 1.0 everywhere) and never reaches
+    a bake: blender/gather.py's world_ao_distance refuses it."""
+    d = float(distance or 0.0)
+    return d if d > 0 else math.inf
 
 
 @dataclass

@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass
 
 from .ladder import DEFAULT_TAU, RUNGS
-from .native import CanopyAOError
+from .native import LIMITS, CanopyAOError
 
 
 @dataclass(frozen=True)
@@ -45,13 +45,16 @@ class Option:
     advanced: bool = False  # the panel's Advanced section
     unit: str = "NONE"  # Blender's unit ('LENGTH', 'TIME')
     subtype: str = "NONE"  # Blender's string subtype ('DIR_PATH')
+    positive_min: float | None = None  # a value above 0 must be at least this (0 keeps its meaning)
 
     @property
     def flag(self) -> str:
         return self.cli or "--" + self.name.replace("_", "-")
 
     def range_text(self) -> str:
-        """'in [1, 65536]', '> 0', '>= 0' or '' (no bound)."""
+        """'in [1, 65536]', '> 0', '>= 0', '0 or in [1e-09, 1e+10]' or '' (no bound)."""
+        if self.positive_min is not None:
+            return f"0 or in [{self.positive_min:g}, {self.max:g}]"
         if self.min is not None and self.max is not None:
             return (f"in {'(' if self.min_exclusive else '['}{self.min:g}, {self.max:g}"
                     f"{')' if self.max_exclusive else ']'}")
@@ -91,6 +94,8 @@ class Option:
             ok = number > self.min if self.min_exclusive else number >= self.min
         if ok and self.max is not None:
             ok = number < self.max if self.max_exclusive else number <= self.max
+        if ok and self.positive_min is not None:
+            ok = number == 0 or number >= self.positive_min
         if not ok:
             what = "an integer" if self.kind == "int" else "a finite number"
             hint = (f" (to {self.none_label.lower()}: --{self.name} auto on the command line, "
@@ -126,15 +131,18 @@ OPTIONS = (
     Option("method", "enum", "auto", "Method", "How the AO is computed (the method ladder)",
            items=_enum(RUNGS)),
     Option("tau", "float", None, "τ", "Optical depth of a canopy: AO at its centre is exp(-τ)",
-           min=0.0, min_exclusive=True, soft_max=20.0, number_default=DEFAULT_TAU,
+           min=0.0, min_exclusive=True, max=LIMITS["tau"], soft_max=20.0,
+           number_default=DEFAULT_TAU,
            none_prop="calibrate_tau", none_label="Calibrate τ",
            none_help="Calibrate the optical depth against ray-traced samples"),
     Option("distance", "float", 0.0, "AO Distance",
            "Ray length cut-off (as Cycles' world AO distance); 0 = unlimited. Rays, the "
            "density grid and calibration stop at it; the occluder laws (other trees, trunks, "
            "instanced forests) count only what lies within it; the in-shell models do not "
-           "shorten paths inside a crown", min=0.0, unit='LENGTH',
-           cli_default="the World's AO distance, as Cycles uses it; unlimited without a world"),
+           "shorten paths inside a crown", min=0.0, max=LIMITS["max_length"],
+           positive_min=LIMITS["min_length"], unit='LENGTH',
+           cli_default="the World's AO distance, as Cycles uses it (10 without a World; a "
+                       "World's 0, with which Cycles sees no AO, is refused)"),
     Option("samples", "int", 64, "Samples", "Rays per face corner for the ray-traced method, "
            "as Cycles' bake counts samples: the bake casts Cycles' rays (a vertex on k faces "
            "k times this many, a texel this many), spread evenly over the vertices",
