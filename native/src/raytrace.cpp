@@ -799,8 +799,22 @@ struct RayTracer::Impl {
     w[1] = std::clamp(w[1], 0.0f, 1.0f);
     w[2] = std::clamp(w[2], 0.0f, 1.0f - w[1]);
     w[0] = 1.0f - w[1] - w[2];
+    // A texel on its triangle's boundary (a conservative texel's closest point, on an edge
+    // or a vertex such as a UV sphere's pole, in 3D within rounding of it) starts where the
+    // faces meeting there stop rays at t = 0 whichever side of the edge the rounding put it:
+    // inside, Cycles' edge test does not offset it (at a UV sphere's pole 6 % of the rays
+    // stopped). Below Cycles' own barycentric floor (1e-5, as its bake clamps u and v) it
+    // moves towards the centroid by Cycles' bake reach, as a vertex's corner does
+    // (bake_offset_towards_center): inside, where only its own triangle is skipped.
+    const bool on_boundary = !(std::min(w[0], std::min(w[1], w[2])) >= 1e-5f);
+    if (on_boundary) {
+      const Vec3 to = (V[0] + V[1] + V[2]) / 3.0f - x;
+      const float len = length(to);
+      const float f = len > 0.0f ? std::min(1.0f, bake_reach(x) / len) : 0.0f;
+      for (float& wk : w) wk += (1.0f / 3.0f - wk) * f;
+    }
     *out = corner_at(tri, V, c / area2, w, &n);
-    out->start = x;  // the texel itself (the weights only shape the lift)
+    if (!on_boundary) out->start = x;  // the texel itself (the weights only shape the lift)
     return true;
   }
 

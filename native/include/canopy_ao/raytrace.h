@@ -70,7 +70,10 @@
 // corners cut the error to Cycles' 1024 samples at the Douglas fir's 4,372 vertices on one from
 // 0.129 to 0.038, and at its 1,791 tips (every face a residue one) from 0.121 to 0.042.
 // A texel (triangle_ids) on such a tracer starts at the texel itself with its own normal,
-// skips its triangle and gets the same terminator lift and ray offset. Checked against Cycles
+// skips its triangle and gets the same terminator lift and ray offset; a texel on its
+// triangle's boundary (a barycentric below 1e-5, Cycles' own floor: a conservative texel's
+// closest point, on an edge or a vertex such as a UV sphere's pole) first moves towards the
+// centroid by the bake reach, as a vertex's corner does, so no face meeting there stops it. Checked against Cycles
 // (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
 // 1024 samples): a vertex of a branch piece lying 25–90 µm from another piece's face, an
 // isolated square tube (1.0 where a start inside a face without the lift gives 0.85–0.89), a
