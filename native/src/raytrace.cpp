@@ -1106,6 +1106,10 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   if (std::isnan(options.offset) || std::isinf(options.offset)) {
     throw std::invalid_argument("offset must be finite (< 0 = automatic)");
   }
+  if (options.point_group < 1) {
+    throw std::invalid_argument("point_group must be at least 1, got " +
+                                std::to_string(options.point_group));
+  }
   for (std::size_t i = 0; options.point_samples && i < points.size; ++i) {
     if (options.point_samples[i] < 1) {
       std::ostringstream s;
@@ -1130,6 +1134,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   }
 
   const int samples = options.samples;
+  const std::size_t group = static_cast<std::size_t>(options.point_group);
   const bool automatic = options.offset < 0;
   const float offset = automatic ? m.auto_offset : options.offset;
   // Vertex receivers start at Cycles' bake point (raytrace.h, "Origins").
@@ -1218,24 +1223,31 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const int samples_here = options.point_samples ? options.point_samples[i] : samples;
       const int rays_here = static_cast<int>(
           vertex_ray_count(static_cast<std::int64_t>(k), samples_here, options.per_corner));
+      // A point of a group (RayTraceOptions::point_group; never a vertex) casts its share of
+      // the group's set of max(count, g) directions: rays slot, slot + g, slot + 2g, ...
+      const std::size_t g = ov < 0 ? group : 1;
+      const std::size_t slot = i % g;
+      const int set_rays = std::max(rays_here, static_cast<int>(g));
+      const int own_rays = static_cast<int>((set_rays - slot + g - 1) / g);
       const SampleSet* here = &set;
-      if (rays_here != samples && options.sampling == Sampling::kLattice) {
-        std::unique_ptr<SampleSet>& built = sets[rays_here];
-        if (!built) built = std::make_unique<SampleSet>(rays_here);
+      if (set_rays != samples && options.sampling == Sampling::kLattice) {
+        std::unique_ptr<SampleSet>& built = sets[set_rays];
+        if (!built) built = std::make_unique<SampleSet>(set_rays);
         here = built.get();
       }
-      if (xs.size() < static_cast<std::size_t>(rays_here)) {
-        xs.resize(rays_here);
-        ys.resize(rays_here);
-        zs.resize(rays_here);
+      if (xs.size() < static_cast<std::size_t>(set_rays)) {
+        xs.resize(set_rays);
+        ys.resize(set_rays);
+        zs.resize(set_rays);
       }
-      cast[local] = rays_here;
+      cast[local] = own_rays;
       // Keyed by the vertex id where there is one: the same rays in any split into calls.
-      const std::size_t key = ov >= 0 ? static_cast<std::size_t>(ov) : i;
-      point_directions(options.sampling, *here, key, options.seed, rays_here, xs.data(),
+      const std::size_t key = ov >= 0 ? static_cast<std::size_t>(ov) : i / g;
+      point_directions(options.sampling, *here, key, options.seed, set_rays, xs.data(),
                        ys.data(), zs.data());
-      for (int s = 0; s < rays_here; ++s) {
-        const float x = xs[s], y = ys[s], z = zs[s];
+      for (int s = 0; s < own_rays; ++s) {
+        const std::size_t r = slot + g * static_cast<std::size_t>(s);
+        const float x = xs[r], y = ys[r], z = zs[r];
         RTCRay& ray = rays[filled];
         Vec3 d, org = o;
         std::int32_t sk = own_skip;

@@ -77,8 +77,8 @@ class BakeJob:
         # (target, first, last receiver) per step; an empty target still gets its one step.
         self.blocking = blocking
         chunk = CHUNK * (BLOCKING_CHUNKS if blocking else 1)
-        self._chunks = [(t, a, min(a + chunk, t.count)) for t in self.targets
-                        for a in range(0, max(t.count, 1), chunk)]
+        self._chunks = [(t, a, min(a + t.chunk(chunk), t.count)) for t in self.targets
+                        for a in range(0, max(t.count, 1), t.chunk(chunk))]
         self._next = 0
         self._lap("receivers", t0)
         t0 = time.perf_counter()
@@ -152,7 +152,7 @@ class BakeJob:
                 t.ao[a:b] = self._bent_step(t, a, b)
             else:
                 t.ao[a:b] = core.evaluate_receivers(
-                    self.plan, t.item, t.positions[a:b], t.normals[a:b],
+                    self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
                     vertices=slice(a, b) if t.kind == "vertex" else None,
                     triangles=t.triangles[a:b] if t.triangles is not None else None)
                 if bent:
@@ -167,6 +167,7 @@ class BakeJob:
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
+        t.finish()
         it = t.item
         r = core.ItemResult(it.name, it.role, it.tree, self.plan.method, t.ao, t.seconds,
                             it.tree_source, it.tree_why)

@@ -64,6 +64,8 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
+            col.prop(s, "texel_aa")
+            col.prop(s, "margin")
             col.prop(s, "image_dir")
             col.prop(s, "udim")
             col.prop(s, "atlas")
@@ -107,7 +109,7 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
+        "texel_aa", "margin", "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
         "bent_normals", "bent_normals_name",
         "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples",
         "live"}

@@ -23,10 +23,19 @@ class Target:
         self.frames = None  # (tangents, signs) per receiver for tangent-space bent normals
         self.seconds = 0.0
         self.stats = {}
+        self.group = 1  # consecutive receivers per result (a texel's sub-samples; finish())
 
     @property
     def count(self):
         return len(self.positions)
+
+    def chunk(self, n):
+        """Receivers per chunk near n: whole groups, so no chunk splits a texel's sub-samples
+        (their rays are dealt by row within the call)."""
+        return max(self.group, n - n % self.group)
+
+    def finish(self):
+        """Called once every receiver is evaluated, before the result is reported."""
 
     def write(self, txn, opts):
         raise NotImplementedError
@@ -104,21 +113,45 @@ class TexelTarget(Target):
                                 "tile; turn off UDIM Tiles and Atlas, or bake them per vertex "
                                 "(nothing was changed)")
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
-                                     opts["resolution"], udim=opts["udim"])
-        super().__init__(item, obj, self.rx.positions, self.rx.normals)
+                                     opts["resolution"], opts["margin"], opts["udim"],
+                                     opts["texel_aa"])
+        # Anti-aliased: the receivers are the texels' sub-samples, each casting its share of
+        # a texel's rays, averaged back to texels by finish() (texel_io._subsamples).
+        pos, nrm, tris = self.rx.sub or (self.rx.positions, self.rx.normals,
+                                         self.rx.triangles)
+        super().__init__(item, obj, pos, nrm)
+        self.group = self.rx.aa ** 2
         # The raster's loop triangles are the item's own when the counts agree (the same
         # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
-        tris = self.rx.triangles
         if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
             self.triangles = tris
         if opts["bent_normals"] == "TANGENT":
-            self.frames = bent_io.texel_frames(obj, depsgraph, self.rx)
+            tangents, signs = bent_io.texel_frames(obj, depsgraph, self.rx)
+            self.frames = (np.repeat(tangents, self.group, axis=0),
+                           np.repeat(signs, self.group, axis=0))
         if opts["channel"] != "RGBA":
             self.pack = bpy.data.images.get(opts["pack_image"])
             if self.pack is None:
                 raise CanopyAOError(f"Channel {opts['channel']} per texel packs into an image: "
                                     f"no image named '{opts['pack_image']}'; set Pack Image "
                                     "(nothing was changed)")
+
+    def finish(self):
+        """Every sub-sample evaluated: each texel's AO (and thickness, bent normal) is the mean
+        of its sub-samples', and the receivers are the texels again."""
+        k = self.group
+        if k == 1 or len(self.ao) == len(self.rx.pixels):
+            return
+        self.ao = self.ao.reshape(-1, k).mean(axis=1, dtype=np.float64).astype(np.float32)
+        if self.thickness is not None:
+            self.thickness = self.thickness.reshape(-1, k).mean(axis=1).astype(np.float32)
+        if self.bent is not None:
+            b = self.bent.reshape(-1, k, 3).mean(axis=1)
+            length = np.linalg.norm(b, axis=1, keepdims=True)
+            self.bent = np.where(length > 0, b / np.maximum(length, 1e-30),
+                                 self.rx.normals).astype(np.float32)
+        self.positions, self.normals = self.rx.positions, self.rx.normals
+        self.triangles = None
 
     def write(self, txn, opts):
         if opts["channel"] != "RGBA":

@@ -114,12 +114,41 @@ class TexelReceivers:
     triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
     tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
     uvs: np.ndarray | None = None  # float32 (3M, 2): the mesh's corner UVs, as gathered
+    aa: int = 1  # anti-aliasing: aa × aa sub-samples per texel ...
+    # ... their points, texel-major (texel k's are rows k·aa² .. (k+1)·aa² − 1): float32
+    # (T·aa², 3) positions and normals, int32 triangles; None when aa is 1 (the centres).
+    sub: tuple | None = None
 
 
-def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False):
+def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, tri_map):
+    """The aa × aa sub-sample points of each texel in pixels (ascending), texel-major: pass
+    (a, b) rasterises the UVs shifted by minus ((a + ½)/aa − ½, (b + ½)/aa − ½) texels, so its
+    texel centres are the sub-sample points of the unshifted image; a sub-sample lies on
+    whichever triangle covers it there (across an edge: the neighbour), or, off the island,
+    on the nearest one (conservative coverage). A texel a pass does not reach keeps its own
+    point for that sub-sample. tri_map: the pass's triangle ids to the mesh's (or None)."""
+    k = aa * aa
+    sp = np.repeat(positions, k, axis=0).reshape(-1, k, 3)
+    sn = np.repeat(normals, k, axis=0).reshape(-1, k, 3)
+    st = np.repeat(triangles, k).reshape(-1, k)
+    for b in range(aa):
+        for a in range(aa):
+            shift = np.float32([((a + 0.5) / aa - 0.5) / res, ((b + 0.5) / aa - 0.5) / res])
+            px, tp, tn, _s, tt = rasterize(np.ascontiguousarray(uvs - shift), pos, nrm, res, res)
+            if tri_map is not None:
+                tt = tri_map[tt]
+            at = np.minimum(np.searchsorted(px, pixels), max(len(px) - 1, 0))
+            hit = (px[at] == pixels) if len(px) else np.zeros(len(pixels), bool)
+            j, src = b * aa + a, at[hit]
+            sp[hit, j], sn[hit, j], st[hit, j] = tp[src], tn[src], tt[src]
+    return sp.reshape(-1, 3), sn.reshape(-1, 3), st.reshape(-1)
+
+
+def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False, aa=1):
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
-    UVs use, tile by tile, tiles_io.split_tiles). Raises CanopyAOError before reading anything
-    when obj is not a mesh, has no (such) UV map, or the sizes are wrong."""
+    UVs use, tile by tile, tiles_io.split_tiles), with aa × aa sub-samples each when aa > 1
+    (_subsamples). Raises CanopyAOError before reading anything when obj is not a mesh, has no
+    (such) UV map, or the sizes are wrong."""
     if obj.type != "MESH":
         raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
                             "texel")
@@ -130,6 +159,10 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
                             f"{MAX_RESOLUTION} texels")
     if margin < 0:
         raise CanopyAOError(f"Margin must be >= 0 texels, not {margin}")
+    aa = int(aa)
+    if not 1 <= aa <= 8:
+        raise CanopyAOError(f"Anti-aliasing must be 1 to 8 (sub-samples per texel side), not "
+                            f"{aa}")
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
     from .tiles_io import split_tiles
     parts, outside = split_tiles(uvs) if udim else ([(1001, slice(None), (0, 0))], 0)
@@ -139,18 +172,23 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
                             "or bake without UDIM Tiles")
     got, tiles, stats = [], [], {}
     for number, rows, (du, dv) in parts:
-        tile_uvs = uvs[rows] - np.float32([du, dv]) if du or dv else uvs[rows]
-        px, tp, tn, st, tt = rasterize(np.ascontiguousarray(tile_uvs),
-                                       np.ascontiguousarray(pos[rows]),
-                                       np.ascontiguousarray(nrm[rows]), res, res)
+        tile_uvs = np.ascontiguousarray(uvs[rows] - np.float32([du, dv]) if du or dv
+                                        else uvs[rows])
+        tile_pos, tile_nrm = np.ascontiguousarray(pos[rows]), np.ascontiguousarray(nrm[rows])
+        px, tp, tn, st, tt = rasterize(tile_uvs, tile_pos, tile_nrm, res, res)
+        tri_map = None
         if not isinstance(rows, slice):  # the tile's triangle k is the mesh's rows[3k] // 3
-            tt = (rows[0::3] // 3).astype(np.int32)[tt]
-        got.append((px, tp, tn, tt))
+            tri_map = (rows[0::3] // 3).astype(np.int32)
+            tt = tri_map[tt]
+        sub = (_subsamples(tile_uvs, tile_pos, tile_nrm, res, aa, px, tp, tn, tt, tri_map)
+               if aa > 1 else ())
+        got.append((px, tp, tn, tt) + sub)
         start = tiles[-1][2] if tiles else 0
         tiles.append((number, start, start + len(px)))
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
-    pixels, tpos, tnrm, ttri = (np.concatenate([g[i] for g in got]) for i in range(4))
+    pixels, tpos, tnrm, ttri, *sub = (np.concatenate([g[i] for g in got])
+                                      for i in range(len(got[0])))
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
     if outside:
         stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
@@ -165,7 +203,8 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         stats["warnings"].append(f"Object '{obj.name}': no texel centre falls inside its UV "
                                  f"map '{uv_map}' at {res}×{res}; raise the resolution or "
                                  "check the UVs lie in the 0–1 square")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles, uvs)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles, uvs,
+                          aa, tuple(sub) if aa > 1 else None)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):

@@ -151,7 +151,7 @@ def _wants_regression(plan: Plan, items, settings) -> bool:
 
 @refusals_are_user_errors
 def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
-                       vertices=None, triangles=None) -> np.ndarray:
+                       vertices=None, triangles=None, group=1) -> np.ndarray:
     """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
     texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
     and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
@@ -161,7 +161,10 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the
     vertex's tree; without it (texels) each receiver takes the tree whose fitted crown is
     nearest (in the crown's own unit frame). ``triangles`` (int32 (N,), texels: the item's
-    triangle each lies on, -1 = unknown) lets the exact rung's rays skip only that one."""
+    triangle each lies on, -1 = unknown) lets the exact rung's rays skip only that one.
+    ``group``: receivers per texel, its anti-aliasing sub-samples, consecutive (a chunk never
+    splits them): the exact rung's and the hybrid's near rays deal a texel's Samples out over
+    them (lighting.ray_args)."""
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
@@ -169,13 +172,13 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     own = own_primitives(item, vertices, triangles)
     if item.tree_labels is None or len(item.tree_names) <= 1:
         ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
-                                      plan.taus(), own)
+                                      plan.taus(), own, group)
     else:
         labels = (item.tree_labels[vertices] if vertices is not None
                   else _nearest_crown(plan, item.tree_names, p))
         if plan.method in ladder.TAU_METHODS:  # the scene plan: one call, a tree per receiver
             ao = lighting.evaluate_points(plan, item.role, (item.tree_names, labels), item.name,
-                                          p, n, plan.method, plan.taus(), own)
+                                          p, n, plan.method, plan.taus(), own, group)
         else:
             ao = np.ones(len(p), np.float32)
             for k, tree in enumerate(item.tree_names):
@@ -184,7 +187,7 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
                     ao[sel] = lighting.evaluate_points(
                         plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
                         np.ascontiguousarray(n[sel]), plan.method, plan.taus(),
-                        {k: v[sel] for k, v in own.items()} if own else None)
+                        {k: v[sel] for k, v in own.items()} if own else None, group)
     if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     _zero_buried(plan, item, p, n, own, vertices, ao)

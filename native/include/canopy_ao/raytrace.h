@@ -187,6 +187,13 @@ struct RayTraceOptions {
   /// rays whatever its corners (per_corner false; docs/DESIGN.md, 'Rays against Cycles'
   /// samples').
   const std::int32_t* point_samples = nullptr;
+  /// Consecutive points that form one receiver (≥ 1): a texel's anti-aliasing sub-samples.
+  /// Point i (its row in the call) is slot i mod g of group i / g; its count is the group's:
+  /// one set of max(count, g) directions keyed by the group, dealt out to its points in turn
+  /// (the point casts rays slot, slot + g, slot + 2g, ...), so the texel casts its count in
+  /// all and the points' mean is one stratified estimate over its footprint. A point with a
+  /// vertex id keeps its own set. Calls must not split a group (the row index decides it).
+  int point_group = 1;
 };
 
 /// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no

@@ -1,0 +1,101 @@
+"""Texel anti-aliasing and margin (issue #35, item 2): each texel is the mean of N × N points
+over its footprint, a texel's Samples rays dealt out over them; the margin is an option whose
+default is Blender's bake margin."""
+import bpy
+import numpy as np
+import pytest
+
+import helpers_materials as H
+from canopy_ao.blender import properties
+from canopy_ao.blender.job import BakeJob, run_bake
+from canopy_ao.core.settings import OPTIONS
+
+
+def opts(tmp_path, **kw):
+    base = dict(properties.scene_options(bpy.context.scene), mode='TEXEL', method="raytrace",
+                distance=0.0, show_proxies=False, image_dir=str(tmp_path))
+    base.update(kw)
+    return base
+
+
+@pytest.fixture
+def ground_under_disk(tmp_path):
+    """The default plane (u = (x + 1) / 2, v = (y + 1) / 2) under a disk of leaves."""
+    H.empty_scene()
+    ground = H.add_plane(name="Ground")
+    bpy.ops.mesh.primitive_circle_add(vertices=24, radius=0.6, fill_type="NGON",
+                                      location=(0.3, 0, 0.4))
+    return H.leaves_over_ground(ground, bpy.context.object, tmp_path)
+
+
+def test_defaults_are_two_by_two_and_blenders_bake_margin():
+    o = {x.name: x for x in OPTIONS}
+    assert o["texel_aa"].default == 2 and o["texel_aa"].flag == "--anti-aliasing"
+    assert o["margin"].default == bpy.types.BakeSettings.bl_rna.properties["margin"].default
+    assert o["margin"].default == 16
+
+
+@pytest.mark.parametrize("aa", [1, 2, 3])
+def test_sub_samples_are_the_footprints_n_by_n_points(ground_under_disk, tmp_path, aa):
+    res = 8
+    job = BakeJob(bpy.context, ["Ground"], opts(tmp_path, resolution=res, texel_aa=aa))
+    (t,) = job.targets
+    px = t.rx.pixels
+    assert len(px) == res * res and t.count == res * res * aa * aa
+    # sub-sample (a, b) of texel (i, j) at uv ((i + (a + ½)/N) / R, (j + (b + ½)/N) / R)
+    k = np.arange(aa)
+    off = (k + 0.5) / aa
+    u = (px[:, None, None] % res + off[None, None, :]) / res
+    v = (px[:, None, None] // res + off[None, :, None]) / res
+    want = np.stack([np.broadcast_to(2 * u - 1, (len(px), aa, aa)),
+                     np.broadcast_to(2 * v - 1, (len(px), aa, aa))], axis=-1).reshape(-1, 2)
+    # within the raster's fixed point: UVs snap to 1/256 of a texel (2/R units here)
+    np.testing.assert_allclose(t.positions[:, :2], want, atol=2 / res / 512 + 1e-6)
+    assert np.all(t.chunk(1000) % (aa * aa) == 0)  # a chunk never splits a texel
+
+
+def test_a_texel_casts_its_samples_dealt_over_its_sub_samples(ground_under_disk, tmp_path):
+    res = 16
+    # 8 rays per texel, 2 per sub-sample: a texel's AO is a multiple of 1/8 (of 1/32 if
+    # every sub-sample cast all 8)
+    job, _rep = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=res, texel_aa=2,
+                                                       samples=8))
+    ao = job.targets[0].ao
+    assert len(ao) == res * res
+    np.testing.assert_allclose(ao * 8, np.round(ao * 8), atol=1e-5)
+    assert np.count_nonzero((ao > 0.05) & (ao < 0.95)) > 10  # the disk's shadow edge
+    again, _ = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=res, texel_aa=2,
+                                                      samples=8, overwrite=True))
+    assert np.array_equal(again.targets[0].ao, ao)  # deterministic
+
+
+def test_anti_aliasing_smooths_a_shadow_edge(ground_under_disk, tmp_path):
+    """At many rays the texel centre alone steps where the footprint mean grades: the mean of
+    the 2 x 2 bake over each 2 x 2 block of a 4 x 4 bake's centres is what it averages."""
+    res = 8
+    fine, _ = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=2 * res, texel_aa=1,
+                                                     samples=1024))
+    aa, _ = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=res, texel_aa=2,
+                                                   samples=1024, overwrite=True))
+    f = fine.targets[0].ao.reshape(2 * res, 2 * res)
+    blocks = f.reshape(res, 2, res, 2).mean(axis=(1, 3)).ravel()
+    # the same points (the fine image's centres are the sub-samples), other rays: equal within
+    # the rays' noise at 1024 (and 256 per sub-sample)
+    assert np.abs(aa.targets[0].ao - blocks).max() < 0.05
+
+
+def test_margin_option_dilates_that_many_texels(tmp_path):
+    H.empty_scene()
+    ground = H.add_plane(name="Ground")
+    ground.canopy_ao.role = 'GROUND'
+    uv = ground.data.uv_layers.active.data
+    buf = np.empty(len(uv) * 2, np.float32)
+    uv.foreach_get("uv", buf)
+    uv.foreach_set("uv", (0.25 + 0.5 * buf).astype(np.float32))  # the middle half of the image
+    ground.data.update()
+    res = 64
+    for margin, ring in ((0, 0), (3, 3), (16, 16)):
+        _j, rep = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=res, margin=margin,
+                                                         overwrite=True, method="sphere"))
+        side = 32 + 2 * ring  # the 32 x 32 island, grown by `ring` texels on each side
+        assert rep["objects"]["Ground"]["texel"]["margin_texels"] == side * side - 32 * 32
