@@ -16,6 +16,7 @@ import numpy as np
 
 from . import materials, mesh_io
 from .files_io import Output, check_outputs, image_path, write_own_file
+from ..core import texel_budget
 # Kept under their old names for code that writes image files of its own through texel_io.
 from ..core.native import CanopyAOError, _core
 
@@ -148,7 +149,8 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
     UVs use, tile by tile, tiles_io.split_tiles), with aa × aa sub-samples each when aa > 1
     (_subsamples). Raises CanopyAOError before reading anything when obj is not a mesh, has no
-    (such) UV map, or the sizes are wrong."""
+    (such) UV map, or the sizes are wrong, and before rasterising when the bake would not fit
+    in the available memory (texel_budget.check_memory)."""
     if obj.type != "MESH":
         raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
                             "texel")
@@ -170,6 +172,8 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         raise CanopyAOError(f"Object '{obj.name}': no triangle of UV map '{uv_map}' lies in a "
                             "UDIM tile (1001–1999: u in [0, 10), v >= 0); move its UVs there "
                             "or bake without UDIM Tiles")
+    texel_budget.check_memory(obj.name, np.concatenate([uvs[r] for _n, r, _d in parts]), res,
+                              aa, len(parts))
     got, tiles, stats = [], [], {}
     for number, rows, (du, dv) in parts:
         tile_uvs = np.ascontiguousarray(uvs[rows] - np.float32([du, dv]) if du or dv
