@@ -4,12 +4,14 @@
         [--resolution 64] [--samples 16,64] [--aa 1,2,4] [--reference 4096]
 
 A ground (4 × 4 m, UV-mapped) under a small tree (a trunk and a crown of 600 leaf quads) with
-a rock (a 0.5 m cube sunk 5 cm, turned off the texel grid) beside it, roles set explicitly. The reference is Cycles' AO baked into the ground's UV layout at
-``--reference`` samples (seed 1, so no other bake shares its noise); Cycles' texel bake spreads
-its samples over each texel's footprint, so the reference is the footprint's mean. Printed per
-sample count S: the error (MAE over the texels Cycles covers) of Cycles at S samples (seed 0)
-and of ours by rays (``--method raytrace``) at S samples with each anti-aliasing N (a texel's
-S rays dealt over its N × N sub-samples: equal rays). The AO distance is 2 m. The add-on is
+a rock (a 0.5 m cube sunk 5 cm, turned off the texel grid) beside it, roles set explicitly. The
+reference is Cycles' AO baked into the ground's UV layout at ``--reference`` samples (seed 1,
+so no other bake shares its noise); Cycles' texel bake spreads its samples over each texel's
+footprint, so the reference is the footprint's mean. Printed per sample count S: the error
+(MAE over the texels Cycles covers, and over the edge texels where the reference steps) of
+Cycles at S samples (seed 0) and of ours by rays (``--method raytrace``) at S samples with
+each anti-aliasing N (a texel's S rays dealt over its N × N sub-samples: equal rays when N²
+divides S). The AO distance is 2 m. ~40 s at the defaults. The add-on is
 found through BLENDER_USER_SCRIPTS (addons/canopy_ao) or in this repository's addon/ folder.
 Exits non-zero (message on stderr) on failure.
 """
@@ -106,15 +108,17 @@ def _mae(got, ref, mask, edge):
     return f"{err[mask].mean():.4f} / {err[edge].mean():.4f}"
 
 
-def ours(ground, res, samples, aa, image_dir):
-    """Our texel bake of the ground by rays: float32 (res, res)."""
+def ours(res, samples, aa, image_dir):
+    """Our texel bake of Ground by rays at `samples` rays per texel, aa × aa sub-samples: its
+    texel target (rx.pixels, ao)."""
+    import bpy
     from canopy_ao.blender import job, properties
-    opts = dict(properties.scene_options(__import__("bpy").context.scene), mode='TEXEL',
-                method="raytrace", samples=samples, texel_aa=aa, resolution=res, margin=0,
-                distance=DISTANCE, use_world_distance=False, show_proxies=False,
-                image_dir=image_dir, overwrite=True)
-    _j, rep = job.run_bake(__import__("bpy").context, ["Ground"], opts)
-    return rep, _j.targets[0]
+    opts = dict(properties.scene_options(bpy.context.scene), mode='TEXEL', method="raytrace",
+                samples=samples, texel_aa=aa, resolution=res, margin=0, distance=DISTANCE,
+                use_world_distance=False, show_proxies=False, image_dir=image_dir,
+                overwrite=True)
+    done, _rep = job.run_bake(bpy.context, ["Ground"], opts)
+    return done.targets[0]
 
 
 def main(argv):
@@ -143,7 +147,7 @@ def main(argv):
                                                     s, seed=0)
             line = [f"  S = {s:4d}: Cycles {_mae(cyc, ref, mask, edge)}"]
             for n in (int(x) for x in a.aa.split(",")):
-                _rep, t = ours(ground, res, s, n, tmp)
+                t = ours(res, s, n, tmp)
                 img = np.zeros(res * res, np.float32)
                 img[t.rx.pixels] = t.ao
                 line.append(f"ours AA {n}x{n} {_mae(img.reshape(res, res), ref, mask, edge)}")

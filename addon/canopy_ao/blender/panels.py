@@ -109,7 +109,8 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "texel_aa", "margin", "image_dir", "udim", "atlas", "channel", "pack_image", "thickness", "thickness_name",
+        "texel_aa", "margin", "image_dir", "udim", "atlas", "channel", "pack_image", "thickness",
+        "thickness_name",
         "bent_normals", "bent_normals_name",
         "show_proxies", "wire_material", "add_aov", "aov_name", "check_cycles", "cycles_samples",
         "live"}
