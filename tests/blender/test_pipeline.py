@@ -47,8 +47,8 @@ def test_texel_bake_evaluates_texels_in_chunks_and_checks_them_with_cycles(
     assert job.steps == 1 + -(-receivers // 1000)  # prepare, then one step per chunk
     job.prepare()
     # Auto's cost model counts what the bake evaluates: Ground's texels' sub-samples, not the
-    # leaves' vertices.
-    assert job.plan.targets == {"Ground": ("texel", receivers)}
+    # leaves' vertices; four to a texel (whose rays they share: cost.corners).
+    assert job.plan.targets == {"Ground": ("texel", receivers, 4)}
     assert cost.receiver_count(job.plan, job.items) == receivers
     lines = []
     while (line := job.step()) is not None:

@@ -123,7 +123,7 @@ class BakeJob:
             protos = self.prototypes.bake(self.settings, skip=skip)
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
-        targets = {t.item.name: (t.kind, t.count) for t in self.targets}
+        targets = {t.item.name: (t.kind, t.count, t.group) for t in self.targets}
         self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:

@@ -25,9 +25,10 @@ from .settings import BakeSettings, validate
 def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
 
-    targets: {item name: ("vertex" | "texel", count)}, the receivers the bake will evaluate
-    (an item's vertices, or the texels of its image: one face corner each); None = every
-    receiver item at its vertices. Auto's cost model counts them (cost.py).
+    targets: {item name: ("vertex" | "texel", count[, group])}, the receivers the bake will
+    evaluate (an item's vertices, or the texels of its image: one face corner each, `group`
+    receivers a texel, its anti-aliasing sub-samples, sharing its rays); None = every receiver
+    item at its vertices. Auto's cost model counts them (cost.py).
 
     prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every
     receiver. Given here rather than attached afterwards, the ray tracer traces their meshes
@@ -124,13 +125,15 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
 
 
 def _targets(targets) -> dict:
-    """prepare's targets checked: {name: (kind, count ≥ 0)}."""
+    """prepare's targets checked: {name: (kind, count ≥ 0, group ≥ 1)}, group the receivers
+    per texel (its anti-aliasing sub-samples; 1 when not given)."""
     out = {}
-    for name, (kind, count) in (targets or {}).items():
-        if kind not in ("vertex", "texel") or int(count) < 0:
+    for name, (kind, count, *group) in (targets or {}).items():
+        group = int(group[0]) if group else 1
+        if kind not in ("vertex", "texel") or int(count) < 0 or group < 1:
             raise CanopyAOError(f"target {name!r}: {kind!r} × {count} is not a vertex or "
                                 "texel count")
-        out[str(name)] = (kind, int(count))
+        out[str(name)] = (kind, int(count), group)
     return out
 
 

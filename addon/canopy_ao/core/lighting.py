@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from . import ray_budget
+from . import ray_budget, texel_budget
 from .native import CanopyAOError, _core
 from .scene import Plan
 
@@ -223,10 +223,10 @@ def ray_args(plan: Plan, group=1) -> dict:
     anti-aliasing sub-samples): one set of Samples per group, rounded up to a multiple of the
     group, dealt out to its points in turn (point_group). Every point then casts as many rays,
     so the plain mean of its points' AO is the texel's one stratified estimate."""
-    s = int(plan.settings.samples)
     if group <= 1:
-        return {"samples": s}
-    return {"samples": -(-s // group) * int(group), "point_group": int(group)}
+        return {"samples": int(plan.settings.samples)}
+    return {"samples": texel_budget.texel_rays(plan.settings.samples, group),
+            "point_group": int(group)}
 
 
 def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra):

@@ -1,5 +1,6 @@
-"""What a texel bake needs in memory (no bpy), checked against what the machine has before any
-texel is rasterised (docs/DESIGN.md, 'Texel anti-aliasing and memory')."""
+"""What a texel bake spends (no bpy): the rays its anti-aliasing sub-samples cast, and the
+memory it needs, checked against what the machine has before any texel is rasterised
+(docs/DESIGN.md, 'Texel anti-aliasing and memory')."""
 
 from __future__ import annotations
 
@@ -21,6 +22,13 @@ SUB_BYTES = 72
 # Bytes per image pixel: the splat's float image and mask (5), the EXR writer's copy (4) and
 # Blender's RGBA float image it loads (16).
 PIXEL_BYTES = 5 + 4 + 16
+
+
+def texel_rays(samples: int, group: int) -> int:
+    """Rays a texel of `group` anti-aliasing sub-samples casts at Samples: Samples rounded up to
+    a multiple of the group, so each sub-sample casts as many (RayTraceOptions::point_group)."""
+    g = max(1, int(group))
+    return -(-int(samples) // g) * g
 
 
 def covered_texels(uvs, resolution: int, tiles: int = 1) -> int:
