@@ -118,3 +118,35 @@ def test_rays_per_texel_agree_with_cycles_texel_bake_as_it_agrees_with_itself(
     b = cycles_check.bake_cycles_texel_ao(bpy.context, ground, None, res, 1.0e6, s, seed=2)
     itself = float(np.abs(a - b)[mask].mean())
     assert 0.0 < ours <= 1.15 * itself, (ours, itself)
+
+
+def test_sub_samples_never_cross_a_uv_seam_to_another_surface(tmp_path):
+    """Two quads of one mesh whose UV islands touch at u = 0.51 but lie apart in 3D: one under
+    a low roof (dark), one in the open. A sub-sample of an open texel at the seam falls into
+    the dark island's UVs; it must keep to its own surface (as Cycles' jitter does), so every
+    texel of the open island reads open sky."""
+    H.empty_scene()
+    verts = [(-3, -1, 0), (-1, -1, 0), (-1, 1, 0), (-3, 1, 0),   # under the roof: u < 0.5
+             (1, -1, 0), (3, -1, 0), (3, 1, 0), (1, 1, 0)]       # open: u > 0.5
+    me = bpy.data.meshes.new("Two")
+    me.from_pydata(verts, [], [(0, 1, 2, 3), (4, 5, 6, 7)])
+    uv = me.uv_layers.new(name="UVMap")
+    seam = 0.51  # inside texel column 16 of 32 (u 0.5 to 0.53125), left of its centre
+    corner_uv = {0: (0, 0), 1: (seam, 0), 2: (seam, 1), 3: (0, 1),
+                 4: (seam, 0), 5: (1, 0), 6: (1, 1), 7: (seam, 1)}
+    for loop in me.loops:
+        uv.data[loop.index].uv = corner_uv[loop.vertex_index]
+    two = bpy.data.objects.new("Two", me)
+    bpy.context.scene.collection.objects.link(two)
+    bpy.ops.mesh.primitive_plane_add(size=3.0, location=(-2, 0, 0.05))  # the roof
+    roof = bpy.context.object
+    two.canopy_ao.role, roof.canopy_ao.role = 'GROUND', 'TRUNK'
+    res = 32
+    job, _rep = run_bake(bpy.context, ["Two"], opts(tmp_path, resolution=res, texel_aa=2,
+                                                    samples=16))
+    t = job.targets[0]
+    u = (t.rx.pixels % res + 0.5) / res
+    assert np.all(t.ao[u < 0.45] < 0.5)  # the roofed island is dark
+    open_side = t.ao[u > 0.51]  # column 16's centre (0.5156) is the open island's
+    assert len(open_side) >= res * res // 2 - res
+    assert open_side.min() >= 0.99, np.sort(open_side)[:8]

@@ -121,13 +121,29 @@ class TexelReceivers:
     sub: tuple | None = None
 
 
-def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, tri_map):
+def _texel_reach(uvs, pos, tris, res):
+    """float64 (T,): how far (world) a sub-sample may lie from its texel's point: two texels'
+    width on the texel's own triangle (√(3D area / UV area) / res). A neighbour across an edge
+    stays within it, another island across a UV seam (near in UV, apart in 3D) does not."""
+    u = uvs.reshape(-1, 3, 2).astype(np.float64)
+    p = pos.reshape(-1, 3, 3).astype(np.float64)
+    e, f = u[:, 1] - u[:, 0], u[:, 2] - u[:, 0]
+    uv_area = np.abs(e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0])
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(uv_area > 0, np.sqrt(area / uv_area), np.inf)
+    return 2.0 * scale[tris] / res
+
+
+def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, tri_map, reach):
     """The aa × aa sub-sample points of each texel in pixels (ascending), texel-major: pass
     (a, b) rasterises the UVs shifted by minus ((a + ½)/aa − ½, (b + ½)/aa − ½) texels, so its
     texel centres are the sub-sample points of the unshifted image; a sub-sample lies on
     whichever triangle covers it there (across an edge: the neighbour), or, off the island,
-    on the nearest one (conservative coverage). A texel a pass does not reach keeps its own
-    point for that sub-sample. tri_map: the pass's triangle ids to the mesh's (or None)."""
+    on the nearest one (conservative coverage). One that a pass does not reach, or that lies
+    farther than reach (_texel_reach: across a UV seam on another surface) from its texel's
+    point, keeps the texel's own point. tri_map: the pass's triangle ids to the mesh's (or
+    None)."""
     k = aa * aa
     sp = np.repeat(positions, k, axis=0).reshape(-1, k, 3)
     sn = np.repeat(normals, k, axis=0).reshape(-1, k, 3)
@@ -140,6 +156,7 @@ def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, t
                 tt = tri_map[tt]
             at = np.minimum(np.searchsorted(px, pixels), max(len(px) - 1, 0))
             hit = (px[at] == pixels) if len(px) else np.zeros(len(pixels), bool)
+            hit[hit] = np.linalg.norm(tp[at[hit]] - positions[hit], axis=1) <= reach[hit]
             j, src = b * aa + a, at[hit]
             sp[hit, j], sn[hit, j], st[hit, j] = tp[src], tn[src], tt[src]
     return sp.reshape(-1, 3), sn.reshape(-1, 3), st.reshape(-1)
@@ -180,12 +197,13 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
                                         else uvs[rows])
         tile_pos, tile_nrm = np.ascontiguousarray(pos[rows]), np.ascontiguousarray(nrm[rows])
         px, tp, tn, st, tt = rasterize(tile_uvs, tile_pos, tile_nrm, res, res)
+        reach = _texel_reach(tile_uvs, tile_pos, tt, res) if aa > 1 else None
         tri_map = None
         if not isinstance(rows, slice):  # the tile's triangle k is the mesh's rows[3k] // 3
             tri_map = (rows[0::3] // 3).astype(np.int32)
             tt = tri_map[tt]
-        sub = (_subsamples(tile_uvs, tile_pos, tile_nrm, res, aa, px, tp, tn, tt, tri_map)
-               if aa > 1 else ())
+        sub = (_subsamples(tile_uvs, tile_pos, tile_nrm, res, aa, px, tp, tn, tt, tri_map,
+                           reach) if aa > 1 else ())
         got.append((px, tp, tn, tt) + sub)
         start = tiles[-1][2] if tiles else 0
         tiles.append((number, start, start + len(px)))
