@@ -42,9 +42,10 @@ def test_sub_samples_are_the_footprints_n_by_n_points(ground_under_disk, tmp_pat
     (t,) = job.targets
     px = t.rx.pixels
     assert len(px) == res * res and t.count == res * res * aa * aa
-    # sub-sample (a, b) of texel (i, j) at uv ((i + (a + ½)/N) / R, (j + (b + ½)/N) / R)
+    # sub-sample (a, b) of texel (i, j) at uv ((i + ½ + ½((a + ½)/N − ½)) / R, ...): the
+    # centres of an N x N grid over the central half of the texel, Cycles' bake footprint
     k = np.arange(aa)
-    off = (k + 0.5) / aa
+    off = 0.5 + 0.5 * ((k + 0.5) / aa - 0.5)
     u = (px[:, None, None] % res + off[None, None, :]) / res
     v = (px[:, None, None] // res + off[None, :, None]) / res
     want = np.stack([np.broadcast_to(2 * u - 1, (len(px), aa, aa)),
@@ -69,19 +70,19 @@ def test_a_texel_casts_its_samples_dealt_over_its_sub_samples(ground_under_disk,
     assert np.array_equal(again.targets[0].ao, ao)  # deterministic
 
 
-def test_anti_aliasing_smooths_a_shadow_edge(ground_under_disk, tmp_path):
-    """At many rays the texel centre alone steps where the footprint mean grades: the mean of
-    the 2 x 2 bake over each 2 x 2 block of a 4 x 4 bake's centres is what it averages."""
+def test_anti_aliasing_is_the_mean_of_its_sub_samples(ground_under_disk, tmp_path):
+    """A 2 x 2 texel at R px is the mean of the texel centres at 4R px that are its
+    sub-samples (the middle 2 x 2 of each 4 x 4 block: offsets ±1/8 texel)."""
     res = 8
-    fine, _ = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=2 * res, texel_aa=1,
+    fine, _ = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=4 * res, texel_aa=1,
                                                      samples=1024))
     aa, _ = run_bake(bpy.context, ["Ground"], opts(tmp_path, resolution=res, texel_aa=2,
                                                    samples=1024, overwrite=True))
-    f = fine.targets[0].ao.reshape(2 * res, 2 * res)
-    blocks = f.reshape(res, 2, res, 2).mean(axis=(1, 3)).ravel()
-    # the same points (the fine image's centres are the sub-samples), other rays: equal within
-    # the rays' noise at 1024 (and 256 per sub-sample)
-    assert np.abs(aa.targets[0].ao - blocks).max() < 0.05
+    f = fine.targets[0].ao.reshape(res, 4, res, 4)
+    means = f[:, 1:3, :, 1:3].mean(axis=(1, 3)).ravel()
+    # the same points, other rays: equal within the rays' noise at 1024 (256 per sub-sample)
+    diff = np.abs(aa.targets[0].ao - means)
+    assert diff.max() < 0.05 and np.ptp(means) > 0.3  # across the disk's shadow
 
 
 def test_margin_option_dilates_that_many_texels(tmp_path):
@@ -121,7 +122,7 @@ def test_rays_per_texel_agree_with_cycles_texel_bake_as_it_agrees_with_itself(
 
 
 def test_sub_samples_never_cross_a_uv_seam_to_another_surface(tmp_path):
-    """Two quads of one mesh whose UV islands touch at u = 0.51 but lie apart in 3D: one under
+    """Two quads of one mesh whose UV islands touch at u = 0.514 but lie apart in 3D: one under
     a low roof (dark), one in the open. A sub-sample of an open texel at the seam falls into
     the dark island's UVs; it must keep to its own surface (as Cycles' jitter does), so every
     texel of the open island reads open sky."""
@@ -131,7 +132,8 @@ def test_sub_samples_never_cross_a_uv_seam_to_another_surface(tmp_path):
     me = bpy.data.meshes.new("Two")
     me.from_pydata(verts, [], [(0, 1, 2, 3), (4, 5, 6, 7)])
     uv = me.uv_layers.new(name="UVMap")
-    seam = 0.51  # inside texel column 16 of 32 (u 0.5 to 0.53125), left of its centre
+    seam = 0.514  # in texel column 16 of 32 (centre 0.5156), between it and its left
+    # sub-samples (0.5117: a quarter of the footprint's half-width to the left)
     corner_uv = {0: (0, 0), 1: (seam, 0), 2: (seam, 1), 3: (0, 1),
                  4: (seam, 0), 5: (1, 0), 6: (1, 1), 7: (seam, 1)}
     for loop in me.loops:
@@ -147,6 +149,6 @@ def test_sub_samples_never_cross_a_uv_seam_to_another_surface(tmp_path):
     t = job.targets[0]
     u = (t.rx.pixels % res + 0.5) / res
     assert np.all(t.ao[u < 0.45] < 0.5)  # the roofed island is dark
-    open_side = t.ao[u > 0.51]  # column 16's centre (0.5156) is the open island's
+    open_side = t.ao[u > seam]  # column 16's centre is the open island's
     assert len(open_side) >= res * res // 2 - res
     assert open_side.min() >= 0.99, np.sort(open_side)[:8]

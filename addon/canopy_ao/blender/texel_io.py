@@ -123,7 +123,7 @@ class TexelReceivers:
 
 def _texel_reach(uvs, pos, tris, res):
     """float64 (T,): how far (world) a sub-sample may lie from its texel's point: two texels'
-    width on the texel's own triangle (√(3D area / UV area) / res). A neighbour across an edge
+    width on the texel's own triangle (√(3D area / UV area) / res): a neighbour across an edge
     stays within it, another island across a UV seam (near in UV, apart in 3D) does not."""
     u = uvs.reshape(-1, 3, 2).astype(np.float64)
     p = pos.reshape(-1, 3, 3).astype(np.float64)
@@ -135,22 +135,29 @@ def _texel_reach(uvs, pos, tris, res):
     return 2.0 * scale[tris] / res
 
 
+# A texel's footprint's width, in texels: Cycles jitters its bake samples over the central half
+# of each texel (Blender's bake_differentials halves the UV derivative, "A = 0.5f / A"), so
+# ours averages that box (bench/texel_aa.py: edge texels 0.030 → 0.017 against a whole texel).
+FOOTPRINT = 0.5
+
+
 def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, tri_map, reach):
     """The aa × aa sub-sample points of each texel in pixels (ascending), texel-major: pass
-    (a, b) rasterises the UVs shifted by minus ((a + ½)/aa − ½, (b + ½)/aa − ½) texels, so its
-    texel centres are the sub-sample points of the unshifted image; a sub-sample lies on
-    whichever triangle covers it there (across an edge: the neighbour), or, off the island,
-    on the nearest one (conservative coverage). One that a pass does not reach, or that lies
-    farther than reach (_texel_reach: across a UV seam on another surface) from its texel's
-    point, keeps the texel's own point. tri_map: the pass's triangle ids to the mesh's (or
-    None)."""
+    (a, b) rasterises the UVs shifted by minus FOOTPRINT × ((a + ½)/aa − ½, (b + ½)/aa − ½)
+    texels, so its texel centres are the sub-sample points of the unshifted image (the centres
+    of an aa × aa grid over the footprint's box); a sub-sample lies on whichever triangle
+    covers it there (across an edge: the neighbour), or, off the island, on the nearest one
+    (conservative coverage). One that a pass does not reach, or that lies farther than reach
+    (_texel_reach: across a UV seam on another surface) from its texel's point, keeps the
+    texel's own point. tri_map: the pass's triangle ids to the mesh's (or None)."""
     k = aa * aa
     sp = np.repeat(positions, k, axis=0).reshape(-1, k, 3)
     sn = np.repeat(normals, k, axis=0).reshape(-1, k, 3)
     st = np.repeat(triangles, k).reshape(-1, k)
     for b in range(aa):
         for a in range(aa):
-            shift = np.float32([((a + 0.5) / aa - 0.5) / res, ((b + 0.5) / aa - 0.5) / res])
+            shift = np.float32([((a + 0.5) / aa - 0.5) * FOOTPRINT / res,
+                                ((b + 0.5) / aa - 0.5) * FOOTPRINT / res])
             px, tp, tn, _s, tt = rasterize(np.ascontiguousarray(uvs - shift), pos, nrm, res, res)
             if tri_map is not None:
                 tt = tri_map[tt]
