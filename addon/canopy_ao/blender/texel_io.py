@@ -115,18 +115,15 @@ class TexelReceivers:
     triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
     tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
     uvs: np.ndarray | None = None  # float32 (3M, 2): the mesh's corner UVs, as gathered
-    aa: int = 1  # anti-aliasing: aa × aa sub-samples per texel ...
-    # ... their points, texel-major (texel k's are rows k·aa² .. (k+1)·aa² − 1): float32
-    # (T·aa², 3) positions and normals, int32 triangles; None when aa is 1 (the centres).
-    sub: tuple | None = None
+    aa: int = 1  # anti-aliasing: aa × aa sub-samples per texel, texel-major (texel k's rows
+    sub: tuple | None = None  # k·aa² ..): positions, normals, triangles; None when aa is 1
 
 
 def _texel_reach(uvs, pos, tris, res):
     """float64 (T,): how far (world) a sub-sample may lie from its texel's point: two texels'
     width on the texel's own triangle (√(3D area / UV area) / res): a neighbour across an edge
     stays within it, another island across a UV seam (near in UV, apart in 3D) does not."""
-    u = uvs.reshape(-1, 3, 2).astype(np.float64)
-    p = pos.reshape(-1, 3, 3).astype(np.float64)
+    u, p = uvs.reshape(-1, 3, 2).astype(np.float64), pos.reshape(-1, 3, 3).astype(np.float64)
     e, f = u[:, 1] - u[:, 0], u[:, 2] - u[:, 0]
     uv_area = np.abs(e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0])
     area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
@@ -150,23 +147,26 @@ def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, t
     (conservative coverage). One that a pass does not reach, or that lies farther than reach
     (_texel_reach: across a UV seam on another surface) from its texel's point, keeps the
     texel's own point. tri_map: the pass's triangle ids to the mesh's (or None)."""
-    k = aa * aa
-    sp = np.repeat(positions, k, axis=0).reshape(-1, k, 3)
-    sn = np.repeat(normals, k, axis=0).reshape(-1, k, 3)
-    st = np.repeat(triangles, k).reshape(-1, k)
+    cols = ([], [], [])  # per sub-sample: positions, normals, triangles of every texel
+    off = ((np.arange(aa) + 0.5) / aa - 0.5) * (FOOTPRINT / res)
     for b in range(aa):
         for a in range(aa):
-            shift = np.float32([((a + 0.5) / aa - 0.5) * FOOTPRINT / res,
-                                ((b + 0.5) / aa - 0.5) * FOOTPRINT / res])
-            px, tp, tn, _s, tt = rasterize(np.ascontiguousarray(uvs - shift), pos, nrm, res, res)
-            if tri_map is not None:
-                tt = tri_map[tt]
-            at = np.minimum(np.searchsorted(px, pixels), max(len(px) - 1, 0))
-            hit = (px[at] == pixels) if len(px) else np.zeros(len(pixels), bool)
-            hit[hit] = np.linalg.norm(tp[at[hit]] - positions[hit], axis=1) <= reach[hit]
-            j, src = b * aa + a, at[hit]
-            sp[hit, j], sn[hit, j], st[hit, j] = tp[src], tn[src], tt[src]
-    return sp.reshape(-1, 3), sn.reshape(-1, 3), st.reshape(-1)
+            ts = _core.rasterize_uv(np.ascontiguousarray(uvs - np.float32([off[a], off[b]])),
+                                    pos, nrm, resolution=(res, res), conservative=True)
+            px = np.asarray(ts.pixels)  # views of ts's buffers, read before ts goes
+            if not len(px):  # nothing covered: every sub-sample is its texel's own point
+                return tuple(np.repeat(x, aa * aa, 0) for x in (positions, normals, triangles))
+            at = np.minimum(np.searchsorted(px, pixels), len(px) - 1)
+            tp, tt = np.asarray(ts.positions).reshape(-1, 3)[at], np.asarray(ts.triangles)[at]
+            d = tp - positions
+            hit = (px[at] == pixels) & (np.einsum("ij,ij->i", d, d) <= reach * reach)
+            cols[0].append(np.where(hit[:, None], tp, positions))
+            cols[1].append(np.where(hit[:, None], np.asarray(ts.normals).reshape(-1, 3)[at],
+                                    normals))
+            cols[2].append(np.where(hit, tri_map[tt] if tri_map is not None else tt,
+                                    triangles).astype(np.int32))
+    return tuple(np.stack(c, axis=1).reshape((-1, 3) if c[0].ndim == 2 else -1)
+                 for c in cols)
 
 
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False, aa=1):
@@ -216,8 +216,8 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         tiles.append((number, start, start + len(px)))
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
-    pixels, tpos, tnrm, ttri, *sub = (np.concatenate([g[i] for g in got])
-                                      for i in range(len(got[0])))
+    pixels, tpos, tnrm, ttri, *sub = (np.concatenate([g[i] for g in got]) if len(got) > 1
+                                      else got[0][i] for i in range(len(got[0])))
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
     if outside:
         stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
