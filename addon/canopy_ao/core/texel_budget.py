@@ -14,11 +14,11 @@ from .native import CanopyAOError
 # pixel, triangle, exact flag, barycentrics, position and normal (45) and their Python copies
 # (pixel, triangle, position, normal: 32).
 TEXEL_BYTES = 45 + 32
-# Bytes per anti-aliasing sub-sample (N > 1): its position, normal and triangle, the numpy
-# temporaries that gather them, its AO and a chunk's share. Measured: a 2048² plane's bake grew
-# the process by 78 bytes a texel at 1 × 1 and 290 at 2 × 2 (by ~71 a sub-sample); the
-# estimate, 102 and 390, stays above.
-SUB_BYTES = 72
+# Bytes per anti-aliasing sub-sample (N > 1): its position, normal and triangle (twice, while
+# the columns are stacked), the numpy temporaries that gather them, its AO and a chunk's share.
+# Measured: a 2048² plane's bake grew the process by 78 bytes a texel at 1 × 1, 347 at 2 × 2 and
+# 1,019 at 4 × 4; the estimate, 102, 422 and 1,382, stays above.
+SUB_BYTES = 80
 # Bytes per image pixel: the splat's float image and mask (5), the EXR writer's copy (4) and
 # Blender's RGBA float image it loads (16).
 PIXEL_BYTES = 5 + 4 + 16
