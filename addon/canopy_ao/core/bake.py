@@ -183,6 +183,8 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
             ao = lighting.evaluate_points(plan, item.role, (item.tree_names, labels), item.name,
                                           p, n, plan.method, plan.taus(), own, group)
         else:
+            if group > 1 and len(labels) % group == 0:  # a texel's sub-samples stay together
+                labels = np.repeat(labels[::group], group)
             ao = np.ones(len(p), np.float32)
             for k, tree in enumerate(item.tree_names):
                 sel = np.flatnonzero(labels == k)
