@@ -145,11 +145,12 @@ class TexelTarget(Target):
         self.ao = self.ao.reshape(-1, k).mean(axis=1, dtype=np.float64).astype(np.float32)
         if self.thickness is not None:
             self.thickness = self.thickness.reshape(-1, k).mean(axis=1).astype(np.float32)
-        if self.bent is not None:
-            b = self.bent.reshape(-1, k, 3).mean(axis=1)
+        if self.bent is not None:  # unit again; sub-samples that cancel keep the first's
+            each = self.bent.reshape(-1, k, 3)
+            b = each.mean(axis=1)
             length = np.linalg.norm(b, axis=1, keepdims=True)
             self.bent = np.where(length > 0, b / np.maximum(length, 1e-30),
-                                 self.rx.normals).astype(np.float32)
+                                 each[:, 0]).astype(np.float32)
         self.positions, self.normals = self.rx.positions, self.rx.normals
         self.triangles = None
 

@@ -2,8 +2,8 @@
 (docs/DESIGN.md, 'Data flow').
 
     evaluated mesh ──foreach_get──► per-corner UV / world position / world normal (float32)
-    ──_core.rasterize_uv──► one receiver point per covered texel (TexelReceivers)
-    ──the bake's evaluation──► AO per texel ──_core.splat_texels──► image + dilated margin
+    ──_core.rasterize_uv──► one point per covered texel, N × N with anti-aliasing (TexelReceivers)
+    ──the bake's evaluation──► AO per texel (their mean) ──_core.splat_texels──► image + margin
     ──_core.write_image──► EXR file ──► Blender image, wired
 
 Image conventions (texel_raster.h, Blender): texel (i, j) has its centre at
