@@ -296,13 +296,15 @@ void bind_medium(py::module_& m) {
       [](const RayTracer& tracer, const DensityGrid& grid, const py::array& points,
          const py::array& normals, double near, const py::object& samples,
          const py::object& directions, double distance, const py::object& seed,
-         double sigma_scale, const py::object& vertex_ids, const py::object& triangle_ids) {
+         double sigma_scale, const py::object& vertex_ids, const py::object& triangle_ids,
+         int point_group) {
         length_arg(near, "near");
         const DensityAOOptions far = grid_options(directions, distance, seed, sigma_scale, 0.0);
         RayTraceOptions rt;
         rt.samples = static_cast<int>(int_arg(samples, "samples", 1, kMaxSamples));
         rt.distance = static_cast<float>(distance);
         rt.seed = far.seed;
+        rt.point_group = point_group;
         const Receivers r = receivers_arg(points, normals, "points");
         OwnPrimitives own;
         own.vertex_ids = ids_arg(vertex_ids, "vertex_ids", r.positions.size);
@@ -320,11 +322,12 @@ void bind_medium(py::module_& m) {
       py::arg("near"), py::arg("samples") = 64, py::arg("directions") = 32,
       py::arg("distance") = kInf, py::arg("seed") = 0, py::arg("sigma_scale") = 1.0,
       py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
+      py::arg("point_group") = 1,
       "ao_near_far(tracer, grid, points, normals, near, samples=64, directions=32, "
-      "distance=inf, seed=0, sigma_scale=1.0, vertex_ids=None, triangle_ids=None) -> float32 "
-      "(N,)\n\n"
+      "distance=inf, seed=0, sigma_scale=1.0, vertex_ids=None, triangle_ids=None, "
+      "point_group=1) -> float32 (N,)\n\n"
       "Near exact, far statistical: tracer.ao(points, normals, samples, distance=min(near, "
-      "distance), vertex_ids, triangle_ids) times grid.ao(points, normals, directions, "
+      "distance), vertex_ids, triangle_ids, point_group) times grid.ao(points, normals, directions, "
       "distance, start=near, self_skip=0). Contact shadows from real geometry (each receiver "
       "named by its own primitives starts as in tracer.ao: a vertex at Cycles' bake point, "
       "its samples cast at every face corner), the canopy's bulk from the density grid; the "

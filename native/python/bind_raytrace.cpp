@@ -188,10 +188,11 @@ void bind_raytrace(py::module_& m) {
              const py::object& samples, double distance, const py::object& seed,
              double offset, const py::object& vertex_ids, const py::object& triangle_ids,
              const std::string& sampling, bool bent_normals, bool per_corner,
-             const py::object& point_samples) {
+             const py::object& point_samples, int point_group) {
             RayTraceOptions o = options_arg(samples, distance, seed, offset);
             o.sampling = sampling_arg(sampling);
             o.per_corner = per_corner;
+            o.point_group = point_group;
             o.point_samples = ids_arg(point_samples, "point_samples",
                                       static_cast<std::size_t>(py::len(points)));
             return trace(self, points, normals, o, vertex_ids, triangle_ids, bent_normals);
@@ -201,9 +202,10 @@ void bind_raytrace(py::module_& m) {
           py::arg("vertex_ids") = py::none(), py::arg("triangle_ids") = py::none(),
           py::arg("sampling") = "lattice", py::arg("bent_normals") = false,
           py::arg("per_corner") = true, py::arg("point_samples") = py::none(),
+          py::arg("point_group") = 1,
           "ao(points, normals, samples=64, distance=inf, seed=0, offset=-1.0, vertex_ids=None, "
           "triangle_ids=None, sampling='lattice', bent_normals=False, per_corner=True, "
-          "point_samples=None) -> "
+          "point_samples=None, point_group=1) -> "
           "float32 (N,), or (ao, bent) with bent_normals\n\n"
           "Cosine-weighted ambient occlusion, 1 = open sky (Cycles' meaning): the fraction of "
           "`samples` cosine-distributed rays from each point (float32 (N, 3)) over the "
@@ -230,6 +232,10 @@ void bind_raytrace(py::module_& m) {
           "deals `samples` rays out to the corners.\n\n"
           "point_samples: int32 (N,), each point's own count in place of `samples` (>= 1; "
           "ValueError otherwise).\n\n"
+          "point_group: g >= 1 consecutive points (rows of this call) form one receiver, a "
+          "texel's anti-aliasing sub-samples: the group casts its `samples` (at least g) from "
+          "one set keyed by the group (row // g), dealt out to its points in turn (row % g "
+          "takes rays row % g, + g, ...); a point with a vertex id keeps its own.\n\n"
           "bent_normals=True also returns each point's bent normal, float32 (N, 3), world "
           "space: the normalised sum of its unblocked rays' directions (the cosine-weighted "
           "mean unoccluded direction), from the same rays as the AO. Every ray blocked: the "

@@ -799,8 +799,22 @@ struct RayTracer::Impl {
     w[1] = std::clamp(w[1], 0.0f, 1.0f);
     w[2] = std::clamp(w[2], 0.0f, 1.0f - w[1]);
     w[0] = 1.0f - w[1] - w[2];
+    // A texel on its triangle's boundary (a conservative texel's closest point, on an edge
+    // or a vertex such as a UV sphere's pole, in 3D within rounding of it) starts where the
+    // faces meeting there stop rays at t = 0 whichever side of the edge the rounding put it:
+    // inside, Cycles' edge test does not offset it (at a UV sphere's pole 6 % of the rays
+    // stopped). Below Cycles' own barycentric floor (1e-5, as its bake clamps u and v) it
+    // moves towards the centroid by Cycles' bake reach, as a vertex's corner does
+    // (bake_offset_towards_center): inside, where only its own triangle is skipped.
+    const bool on_boundary = !(std::min(w[0], std::min(w[1], w[2])) >= 1e-5f);
+    if (on_boundary) {
+      const Vec3 to = (V[0] + V[1] + V[2]) / 3.0f - x;
+      const float len = length(to);
+      const float f = len > 0.0f ? std::min(1.0f, bake_reach(x) / len) : 0.0f;
+      for (float& wk : w) wk += (1.0f / 3.0f - wk) * f;
+    }
     *out = corner_at(tri, V, c / area2, w, &n);
-    out->start = x;  // the texel itself (the weights only shape the lift)
+    if (!on_boundary) out->start = x;  // the texel itself (the weights only shape the lift)
     return true;
   }
 
@@ -1092,6 +1106,10 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   if (std::isnan(options.offset) || std::isinf(options.offset)) {
     throw std::invalid_argument("offset must be finite (< 0 = automatic)");
   }
+  if (options.point_group < 1) {
+    throw std::invalid_argument("point_group must be at least 1, got " +
+                                std::to_string(options.point_group));
+  }
   for (std::size_t i = 0; options.point_samples && i < points.size; ++i) {
     if (options.point_samples[i] < 1) {
       std::ostringstream s;
@@ -1116,6 +1134,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   }
 
   const int samples = options.samples;
+  const std::size_t group = static_cast<std::size_t>(options.point_group);
   const bool automatic = options.offset < 0;
   const float offset = automatic ? m.auto_offset : options.offset;
   // Vertex receivers start at Cycles' bake point (raytrace.h, "Origins").
@@ -1204,24 +1223,31 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       const int samples_here = options.point_samples ? options.point_samples[i] : samples;
       const int rays_here = static_cast<int>(
           vertex_ray_count(static_cast<std::int64_t>(k), samples_here, options.per_corner));
+      // A point of a group (RayTraceOptions::point_group; never a vertex) casts its share of
+      // the group's set of max(count, g) directions: rays slot, slot + g, slot + 2g, ...
+      const std::size_t g = ov < 0 ? group : 1;
+      const std::size_t slot = i % g;
+      const int set_rays = std::max(rays_here, static_cast<int>(g));
+      const int own_rays = static_cast<int>((set_rays - slot + g - 1) / g);
       const SampleSet* here = &set;
-      if (rays_here != samples && options.sampling == Sampling::kLattice) {
-        std::unique_ptr<SampleSet>& built = sets[rays_here];
-        if (!built) built = std::make_unique<SampleSet>(rays_here);
+      if (set_rays != samples && options.sampling == Sampling::kLattice) {
+        std::unique_ptr<SampleSet>& built = sets[set_rays];
+        if (!built) built = std::make_unique<SampleSet>(set_rays);
         here = built.get();
       }
-      if (xs.size() < static_cast<std::size_t>(rays_here)) {
-        xs.resize(rays_here);
-        ys.resize(rays_here);
-        zs.resize(rays_here);
+      if (xs.size() < static_cast<std::size_t>(set_rays)) {
+        xs.resize(set_rays);
+        ys.resize(set_rays);
+        zs.resize(set_rays);
       }
-      cast[local] = rays_here;
+      cast[local] = own_rays;
       // Keyed by the vertex id where there is one: the same rays in any split into calls.
-      const std::size_t key = ov >= 0 ? static_cast<std::size_t>(ov) : i;
-      point_directions(options.sampling, *here, key, options.seed, rays_here, xs.data(),
+      const std::size_t key = ov >= 0 ? static_cast<std::size_t>(ov) : i / g;
+      point_directions(options.sampling, *here, key, options.seed, set_rays, xs.data(),
                        ys.data(), zs.data());
-      for (int s = 0; s < rays_here; ++s) {
-        const float x = xs[s], y = ys[s], z = zs[s];
+      for (int s = 0; s < own_rays; ++s) {
+        const std::size_t r = slot + g * static_cast<std::size_t>(s);
+        const float x = xs[r], y = ys[r], z = zs[r];
         RTCRay& ray = rays[filled];
         Vec3 d, org = o;
         std::int32_t sk = own_skip;

@@ -41,13 +41,15 @@ def test_texel_bake_evaluates_texels_in_chunks_and_checks_them_with_cycles(
                                                  image_dir=plane_under_disk["image_dir"],
                                                  check_cycles=True, cycles_samples=16))
     (target,) = job.targets
-    texels = target.count
+    texels, receivers = len(target.rx.pixels), target.count
     assert target.kind == "texel" and texels > 3000  # most of the 64 x 64 square
-    assert job.steps == 1 + -(-texels // 1000)  # prepare, then one step per chunk
+    assert receivers == 4 * texels  # each texel's 2 x 2 anti-aliasing sub-samples (default)
+    assert job.steps == 1 + -(-receivers // 1000)  # prepare, then one step per chunk
     job.prepare()
-    # Auto's cost model counts what the bake evaluates: Ground's texels, not the leaves' vertices.
-    assert job.plan.targets == {"Ground": ("texel", texels)}
-    assert cost.receiver_count(job.plan, job.items) == texels
+    # Auto's cost model counts what the bake evaluates: Ground's texels' sub-samples, not the
+    # leaves' vertices; four to a texel (whose rays they share: cost.corners).
+    assert job.plan.targets == {"Ground": ("texel", receivers, 4)}
+    assert cost.receiver_count(job.plan, job.items) == receivers
     lines = []
     while (line := job.step()) is not None:
         lines.append(line)

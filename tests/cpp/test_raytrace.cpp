@@ -930,6 +930,44 @@ TEST(BakePoint, EachPointCastsItsOwnSampleCount) {
   EXPECT_THROW(tracer.ao(p, n, own, zero, out.data()), std::invalid_argument);
 }
 
+TEST(BakePoint, TexelSubSamplesShareOneDealtSet) {
+  // point_group: g consecutive texel points share one set of directions keyed by the group,
+  // point j casting rays j, j + g, ...: g points at one spot average to that spot's estimate
+  // at the group's count, ray for ray (the first group is keyed as row 0 alone).
+  Mesh m = hexagon_fan();
+  m.quad({-0.2f, -0.3f, 0.15f}, {0.6f, -0.3f, 0.15f}, {0.6f, 0.5f, 0.15f}, {-0.2f, 0.5f, 0.15f});
+  const std::vector<float> up = same_normals(m, {0, 0, 1});
+  const RayTracer tracer = m.baking(up);
+  constexpr std::size_t kG = 4;
+  const Vec3 a = m.view()[0], b = m.view()[1], c = m.view()[2];  // triangle 0, the hub's
+  const Vec3 x = (a * 2.0f + b + c) / 4.0f;  // inside it, under the roof's edge
+  std::vector<float> pts, nrm;
+  for (std::size_t i = 0; i < 2 * kG; ++i) {
+    pts.insert(pts.end(), {x.x, x.y, x.z});
+    nrm.insert(nrm.end(), {0.0f, 0.0f, 1.0f});
+  }
+  const std::vector<std::int32_t> tri(2 * kG, 0);
+  OwnPrimitives own;
+  own.triangle_ids = tri.data();
+  const PointsView p{pts.data(), 2 * kG}, n{nrm.data(), 2 * kG};
+  RayTraceOptions grouped = opts(64);
+  grouped.point_group = static_cast<int>(kG);
+  std::vector<float> got(2 * kG, -1.0f), alone(1, -1.0f);
+  tracer.ao(p, n, own, grouped, got.data());
+  tracer.ao(PointsView{pts.data(), 1}, PointsView{nrm.data(), 1}, own, opts(64), alone.data());
+  float mean = 0.0f;
+  for (std::size_t i = 0; i < kG; ++i) mean += got[i];
+  EXPECT_EQ(mean / kG, alone[0]);
+  EXPECT_GT(alone[0], 0.05f);
+  EXPECT_LT(alone[0], 0.95f);
+  for (std::size_t i = 0; i < 2 * kG; ++i) {  // 16 rays each: multiples of 1/16
+    EXPECT_NEAR(got[i] * 16.0f, std::round(got[i] * 16.0f), 1e-4f) << "point " << i;
+  }
+  RayTraceOptions none = opts(64);
+  none.point_group = 0;
+  EXPECT_THROW(tracer.ao(p, n, own, none, got.data()), std::invalid_argument);
+}
+
 TEST(BakePoint, CornersPerVertexCountsFacesWithArea) {
   const Mesh fan = hexagon_fan();
   const std::vector<float> up = same_normals(fan, {0, 0, 1});

@@ -513,6 +513,9 @@ def test_vertex_rays_are_per_corner_and_counted_so():
     mixed = engine.prepare(both, settings, targets={"P": ("vertex", 5), "R": ("texel", 50)})
     assert abs(cost.corners(mixed) - (12 + 50) / 55) < 1e-12
     assert cost.receiver_count(mixed, both) == 55
+    # 2 x 2 anti-aliased texels: four receivers share a texel's rays (16 rays: 4 each)
+    aa = engine.prepare(both, settings, targets={"P": ("texel", 100, 4), "R": ("texel", 40, 4)})
+    assert cost.corners(aa) == 0.25 and cost.receiver_count(aa, both) == 140
     roof_only = engine.prepare(both, settings, targets={"R": ("vertex", 4)})
     assert cost.corners(roof_only) == 1.5 and cost.receiver_count(roof_only, both) == 4
     with pytest.raises(engine.CanopyAOError, match="not a vertex or texel count"):

@@ -106,3 +106,20 @@ def test_tau_per_tree_lightens_the_sparse_tree(monkeypatch):
     one, rep_one = bias("LeavesB")
     assert rep_one["tau_by_tree"] == {}
     assert one < -0.2 and abs(per_tree) < abs(one) - 0.1, (one, per_tree)
+
+
+def test_a_texels_sub_samples_stay_one_group_across_two_crowns():
+    """A texel of a mesh holding two trees whose anti-aliasing sub-samples lie nearest to
+    different crowns is still traced as one group (its rays dealt over its sub-samples), not
+    split into the two trees' calls."""
+    from canopy_ao.core import lighting
+    items, n_a = _grove("collection", joined=True)
+    plan = core.prepare(items, core.BakeSettings(method="raytrace", samples=16))
+    it = items[0]
+    idx = [0, n_a, 1, n_a + 1, n_a + 2, 2, n_a + 3, 3]  # two texels, each 2 + 2 across crowns
+    p, n = it.positions[idx], it.normals[idx]
+    got = core.evaluate_receivers(plan, it, p, n, group=4)
+    # each texel as its own call (its tree's: the first sub-sample's): keyed as group 0
+    want = np.concatenate([lighting.trace(plan, p[k:k + 4], n[k:k + 4],
+                                          **lighting.ray_args(plan, 4)) for k in (0, 4)])
+    np.testing.assert_array_equal(got, want)

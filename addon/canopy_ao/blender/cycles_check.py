@@ -168,10 +168,11 @@ def bake_cycles_vertex_ao(context, objects, distance, samples, seed=None):
 
 
 def bake_cycles_texel_ao(context, obj, uv_map, resolution, distance, samples,
-                         return_mask=False):
+                         return_mask=False, seed=None):
     """Cycles AO baked into obj's UV layout `uv_map`, as float32 (H, W) with row 0 at v = 0
     (Blender's image order). Texels no triangle covers are 0; with return_mask=True also
-    returns the bool (H, W) coverage mask (texels Cycles wrote)."""
+    returns the bool (H, W) coverage mask (texels Cycles wrote). seed: as
+    bake_cycles_vertex_ao's."""
     _check_bakeable(context, [obj])
     me = obj.data
     if uv_map is None:
@@ -215,7 +216,7 @@ def bake_cycles_texel_ao(context, obj, uv_map, resolution, distance, samples,
             prev_active.append((nt, nt.nodes.active))
             nt.nodes.active = node
         me.uv_layers.active = me.uv_layers[uv_map]
-        with _cycles_bake_settings(context, [obj], distance, samples):
+        with _cycles_bake_settings(context, [obj], distance, samples, seed):
             _run_bake("IMAGE_TEXTURES", use_clear=False)
         px = np.empty(res * res * 4, dtype=np.float32)
         image.pixels.foreach_get(px)

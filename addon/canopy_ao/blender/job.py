@@ -110,7 +110,7 @@ class BakeJob:
             protos = self.prototypes.bake(self.settings, skip=skip)
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
-        targets = {t.item.name: (t.kind, t.count) for t in self.targets}
+        targets = {t.item.name: (t.kind, t.count, t.group) for t in self.targets}
         self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:
@@ -142,7 +142,7 @@ class BakeJob:
                 t.ao[a:b] = self._bent_step(t, a, b)
             else:
                 t.ao[a:b] = core.evaluate_receivers(
-                    self.plan, t.item, t.positions[a:b], t.normals[a:b],
+                    self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
                     vertices=slice(a, b) if t.kind == "vertex" else None,
                     triangles=t.triangles[a:b] if t.triangles is not None else None)
                 if bent:
@@ -157,6 +157,7 @@ class BakeJob:
         t.seconds += self._lap("evaluate", t0) - t0
         if b < t.count:
             return ""
+        t.finish()
         it = t.item
         r = core.ItemResult(it.name, it.role, it.tree, self.plan.method, t.ao, t.seconds,
                             it.tree_source, it.tree_why)

@@ -69,6 +69,8 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
         if s.mode == 'TEXEL':
             col.prop(s, "uv_map")
             col.prop(s, "resolution")
+            col.prop(s, "texel_aa")
+            col.prop(s, "margin")
             col.prop(s, "image_dir", text=SHORT["image_dir"])
             col.prop(s, "image_format")
             col.prop(s, "udim")
@@ -125,8 +127,8 @@ SHORT = {"time_budget": "Budget", "image_dir": "Folder", "calibration_points": "
 # core/settings.py is reachable from the panel.
 MAIN = {"method", "calibrate_tau", "tau", "use_world_distance", "distance", "samples",
         "time_budget", "target_rmse", "mode", "attribute", "overwrite", "uv_map", "resolution",
-        "image_dir", "image_format", "udim", "atlas", "channel", "packing", "pack_image",
-        "thickness", "thickness_name", "bent_normals", "bent_normals_name",
+        "texel_aa", "margin", "image_dir", "image_format", "udim", "atlas", "channel", "packing",
+        "pack_image", "thickness", "thickness_name", "bent_normals", "bent_normals_name",
         "show_proxies", "wire_material", "gltf", "add_aov", "aov_name", "check_cycles",
         "cycles_samples",
         "live"}

@@ -23,20 +23,29 @@ class Target:
         self.frames = None  # (tangents, signs) per receiver for tangent-space bent normals
         self.seconds = 0.0
         self.stats = {}
+        self.group = 1  # consecutive receivers per result (a texel's sub-samples; finish())
 
     @property
     def count(self):
         return len(self.positions)
+
+    def chunk(self, n):
+        """Receivers per chunk near n: whole groups, so no chunk splits a texel's sub-samples
+        (their rays are dealt by row within the call)."""
+        return max(self.group, n - n % self.group)
+
+    def finish(self):
+        """Called once every receiver is evaluated, before the result is reported."""
 
     def write(self, txn, opts):
         raise NotImplementedError
 
 
 def chunks(targets, size):
-    """(target, first, last receiver) per step of ``size`` receivers; an empty target still
-    gets its one step."""
-    return [(t, a, min(a + size, t.count)) for t in targets
-            for a in range(0, max(t.count, 1), size)]
+    """(target, first, last receiver) per step of about ``size`` receivers (whole sub-sample
+    groups: Target.chunk); an empty target still gets its one step."""
+    return [(t, a, min(a + t.chunk(size), t.count)) for t in targets
+            for a in range(0, max(t.count, 1), t.chunk(size))]
 
 
 def split_vertex_chunks(steps, size):
@@ -154,15 +163,22 @@ class TexelTarget(Target):
                                 "(nothing was changed)")
         check_wiring(obj, opts)
         self.rx = texel_io.receivers(obj, depsgraph, opts["uv_map"] or None,
-                                     opts["resolution"], udim=opts["udim"])
-        super().__init__(item, obj, self.rx.positions, self.rx.normals)
+                                     opts["resolution"], opts["margin"], opts["udim"],
+                                     opts["texel_aa"])
+        # Anti-aliased: the receivers are the texels' sub-samples, each casting its share of
+        # a texel's rays, averaged back to texels by finish() (texel_io._subsamples).
+        pos, nrm, tris = self.rx.sub or (self.rx.positions, self.rx.normals,
+                                         self.rx.triangles)
+        super().__init__(item, obj, pos, nrm)
+        self.group = self.rx.aa ** 2
         # The raster's loop triangles are the item's own when the counts agree (the same
         # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
-        tris = self.rx.triangles
         if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
             self.triangles = tris
         if opts["bent_normals"] == "TANGENT":
-            self.frames = bent_io.texel_frames(obj, depsgraph, self.rx)
+            tangents, signs = bent_io.texel_frames(obj, depsgraph, self.rx)
+            self.frames = (np.repeat(tangents, self.group, axis=0),
+                           np.repeat(signs, self.group, axis=0))
         if opts["gltf"] and opts["udim"]:
             raise CanopyAOError("For glTF wires one image per material; glTF has no UDIM "
                                 "tiles: turn off UDIM Tiles (nothing was changed)")
@@ -185,6 +201,24 @@ class TexelTarget(Target):
                 raise CanopyAOError(f"{obj.name}: Pack Image '{self.pack.name}' is {why}; "
                                     "make it local (or pick a local image) to pack into it "
                                     "(nothing was changed)")
+
+    def finish(self):
+        """Every sub-sample evaluated: each texel's AO (and thickness, bent normal) is the mean
+        of its sub-samples', and the receivers are the texels again."""
+        k = self.group
+        if k == 1 or len(self.ao) == len(self.rx.pixels):
+            return
+        self.ao = self.ao.reshape(-1, k).mean(axis=1, dtype=np.float64).astype(np.float32)
+        if self.thickness is not None:
+            self.thickness = self.thickness.reshape(-1, k).mean(axis=1).astype(np.float32)
+        if self.bent is not None:  # unit again; sub-samples that cancel keep the first's
+            each = self.bent.reshape(-1, k, 3)
+            b = each.mean(axis=1)
+            length = np.linalg.norm(b, axis=1, keepdims=True)
+            self.bent = np.where(length > 0, b / np.maximum(length, 1e-30),
+                                 each[:, 0]).astype(np.float32)
+        self.positions, self.normals = self.rx.positions, self.rx.normals
+        self.triangles = None
 
     def write(self, txn, opts):
         if opts["channel"] != "RGBA":

@@ -2,8 +2,8 @@
 (docs/DESIGN.md, 'Data flow').
 
     evaluated mesh ──foreach_get──► per-corner UV / world position / world normal (float32)
-    ──_core.rasterize_uv──► one receiver point per covered texel (TexelReceivers)
-    ──the bake's evaluation──► AO per texel ──_core.splat_texels──► image + dilated margin
+    ──_core.rasterize_uv──► one point per covered texel, N × N with anti-aliasing (TexelReceivers)
+    ──the bake's evaluation──► AO per texel (their mean) ──_core.splat_texels──► image + margin
     ──_core.write_image──► EXR file ──► Blender image, wired
 
 Image conventions (texel_raster.h, Blender): texel (i, j) has its centre at
@@ -16,6 +16,7 @@ import numpy as np
 
 from . import materials, mesh_io
 from .files_io import Output, check_outputs, image_path, write_own_file
+from ..core import texel_budget
 # Kept under their old names for code that writes image files of its own through texel_io.
 from ..core.native import CanopyAOError, _core
 
@@ -114,13 +115,67 @@ class TexelReceivers:
     triangles: np.ndarray | None = None  # int32 (T,): each texel's loop triangle
     tiles: list = field(default_factory=list)  # (UDIM number, first, end receiver) per tile
     uvs: np.ndarray | None = None  # float32 (3M, 2): the mesh's corner UVs, as gathered
+    aa: int = 1  # anti-aliasing: aa × aa sub-samples per texel, texel-major (texel k's rows
+    sub: tuple | None = None  # k·aa² ..): positions, normals, triangles; None when aa is 1
 
 
-def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False):
+def _texel_reach(uvs, pos, tris, res):
+    """float64 (T,): how far (world) a sub-sample may lie from its texel's point: two texels'
+    width on the texel's own triangle (√(3D area / UV area) / res): a neighbour across an edge
+    stays within it, another island across a UV seam (near in UV, apart in 3D) does not."""
+    u, p = uvs.reshape(-1, 3, 2).astype(np.float64), pos.reshape(-1, 3, 3).astype(np.float64)
+    e, f = u[:, 1] - u[:, 0], u[:, 2] - u[:, 0]
+    uv_area = np.abs(e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0])
+    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(uv_area > 0, np.sqrt(area / uv_area), np.inf)
+    return 2.0 * scale[tris] / res
+
+
+# A texel's footprint's width, in texels: Cycles jitters its bake samples over the central half
+# of each texel (Blender's bake_differentials halves the UV derivative, "A = 0.5f / A"), so
+# ours averages that box (bench/texel_aa.py: edge texels 0.030 → 0.017 against a whole texel).
+FOOTPRINT = 0.5
+
+
+def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, tri_map, reach):
+    """The aa × aa sub-sample points of each texel in pixels (ascending), texel-major: pass
+    (a, b) rasterises the UVs shifted by minus FOOTPRINT × ((a + ½)/aa − ½, (b + ½)/aa − ½)
+    texels, so its texel centres are the sub-sample points of the unshifted image (the centres
+    of an aa × aa grid over the footprint's box); a sub-sample lies on whichever triangle
+    covers it there (across an edge: the neighbour), or, off the island, on the nearest one
+    (conservative coverage). One that a pass does not reach, or that lies farther than reach
+    (_texel_reach: across a UV seam on another surface) from its texel's point, keeps the
+    texel's own point. tri_map: the pass's triangle ids to the mesh's (or None)."""
+    cols = ([], [], [])  # per sub-sample: positions, normals, triangles of every texel
+    off = ((np.arange(aa) + 0.5) / aa - 0.5) * (FOOTPRINT / res)
+    for b in range(aa):
+        for a in range(aa):
+            ts = _core.rasterize_uv(np.ascontiguousarray(uvs - np.float32([off[a], off[b]])),
+                                    pos, nrm, resolution=(res, res), conservative=True)
+            px = np.asarray(ts.pixels)  # views of ts's buffers, read before ts goes
+            if not len(px):  # nothing covered: every sub-sample is its texel's own point
+                return tuple(np.repeat(x, aa * aa, 0) for x in (positions, normals, triangles))
+            at = np.minimum(np.searchsorted(px, pixels), len(px) - 1)
+            tp, tt = np.asarray(ts.positions).reshape(-1, 3)[at], np.asarray(ts.triangles)[at]
+            d = tp - positions
+            hit = (px[at] == pixels) & (np.einsum("ij,ij->i", d, d) <= reach * reach)
+            cols[0].append(np.where(hit[:, None], tp, positions))
+            cols[1].append(np.where(hit[:, None], np.asarray(ts.normals).reshape(-1, 3)[at],
+                                    normals))
+            cols[2].append(np.where(hit, tri_map[tt] if tri_map is not None else tt,
+                                    triangles).astype(np.int32))
+    return tuple(np.stack(c, axis=1).reshape((-1, 3) if c[0].ndim == 2 else -1)
+                 for c in cols)
+
+
+def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False, aa=1):
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
-    UVs use, tile by tile, tiles_io.split_tiles). Raises CanopyAOError before reading anything
-    when obj is not a mesh, has no (such) UV map, or the sizes are wrong, and after reading
-    when no texel centre falls inside a face of the UV map."""
+    UVs use, tile by tile, tiles_io.split_tiles), with aa × aa sub-samples each when aa > 1
+    (_subsamples). Raises CanopyAOError before reading anything when obj is not a mesh, has no
+    (such) UV map, or the sizes are wrong, before rasterising when the bake would not fit in
+    the available memory (texel_budget.check_memory), and after reading when no texel centre
+    falls inside a face of the UV map."""
     if obj.type != "MESH":
         raise CanopyAOError(f"Object '{obj.name}' is not a mesh; only meshes can be baked per "
                             "texel")
@@ -131,6 +186,10 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
                             f"{MAX_RESOLUTION} texels")
     if margin < 0:
         raise CanopyAOError(f"Margin must be >= 0 texels, not {margin}")
+    aa = int(aa)
+    if not 1 <= aa <= 8:
+        raise CanopyAOError(f"Anti-aliasing must be 1 to 8 (sub-samples per texel side), not "
+                            f"{aa}")
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
     from .tiles_io import split_tiles
     parts, outside = split_tiles(uvs) if udim else ([(1001, slice(None), (0, 0))], 0)
@@ -138,20 +197,28 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         raise CanopyAOError(f"Object '{obj.name}': no triangle of UV map '{uv_map}' lies in a "
                             "UDIM tile (1001–1999: u in [0, 10), v >= 0); move its UVs there "
                             "or bake without UDIM Tiles")
+    texel_budget.check_memory(obj.name, np.concatenate([uvs[r] for _n, r, _d in parts]), res,
+                              aa, len(parts))
     got, tiles, stats = [], [], {}
     for number, rows, (du, dv) in parts:
-        tile_uvs = uvs[rows] - np.float32([du, dv]) if du or dv else uvs[rows]
-        px, tp, tn, st, tt = rasterize(np.ascontiguousarray(tile_uvs),
-                                       np.ascontiguousarray(pos[rows]),
-                                       np.ascontiguousarray(nrm[rows]), res, res)
+        tile_uvs = np.ascontiguousarray(uvs[rows] - np.float32([du, dv]) if du or dv
+                                        else uvs[rows])
+        tile_pos, tile_nrm = np.ascontiguousarray(pos[rows]), np.ascontiguousarray(nrm[rows])
+        px, tp, tn, st, tt = rasterize(tile_uvs, tile_pos, tile_nrm, res, res)
+        reach = _texel_reach(tile_uvs, tile_pos, tt, res) if aa > 1 else None
+        tri_map = None
         if not isinstance(rows, slice):  # the tile's triangle k is the mesh's rows[3k] // 3
-            tt = (rows[0::3] // 3).astype(np.int32)[tt]
-        got.append((px, tp, tn, tt))
+            tri_map = (rows[0::3] // 3).astype(np.int32)
+            tt = tri_map[tt]
+        sub = (_subsamples(tile_uvs, tile_pos, tile_nrm, res, aa, px, tp, tn, tt, tri_map,
+                           reach) if aa > 1 else ())
+        got.append((px, tp, tn, tt) + sub)
         start = tiles[-1][2] if tiles else 0
         tiles.append((number, start, start + len(px)))
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
-    pixels, tpos, tnrm, ttri = (np.concatenate([g[i] for g in got]) for i in range(4))
+    pixels, tpos, tnrm, ttri, *sub = (np.concatenate([g[i] for g in got]) if len(got) > 1
+                                      else got[0][i] for i in range(len(got[0])))
     stats.update(warnings=[], notes=[], uv_map=uv_map, resolution=res, texels=int(len(pixels)))
     if outside:
         stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
@@ -168,7 +235,8 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
                             f"{'UDIM tiles' if udim else '0–1 square'} or enclose no area); "
                             "unwrap it (UV > Smart UV Project), raise the resolution or bake "
                             "per vertex (nothing was changed)")
-    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles, uvs)
+    return TexelReceivers(uv_map, res, int(margin), pixels, tpos, tnrm, stats, ttri, tiles, uvs,
+                          aa, tuple(sub) if aa > 1 else None)
 
 
 def splat(pixels, values, width, height, margin, background=1.0):

@@ -25,9 +25,10 @@ from .settings import BakeSettings, validate
 def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
 
-    targets: {item name: ("vertex" | "texel", count)}, the receivers the bake will evaluate
-    (an item's vertices, or the texels of its image: one face corner each); None = every
-    receiver item at its vertices. Auto's cost model counts them (cost.py).
+    targets: {item name: ("vertex" | "texel", count[, group])}, the receivers the bake will
+    evaluate (an item's vertices, or the texels of its image: one face corner each, `group`
+    receivers a texel, its anti-aliasing sub-samples, sharing its rays); None = every receiver
+    item at its vertices. Auto's cost model counts them (cost.py).
 
     prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every
     receiver. Given here rather than attached afterwards, the ray tracer traces their meshes
@@ -124,13 +125,15 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
 
 
 def _targets(targets) -> dict:
-    """prepare's targets checked: {name: (kind, count ≥ 0)}."""
+    """prepare's targets checked: {name: (kind, count ≥ 0, group ≥ 1)}, group the receivers
+    per texel (its anti-aliasing sub-samples; 1 when not given)."""
     out = {}
-    for name, (kind, count) in (targets or {}).items():
-        if kind not in ("vertex", "texel") or int(count) < 0:
+    for name, (kind, count, *group) in (targets or {}).items():
+        group = int(group[0]) if group else 1
+        if kind not in ("vertex", "texel") or int(count) < 0 or group < 1:
             raise CanopyAOError(f"target {name!r}: {kind!r} × {count} is not a vertex or "
                                 "texel count")
-        out[str(name)] = (kind, int(count))
+        out[str(name)] = (kind, int(count), group)
     return out
 
 
@@ -151,7 +154,7 @@ def _wants_regression(plan: Plan, items, settings) -> bool:
 
 @refusals_are_user_errors
 def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
-                       vertices=None, triangles=None) -> np.ndarray:
+                       vertices=None, triangles=None, group=1) -> np.ndarray:
     """AO float32 (N,) in [0, 1] of receivers on ``item`` (its vertices, a chunk of them, or
     texels of its UV layout: points float32 (N, 3) and unit normals) with the plan's method
     and τ. Receivers are independent, so any split into chunks gives the same AO (the exact
@@ -161,7 +164,10 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     ``vertices`` (an index array or slice of the item's vertices the receivers are) picks the
     vertex's tree; without it (texels) each receiver takes the tree whose fitted crown is
     nearest (in the crown's own unit frame). ``triangles`` (int32 (N,), texels: the item's
-    triangle each lies on, -1 = unknown) lets the exact rung's rays skip only that one."""
+    triangle each lies on, -1 = unknown) lets the exact rung's rays skip only that one.
+    ``group``: receivers per texel, its anti-aliasing sub-samples, consecutive (a chunk never
+    splits them): the exact rung's and the hybrid's near rays deal a texel's Samples out over
+    them (lighting.ray_args)."""
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
     n = np.ascontiguousarray(normals, dtype=np.float32).reshape(-1, 3)
     if item.role == "IGNORE":
@@ -169,14 +175,16 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     own = own_primitives(item, vertices, triangles)
     if item.tree_labels is None or len(item.tree_names) <= 1:
         ao = lighting.evaluate_points(plan, item.role, item.tree, item.name, p, n, plan.method,
-                                      plan.taus(), own)
+                                      plan.taus(), own, group)
     else:
         labels = (item.tree_labels[vertices] if vertices is not None
                   else _nearest_crown(plan, item.tree_names, p))
         if plan.method in ladder.TAU_METHODS:  # the scene plan: one call, a tree per receiver
             ao = lighting.evaluate_points(plan, item.role, (item.tree_names, labels), item.name,
-                                          p, n, plan.method, plan.taus(), own)
+                                          p, n, plan.method, plan.taus(), own, group)
         else:
+            if group > 1 and len(labels) % group == 0:  # a texel's sub-samples stay together
+                labels = np.repeat(labels[::group], group)
             ao = np.ones(len(p), np.float32)
             for k, tree in enumerate(item.tree_names):
                 sel = np.flatnonzero(labels == k)
@@ -184,7 +192,7 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
                     ao[sel] = lighting.evaluate_points(
                         plan, item.role, tree, item.name, np.ascontiguousarray(p[sel]),
                         np.ascontiguousarray(n[sel]), plan.method, plan.taus(),
-                        {k: v[sel] for k, v in own.items()} if own else None)
+                        {k: v[sel] for k, v in own.items()} if own else None, group)
     if ao.shape != (len(p),) or not np.all(np.isfinite(ao)):
         raise CanopyAOError(f"{item.name}: the {plan.method} model gave invalid values")
     _zero_buried(plan, item, p, n, own, vertices, ao)

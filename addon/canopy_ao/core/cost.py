@@ -11,7 +11,7 @@ Work per receiver, counted from the plan:
 - raytrace: Cycles' rays (samples at each face corner of a vertex at its bake point), spread
   evenly over the bake's vertices (ray_budget.py: each vertex the multiple of its corners
   nearest to samples × their mean), counted vertex by vertex over the receivers (a texel
-  casts samples), each ~log2(triangles) BVH steps;
+  casts samples, shared by its anti-aliasing sub-samples), each ~log2(triangles) BVH steps;
 - regression: one trilinear look-up of the swept optical depth per feature direction
   (occlusion_features.h), counted as a voxel step each;
 - hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps;
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 
+from . import texel_budget
 from .native import _core
 from .scene import RECEIVER_ROLES
 
@@ -66,7 +67,7 @@ def receiver_count(plan, items) -> int:
     """The receivers a bake with this plan evaluates: its targets' vertices or texels
     (plan.targets), or without targets every receiver item's vertices."""
     if plan.targets:
-        return sum(int(count) for _kind, count in plan.targets.values())
+        return sum(int(t[1]) for t in plan.targets.values())
     return sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
 
 
@@ -79,7 +80,7 @@ def receiver_items(plan, names=None):
             continue
         if plan.targets and it.name not in plan.targets:
             continue
-        kind, n = plan.targets.get(it.name, ("vertex", len(it.positions)))
+        kind, n, _group = plan.targets.get(it.name, ("vertex", len(it.positions), 1))
         yield it, kind, int(n)
 
 
@@ -99,7 +100,10 @@ def corners(plan, names=None, samples=None) -> float:
     rays = count = 0
     for it, kind, n in receiver_items(plan, names):
         base = plan.tracer_bases.get(it.name)
-        if base is None or kind != "vertex":
+        if kind == "texel":  # a texel's sub-samples share its rays (texel_budget.texel_rays)
+            group = plan.targets[it.name][2]
+            rays += n * texel_budget.texel_rays(samples, group) / group
+        elif base is None:
             rays += n * samples
         elif even:
             rays += ray_budget.object_rays(plan, it.name, samples)

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from . import ray_budget
+from . import ray_budget, texel_budget
 from .native import CanopyAOError, _core
 from .scene import Plan, ray_length
 
@@ -102,13 +102,14 @@ def lights(plan: Plan) -> Lights:
 
 def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
                     p: np.ndarray, n: np.ndarray, method: str, tau: float,
-                    own=None) -> np.ndarray:
+                    own=None, group=1) -> np.ndarray:
     """AO for receiver points p, n of an item: the scene's own objects (below) times the
     instanced trees of attach_forest, if any (V = Π (1 − occ), so the fields multiply).
     tree: the item's tree, or for the analytic rungs (names, labels): a tree per receiver.
     own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
-    in its item (-1 = none), so the exact rung's rays skip only what they start on."""
-    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own)
+    in its item (-1 = none), so the exact rung's rays skip only what they start on.
+    group: consecutive points forming one receiver, a texel's sub-samples (ray_args)."""
+    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own, group)
     # The analytic rungs' scene plan multiplies the forest in its own call; the exact rung's
     # rays already hit the instanced trees when its tracer holds them.
     if (plan.forest is not None and len(p) and method not in PLAN_METHODS
@@ -119,7 +120,7 @@ def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
 
 def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | None,
                            p: np.ndarray, n: np.ndarray, method: str, tau: float,
-                           own=None) -> np.ndarray:
+                           own=None, group=1) -> np.ndarray:
     """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree.
 
     Any receiver inside a tree's shells (its own canopy, a trunk, but also ground or grass that
@@ -138,7 +139,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
         ids = own_ids(plan, grass_key, own)
         if ray_budget.applies(plan, grass_key, ids):
             return ray_budget.trace(plan, grass_key, p, n, ids)
-        return trace(plan, p, n, plan.settings.samples, own=ids)
+        return trace(plan, p, n, own=ids, **ray_args(plan, group))
     if method == "grid":
         return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
     if method == "regression":
@@ -146,7 +147,7 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if method == "hybrid":
         # The near rays see the blades around a ground point: a grass layer on top would count
         # them twice (round tree on a grass field: ground bias -0.13 against rays, now +0.02).
-        return _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own))
+        return _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own), group)
     # The analytic rungs: the whole per-receiver composition, grass layers and forest
     # included, in one native call (docs/DESIGN.md, 'How each role is lit').
     if plan.role_scale.get(role, 1.0) != 1.0:
@@ -217,6 +218,17 @@ def _tracer(plan: Plan):
     return plan.tracer
 
 
+def ray_args(plan: Plan, group=1) -> dict:
+    """RayTracer.ao's ray arguments for receivers in groups of `group` points (a texel's
+    anti-aliasing sub-samples): one set of Samples per group, rounded up to a multiple of the
+    group, dealt out to its points in turn (point_group). Every point then casts as many rays,
+    so the plain mean of its points' AO is the texel's one stratified estimate."""
+    if group <= 1:
+        return {"samples": int(plan.settings.samples)}
+    return {"samples": texel_budget.texel_rays(plan.settings.samples, group),
+            "point_group": int(group)}
+
+
 def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra):
     """Ray-traced AO of points p, n against the scene's triangles (the exact rung). own: the
     tracer-mesh ids of own_ids, so each ray skips only its receiver's own triangles, as Cycles'
@@ -242,7 +254,7 @@ def _grid_ao(plan, p, n):
 HYBRID_VOXELS = 2.0
 
 
-def _hybrid_ao(plan, p, n, own=None):
+def _hybrid_ao(plan, p, n, own=None, group=1):
     """Near exact, far statistical (native ao_near_far): settings.samples rays out to
     HYBRID_VOXELS grid voxels, started as the exact rung's (own: the tracer ids of own_ids, a
     vertex at Cycles' bake point), times the density grid's transmittance beyond
@@ -250,9 +262,9 @@ def _hybrid_ao(plan, p, n, own=None):
     the caller traces the whole distance instead (the rays see the grass themselves)."""
     far = ray_length(plan.settings.distance)
     near = min(HYBRID_VOXELS * float(plan.grid.voxel_size), far)
-    return np.asarray(_core.ao_near_far(_tracer(plan), plan.grid, p, n, near,
-                                        samples=int(plan.settings.samples), distance=far,
-                                        seed=int(plan.settings.seed), **(own or {})),
+    return np.asarray(_core.ao_near_far(_tracer(plan), plan.grid, p, n, near, distance=far,
+                                        seed=int(plan.settings.seed), **ray_args(plan, group),
+                                        **(own or {})),
                       dtype=np.float32)
 
 

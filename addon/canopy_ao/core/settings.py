@@ -239,6 +239,17 @@ OPTIONS = (
            group="output", cli="--uv"),
     Option("resolution", "int", 1024, "Resolution", "Texel mode: image size in texels",
            group="output", min=1, max=16384),
+    # 2: four points stratify the footprint (Cycles' own texel bake jitters its samples over
+    # it), each still with a quarter of the rays; memory and per-point setup grow as N².
+    Option("texel_aa", "int", 2, "Anti-Aliasing",
+           "Texel mode: each texel is the mean of N×N points spread over its footprint, its "
+           "Samples rays dealt out over them (Samples per texel, rounded up to a multiple of "
+           "N²; 1 = the texel centre alone)", group="output", min=1, max=8,
+           cli="--anti-aliasing"),
+    Option("margin", "int", 16, "Margin",
+           "Texel mode: texels each UV island's colour is extended past its edge (dilation), "
+           "so mip-maps and filtering do not bleed the background in; 16 as Blender's bake",
+           group="output", min=0, max=1024),
     Option("udim", "bool", False, "UDIM Tiles",
            "Texel mode: bake every UDIM tile the UVs use (tile 1001 + u + 10 v), one EXR per "
            "tile with its own margin, loaded as one tiled image (<UDIM> in its file name)",

@@ -70,7 +70,10 @@
 // corners cut the error to Cycles' 1024 samples at the Douglas fir's 4,372 vertices on one from
 // 0.129 to 0.038, and at its 1,791 tips (every face a residue one) from 0.121 to 0.042.
 // A texel (triangle_ids) on such a tracer starts at the texel itself with its own normal,
-// skips its triangle and gets the same terminator lift and ray offset. Checked against Cycles
+// skips its triangle and gets the same terminator lift and ray offset; a texel on its
+// triangle's boundary (a barycentric below 1e-5, Cycles' own floor: a conservative texel's
+// closest point, on an edge or a vertex such as a UV sphere's pole) first moves towards the
+// centroid by the bake reach, as a vertex's corner does, so no face meeting there stops it. Checked against Cycles
 // (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
 // 1024 samples): a vertex of a branch piece lying 25–90 µm from another piece's face, an
 // isolated square tube (1.0 where a start inside a face without the lift gives 0.85–0.89), a
@@ -184,6 +187,13 @@ struct RayTraceOptions {
   /// rays whatever its corners (per_corner false; docs/DESIGN.md, 'Rays against Cycles'
   /// samples').
   const std::int32_t* point_samples = nullptr;
+  /// Consecutive points that form one receiver (≥ 1): a texel's anti-aliasing sub-samples.
+  /// Point i (its row in the call) is slot i mod g of group i / g; its count is the group's:
+  /// one set of max(count, g) directions keyed by the group, dealt out to its points in turn
+  /// (the point casts rays slot, slot + g, slot + 2g, ...), so the texel casts its count in
+  /// all and the points' mean is one stratified estimate over its footprint. A point with a
+  /// vertex id keeps its own set. Calls must not split a group (the row index decides it).
+  int point_group = 1;
 };
 
 /// The primitives each receiver lies on (see "Origins" above). Either pointer may be null (no
