@@ -101,8 +101,18 @@ class Session:
             why = mesh_io.check_attribute(obj, self.attribute, False)
             if why:
                 raise CanopyAOError(why)
-        for obj in objs:
-            mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
+        if is_render(depsgraph):
+            # Into the render's own evaluated meshes, untagged: a tag on an original would make
+            # the render's depsgraph copy it (and its shape keys, its object's modifiers) again
+            # from the original, which a render never animates: every frame would show the
+            # geometry of the frame the viewport last evaluated.
+            attrs = [mesh_io.evaluated_ao_attribute(obj, depsgraph, self.attribute)
+                     for obj in objs]
+            for obj, attr in zip(objs, attrs):
+                mesh_io.write_evaluated_ao(attr, aos[obj.name])
+        else:
+            for obj in objs:
+                mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
         tm["write"] = time.perf_counter() - t0
         tm["total"] += tm["write"]
         self.timings = tm
@@ -170,11 +180,20 @@ def _rebuild(scene, depsgraph):
                                  if str(i) in stored}
         _SESSIONS[scene.name] = session = Session(job)
         return session
+    if is_render(depsgraph):
+        raise CanopyAOError("live AO is on but was never baked in this file: bake once with "
+                            "Live on (or the CLI's --live) before rendering")
     # Not the Cycles check: seconds of Cycles baking inside a frame change.
     job = BakeJob(ctx, [], dict(scene_options(scene), live=True, check_cycles=False))
     job.run()
     job.commit(ctx)  # commit begins the session (job.py)
     return _SESSIONS[scene.name]
+
+
+def is_render(depsgraph):
+    """True for a render's depsgraph (F12, Ctrl+F12, ``blender -b … -a``), which animates its
+    own copies of the data and never the originals."""
+    return getattr(depsgraph, "mode", 'VIEWPORT') == 'RENDER'
 
 
 def suspend(on):
