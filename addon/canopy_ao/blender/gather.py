@@ -6,6 +6,7 @@ import time
 import numpy as np
 
 from . import mesh_io
+from .visibility import RenderVisibility
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
 from ..core.scene import SceneItem
@@ -86,7 +87,7 @@ def is_candidate(obj):
 
 def bake_targets(context, object_names):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
-    mesh that renders (renders()). Raises CanopyAOError when there are none or a name is wrong."""
+    mesh that renders (visibility.py). Raises CanopyAOError when there are none or a name is wrong."""
     scene = context.scene
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
@@ -100,9 +101,10 @@ def bake_targets(context, object_names):
     else:
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
+            vis = RenderVisibility(context.view_layer)
             targets = [o for o in scene.objects
                        if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
-                       and renders(o)]
+                       and vis.mesh_renders(o)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets)
@@ -134,22 +136,24 @@ def check_writable(targets):
                             " (nothing was changed)")
 
 
-def renders(obj):
-    """False for a mesh Cycles leaves out of the render, so out of its AO rays too: disabled
-    in renders, or an instancer (a particle emitter, a dupli-face parent) whose own mesh is
-    not shown in renders (Show Emitter off)."""
-    return not obj.hide_render and (not obj.is_instancer or obj.show_instancer_for_render)
-
-
-def scene_items(context, depsgraph, targets, opts, timings):
-    """Every visible mesh that renders (trees shade a selected ground) and every target as
-    SceneItems.
+def scene_items(context, depsgraph, targets, opts, timings, notes=None):
+    """Every mesh Cycles renders (visibility.py: trees shade a selected ground, also when hidden
+    in the viewport) and every target as SceneItems.
 
     Returns (items, objects {name: object}, how {name: why this role}); IGNORE objects are left
-    out. Triangles are fetched only where the bake or a role guess needs them."""
+    out. Triangles are fetched only where the bake or a role guess needs them. notes: a list to
+    which a line is added for each occluder read without its modifiers (hidden in the viewport,
+    so the depsgraph did not evaluate it)."""
+    vis = RenderVisibility(context.view_layer)
     members = {o.name: o for o in context.scene.objects
-               if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
-               and renders(o)}
+               if is_candidate(o) and vis.mesh_renders(o)}
+    unevaluated = sorted(n for n, o in members.items()
+                         if not o.evaluated_get(depsgraph).is_evaluated
+                         and not mesh_io.evaluated_is_original(o))
+    if unevaluated and notes is not None:
+        notes.append(f"{', '.join(unevaluated)}: hidden in the viewport, so occluding as the "
+                     "mesh without its modifiers and shape keys (Cycles renders them "
+                     "deformed); show them (eye icon) for the deformed shape")
     for o in targets:
         members.setdefault(o.name, o)
     target_names = {o.name for o in targets}

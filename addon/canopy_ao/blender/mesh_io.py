@@ -28,7 +28,7 @@ def _vertex_normals(mesh, n):
     return out
 
 
-def _evaluated_is_original(obj):
+def evaluated_is_original(obj):
     """True when the evaluated mesh has the same geometry as obj.data, so it can be read without
     a to_mesh() copy (~35 ms per million vertices): no modifiers, no shape keys, not in edit
     mode (whose data lives in a BMesh until it is left), and no armature / lattice / curve
@@ -67,7 +67,7 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     evaluated = obj.evaluated_get(depsgraph)
     matrix = np.array(evaluated.matrix_world, dtype=np.float64)
     ob_eval = None
-    if _evaluated_is_original(obj):
+    if evaluated_is_original(obj):
         mesh = obj.data
     else:
         ob_eval = evaluated
