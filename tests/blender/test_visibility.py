@@ -59,6 +59,27 @@ def _instanced(sc):
     return empty
 
 
+def _particles(sc):
+    """The roof instanced by one particle (emitted at frame 0 from the emitter's one vertex,
+    no physics), the roof itself excluded from the view layer 50 m up; the emitter's own mesh
+    not rendered (Show Instancer off)."""
+    src = _collection("RoofSrc")
+    roof = _roof(src)
+    roof.location.z = 50.0
+    _layer("RoofSrc").exclude = True
+    me = bpy.data.meshes.new("Dot")
+    me.from_pydata([(0.0, 0.0, 0.0)], [], [])
+    emitter = bpy.data.objects.new("Emitter", me)
+    sc.collection.objects.link(emitter)
+    ps = emitter.modifiers.new("Particles", 'PARTICLE_SYSTEM').particle_system.settings
+    ps.type, ps.count, ps.emit_from, ps.use_emit_random = 'EMITTER', 1, 'VERT', False
+    ps.frame_start = ps.frame_end = 0
+    ps.lifetime, ps.physics_type, ps.normal_factor = 1000, 'NO', 0.0
+    ps.render_type, ps.instance_object, ps.particle_size = 'OBJECT', roof, 1.0
+    emitter.show_instancer_for_render = False
+    return emitter
+
+
 def _in_two(sc):
     a, b = _collection("A"), _collection("B")
     b.objects.link(_roof(a))
@@ -149,6 +170,14 @@ ROWS = [
      lambda sc: (_instanced(sc), setattr(bpy.data.collections["RoofSrc"], "hide_render", True)),
      1),
     ("child of the instanced collection disabled in renders", _instanced_child, 1),
+    ("particle instance", _particles, 0),
+    ("particle emitter disabled in renders",
+     lambda sc: setattr(_particles(sc), "hide_render", True), 1),
+    ("particle instance of an object disabled in renders",
+     lambda sc: (_particles(sc), setattr(bpy.data.objects["Roof"], "hide_render", True)), 0),
+    ("particle instance of an object with ray visibility shadow off",
+     lambda sc: (_particles(sc), setattr(bpy.data.objects["Roof"], "visible_shadow", False)),
+     1),
 ]
 
 
