@@ -108,6 +108,7 @@ class Session:
             # geometry of the frame the viewport last evaluated.
             attrs = [mesh_io.evaluated_ao_attribute(obj, depsgraph, self.attribute)
                      for obj in objs]
+            _warn_persistent(scene)
             for obj, attr in zip(objs, attrs):
                 mesh_io.write_evaluated_ao(attr, aos[obj.name])
         else:
@@ -188,6 +189,19 @@ def _rebuild(scene, depsgraph):
     job.run()
     job.commit(ctx)  # commit begins the session (job.py)
     return _SESSIONS[scene.name]
+
+
+_WARNED = set()  # scenes warned that Persistent Data keeps still meshes' AO
+
+
+def _warn_persistent(scene):
+    """Once per scene: with Persistent Data, Cycles re-reads only the meshes whose geometry the
+    frame changed, so a still mesh (a ground under a swaying tree) keeps its first frame's AO."""
+    if scene.render.use_persistent_data and scene.name not in _WARNED:
+        _WARNED.add(scene.name)
+        print("canopy_ao: warning: Render > Performance > Persistent Data is on: Cycles keeps "
+              "the AO of meshes that do not move from the first rendered frame; turn it off for "
+              "live AO renders", file=sys.stderr, flush=True)
 
 
 def is_render(depsgraph):
