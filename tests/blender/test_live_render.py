@@ -122,3 +122,10 @@ def test_an_animation_render_with_live_ao_shows_each_frames_geometry_and_ao(
     finally:
         live.stop(bpy.context.scene)
         _clear_scene()
+
+
+def test_renders_started_in_a_window_follow_the_frame(user_scripts):
+    """In a real window (Xvfb): Ctrl+F12 with Lock Interface on and F12 with it off render each
+    frame as a full bake of it renders (ui_live_render.py). Skipped without xvfb-run."""
+    from ui_harness import run_in_window
+    run_in_window(os.path.join(os.path.dirname(__file__), "ui_live_render.py"), user_scripts)
