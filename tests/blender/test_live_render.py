@@ -11,7 +11,7 @@ import pytest
 
 import tree_scene
 from conftest import _clear_scene, add_mesh
-from canopy_ao.blender import live, properties
+from canopy_ao.blender import live, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 
 ROLES = {"Trunk": 'TRUNK', "Leaves": 'CANOPY', "Ground": 'GROUND', "Grass": 'GRASS'}
@@ -129,3 +129,35 @@ def test_renders_started_in_a_window_follow_the_frame(user_scripts):
     frame as a full bake of it renders (ui_live_render.py). Skipped without xvfb-run."""
     from ui_harness import run_in_window
     run_in_window(os.path.join(os.path.dirname(__file__), "ui_live_render.py"), user_scripts)
+
+
+def test_a_render_leaves_the_files_meshes_alone_also_for_a_target_it_does_not_render(
+        tmp_path):
+    """A live target disabled in renders is not in the render's depsgraph (evaluated_get gives
+    the original): the render writes nothing into it, and live AO goes on without an error."""
+    scene = _deforming_tree("shape_key")
+    try:
+        opts = dict(properties.scene_options(scene), method="ellipsoid", tau=1.7,
+                    show_proxies=False, live=True)
+        run_bake(bpy.context, ["Trunk", "Leaves", "Ground", "Grass"], opts)
+        grass = scene.objects["Grass"]
+        before = mesh_io.read_ao_attribute(grass, "CanopyAO")
+        grass.hide_render = True
+        seen = []
+
+        def after_live(sc, depsgraph=None):  # runs after live AO's handler (added later)
+            if depsgraph is not None and depsgraph.mode == 'RENDER':
+                seen.append(np.abs(mesh_io.read_ao_attribute(grass, "CanopyAO")
+                                   - before).max())
+        bpy.app.handlers.frame_change_post.append(after_live)
+        try:
+            scene.frame_current = 3  # the render's frame change only
+            scene.render.filepath = str(tmp_path / "still.png")
+            bpy.ops.render.render(write_still=True)
+        finally:
+            bpy.app.handlers.frame_change_post.remove(after_live)
+        assert seen == [0.0]
+        assert scene.canopy_ao.live, scene.canopy_ao.last_report
+    finally:
+        live.stop(bpy.context.scene)
+        _clear_scene()

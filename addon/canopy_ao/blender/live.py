@@ -110,7 +110,8 @@ class Session:
                      for obj in objs]
             _warn_persistent(scene)
             for obj, attr in zip(objs, attrs):
-                mesh_io.write_evaluated_ao(attr, aos[obj.name])
+                if attr is not None:  # None: not in this render
+                    mesh_io.write_evaluated_ao(attr, aos[obj.name])
         else:
             for obj in objs:
                 mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)

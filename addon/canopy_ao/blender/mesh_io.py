@@ -188,9 +188,13 @@ def write_ao_attribute(obj, name, ao, overwrite=False, checked=False):
 
 def evaluated_ao_attribute(obj, depsgraph, name):
     """The POINT FLOAT_COLOR attribute ``name`` of obj's mesh as the depsgraph evaluated it
-    (what that depsgraph's render draws); MeshIOError when the evaluated mesh has none (a
-    modifier dropped it, or no bake wrote it)."""
-    mesh = obj.evaluated_get(depsgraph).data
+    (what that depsgraph's render draws); None when the depsgraph does not hold obj (not in
+    the render: evaluated_get would give the original); MeshIOError when the evaluated mesh has
+    none (a modifier dropped it, or no bake wrote it)."""
+    evaluated = obj.evaluated_get(depsgraph)
+    if not evaluated.is_evaluated:
+        return None
+    mesh = evaluated.data
     attr = mesh.attributes.get(name)
     if attr is None or attr.data_type != 'FLOAT_COLOR' or attr.domain != 'POINT':
         raise MeshIOError(f"{obj.name}: its evaluated mesh has no '{name}' colour attribute per "
