@@ -219,3 +219,15 @@ def test_an_occluder_hidden_in_the_viewport_with_modifiers_is_named_in_the_notes
                 samples=SAMPLES, distance=DISTANCE, show_proxies=False)
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
     assert any(n.startswith("Roof: hidden in the viewport") for n in rep["notes"]), rep["notes"]
+
+
+def test_a_target_that_casts_no_shadow_is_refused_unwritten(ground):
+    """Cycles' AO rays pass through an object with Ray Visibility > Shadow off, its own rays
+    too (an open box's floor reads 0.08 with it on, 1.00 with it off: measured), which a bake
+    here cannot do: refused by name, nothing written."""
+    _roof(bpy.context.scene.collection)
+    ground.visible_shadow = False
+    with pytest.raises(RuntimeError, match="Ground: Ray Visibility > Shadow is off"):
+        bpy.ops.canopy_ao.bake(objects="Ground", method="raytrace", samples=SAMPLES,
+                               distance=DISTANCE, show_proxies=False)
+    assert "CanopyAO" not in ground.data.attributes

@@ -6,7 +6,7 @@ import time
 import numpy as np
 
 from . import mesh_io
-from .visibility import RenderVisibility
+from .visibility import RenderVisibility, casts_shadow
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
 from ..core.scene import SceneItem
@@ -87,7 +87,9 @@ def is_candidate(obj):
 
 def bake_targets(context, object_names):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
-    mesh that renders (visibility.py). Raises CanopyAOError when there are none or a name is wrong."""
+    mesh that renders and occludes (visibility.py). Raises CanopyAOError when there are none, a
+    name is wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays,
+    which a bake here cannot do)."""
     scene = context.scene
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
@@ -108,6 +110,12 @@ def bake_targets(context, object_names):
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets)
+    shadowless = [o.name for o in targets if not casts_shadow(o)]
+    if shadowless:
+        raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
+                            "Cycles' AO rays pass through it, its own included, which this "
+                            "bake cannot do; turn Shadow on, or bake other objects (nothing "
+                            "was changed)")
     return targets
 
 
