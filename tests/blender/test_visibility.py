@@ -3,6 +3,10 @@ one row of the table per test, a 1 m ground under a 20 m roof 0.3 m above it, th
 one visibility setting; the ground baked by the add-on's operator (exact rung) and by Cycles'
 own AO bake. Cycles reads 0.00 under the roof and 1.00 without it (16 samples, distance 5)."""
 
+import json
+import os
+import subprocess
+
 import bpy
 import numpy as np
 import pytest
@@ -231,3 +235,25 @@ def test_a_target_that_casts_no_shadow_is_refused_unwritten(ground):
         bpy.ops.canopy_ao.bake(objects="Ground", method="raytrace", samples=SAMPLES,
                                distance=DISTANCE, show_proxies=False)
     assert "CanopyAO" not in ground.data.attributes
+
+
+def test_the_command_lines_cycles_check_agrees_under_a_roof_disabled_in_renders(
+        ground, tmp_path, user_scripts):
+    """The reported case, through the CLI with its Cycles check: a roof in a collection
+    disabled in renders; the ground reads open (before: 0.01) and the check's MAE is small
+    (before: 0.92)."""
+    _roof(_collection("Roofs"))
+    bpy.data.collections["Roofs"].hide_render = True
+    path, report = str(tmp_path / "roof.blend"), tmp_path / "report.json"
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    cmd = ["blender", "-b", "--factory-startup", path, "--python-exit-code", "1",
+           "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()", "--",
+           "--objects", "Ground", "--method", "raytrace", "--samples", str(SAMPLES),
+           "--distance", str(DISTANCE), "--no-proxies", "--check-cycles",
+           "--cycles-samples", str(SAMPLES), "--report", str(report)]
+    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    rep = json.loads(report.read_text())["objects"]["Ground"]
+    assert rep["ao_mean"] > 1.0 - TOL
+    assert rep["cycles"]["mae"] < TOL
