@@ -83,17 +83,28 @@ def _pixels(path):
         bpy.data.images.remove(img)
 
 
-@pytest.mark.parametrize("how, persistent", [("shape_key", False), ("simple_deform", False),
-                                             ("shape_key", True)])
+@pytest.mark.parametrize("how, persistent, armed", [
+    ("shape_key", False, False), ("simple_deform", False, False), ("shape_key", True, False),
+    ("simple_deform", False, True)])
 def test_an_animation_render_with_live_ao_shows_each_frames_geometry_and_ao(
-        how, persistent, tmp_path, user_scripts):
+        how, persistent, armed, tmp_path, user_scripts):
+    """Through the CLI's --live, or (armed) a file saved with live AO on rendered with no
+    add-on arguments (a farm task re-arming from the file's record)."""
     scene = _deforming_tree(how, persistent)
     path = str(tmp_path / "anim.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
     env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
-    cmd = ["blender", "-b", "--factory-startup", path, "--python-exit-code", "1",
-           "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()",
-           "-o", str(tmp_path / "live_"), "-a", "--", "--live"] + LIVE_ARGS
+    if armed:
+        run_bake(bpy.context, [], dict(properties.scene_options(scene), method="ellipsoid",
+                                       tau=1.7, show_proxies=False, live=True))
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+        live.stop(scene)
+        cmd = ["blender", "-b", "--factory-startup", "--addons", "canopy_ao", path,
+               "-o", str(tmp_path / "live_"), "-a"]
+    else:
+        bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+        cmd = ["blender", "-b", "--factory-startup", path, "--python-exit-code", "1",
+               "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()",
+               "-o", str(tmp_path / "live_"), "-a", "--", "--live"] + LIVE_ARGS
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "canopy_ao: error" not in out.stderr, out.stderr
