@@ -248,8 +248,8 @@ def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_pa
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "canopy_ao: error" not in out.stderr, out.stderr
-    # A render writes each frame's AO into its own evaluated meshes (test_live_render.py
-    # checks the frames): the file's mesh keeps the AO of the frame the CLI baked.
+    # The leaves are keyed (a shape key): a render writes their AO into its own evaluated
+    # mesh (test_live_render.py checks the frames), the file's keeps the frame the CLI baked.
     kept = np.load(tmp_path / "ao.npy")
     np.testing.assert_allclose(kept, _full("ellipsoid", 1.7)["Leaves"], atol=2e-6)
     assert os.path.exists(str(tmp_path / "frame_0004.png"))

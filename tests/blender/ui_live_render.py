@@ -1,6 +1,7 @@
 """Windowed check of live AO in the renders a user starts from the UI: Ctrl+F12 (an animation
-render job, Lock Interface on) and F12 (a still render job, Lock Interface off) each show the
-frame's geometry and AO, pixel for pixel what a full bake of that frame renders.
+render job, Lock Interface on), F12 (a still render job, Lock Interface off) and Ctrl+F12 in
+Eevee each show the frame's geometry and AO, pixel for pixel what a full bake of that frame
+renders.
 
     xvfb-run -a blender --factory-startup --enable-event-simulate --python tests/blender/ui_live_render.py
 
@@ -66,6 +67,15 @@ def steps():
     yield 0.5
     still = os.path.join(TMP, "still_3.png")
     bpy.data.images["Render Result"].save_render(still)
+    # Eevee (a GPU engine: it redraws a mesh only when the depsgraph updated it), Ctrl+F12.
+    scene.frame_set(1)
+    scene.render.engine = 'BLENDER_EEVEE'
+    scene.render.filepath = os.path.join(TMP, "eevee_")
+    done.clear()
+    with bpy.context.temp_override(**window_ctx()):
+        r = bpy.ops.render.render('INVOKE_DEFAULT', animation=True)
+    ok = yield from wait_for_render(done)
+    check(ok, "the Eevee animation render did not complete in 60 s")
     live.stop(scene)
     # The reference: each frame baked in full (same rung and τ) and rendered in the foreground.
     opts = dict(properties.scene_options(scene), method="ellipsoid", tau=1.7,
@@ -73,16 +83,19 @@ def steps():
     for frame in (1, 2, 3):
         scene.frame_set(frame)
         run_bake(bpy.context, [], opts)
-        scene.render.filepath = os.path.join(TMP, f"full_{frame}.png")
-        bpy.ops.render.render(write_still=True)
-        want = _pixels(scene.render.filepath)
-        shots = [("Ctrl+F12", os.path.join(TMP, f"anim_{frame:04d}.png"))]
+        shots = {'CYCLES': [("Ctrl+F12", os.path.join(TMP, f"anim_{frame:04d}.png"))],
+                 'BLENDER_EEVEE': [("Eevee Ctrl+F12", os.path.join(TMP,
+                                                                  f"eevee_{frame:04d}.png"))]}
         if frame == 3:
-            shots.append(("F12", still))
-        for what, path in shots:
-            got = _pixels(path)
-            err = np.abs(got - want).max()
-            check(err <= PIXEL_TOL, f"{what} at frame {frame}: {err:.3f} from a full bake")
+            shots['CYCLES'].append(("F12", still))
+        for engine, pairs in shots.items():
+            scene.render.engine = engine
+            scene.render.filepath = os.path.join(TMP, f"full_{engine}_{frame}.png")
+            bpy.ops.render.render(write_still=True)
+            want = _pixels(scene.render.filepath)
+            for what, path in pairs:
+                err = np.abs(_pixels(path) - want).max()
+                check(err <= PIXEL_TOL, f"{what} at frame {frame}: {err:.3f} from a full bake")
     print("UI-OK", flush=True)
     os._exit(0)
 

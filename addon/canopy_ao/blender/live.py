@@ -27,7 +27,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import mesh_io
+from . import live_render, mesh_io
+from .live_render import is_render
 from .. import core
 from ..core import live as core_live
 from ..core.native import CanopyAOError
@@ -102,16 +103,7 @@ class Session:
             if why:
                 raise CanopyAOError(why)
         if is_render(depsgraph):
-            # Into the render's own evaluated meshes, untagged: a tag on an original would make
-            # the render's depsgraph copy it (and its shape keys, its object's modifiers) again
-            # from the original, which a render never animates: every frame would show the
-            # geometry of the frame the viewport last evaluated.
-            attrs = [mesh_io.evaluated_ao_attribute(obj, depsgraph, self.attribute)
-                     for obj in objs]
-            _warn_persistent(scene)
-            for obj, attr in zip(objs, attrs):
-                if attr is not None:  # None: not in this render
-                    mesh_io.write_evaluated_ao(attr, aos[obj.name])
+            live_render.write_frame(scene, depsgraph, objs, self.attribute, aos)
         else:
             for obj in objs:
                 mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
@@ -151,6 +143,7 @@ def begin(job):
     """After a live bake's commit: the scene's session and its record (saved with the file)."""
     session = Session(job)
     _SESSIONS[job.scene.name] = session
+    live_render.forget()
     job.scene[RECORD] = session.record
     # ID property arrays take and give numpy buffers (1M labels in < 1 ms); keys are indices,
     # as tree names may be longer than an ID property key.
@@ -190,25 +183,6 @@ def _rebuild(scene, depsgraph):
     job.run()
     job.commit(ctx)  # commit begins the session (job.py)
     return _SESSIONS[scene.name]
-
-
-_WARNED = set()  # scenes warned that Persistent Data keeps still meshes' AO
-
-
-def _warn_persistent(scene):
-    """Once per scene: with Persistent Data, Cycles re-reads only the meshes whose geometry the
-    frame changed, so a still mesh (a ground under a swaying tree) keeps its first frame's AO."""
-    if scene.render.use_persistent_data and scene.name not in _WARNED:
-        _WARNED.add(scene.name)
-        print("canopy_ao: warning: Render > Performance > Persistent Data is on: Cycles keeps "
-              "the AO of meshes that do not move from the first rendered frame; turn it off for "
-              "live AO renders", file=sys.stderr, flush=True)
-
-
-def is_render(depsgraph):
-    """True for a render's depsgraph (F12, Ctrl+F12, ``blender -b … -a``), which animates its
-    own copies of the data and never the originals."""
-    return getattr(depsgraph, "mode", 'VIEWPORT') == 'RENDER'
 
 
 def suspend(on):
@@ -262,6 +236,7 @@ def _on_frame_change(scene, depsgraph=None):
 def _forget(*_args):
     """Undo, redo and file loads replace every datablock: drop what the sessions cached."""
     _SESSIONS.clear()
+    live_render.forget()
 
 
 class CANOPY_AO_OT_live_stop(bpy.types.Operator):
