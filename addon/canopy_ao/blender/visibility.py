@@ -10,8 +10,9 @@
   diffuse, glossy, transmission and volume visibility, holdout, indirect-only and shadow
   catcher do not change what occludes.
 - An instancer's own mesh renders with Show Instancer (for renders). Its instances render when
-  the instancer renders and casts shadows; a collection instance leaves out objects disabled in
-  renders and collections (the instanced one included) disabled in renders.
+  the instancer renders and casts shadows, and the instanced object casts shadows; a collection
+  instance leaves out objects disabled in renders and collections (the instanced one included)
+  disabled in renders, while a particle instance of an object disabled in renders renders.
 """
 
 _INSTANCE_TYPES_WITH_COLLECTIONS = ('COLLECTION',)
