@@ -222,7 +222,7 @@ def test_an_occluder_hidden_in_the_viewport_with_modifiers_is_named_in_the_notes
     opts = dict(properties.scene_options(bpy.context.scene), method="raytrace",
                 samples=SAMPLES, distance=DISTANCE, show_proxies=False)
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
-    assert any(n.startswith("Roof: hidden in the viewport") for n in rep["notes"]), rep["notes"]
+    assert any(n.startswith("Roof: disabled in viewports") for n in rep["notes"]), rep["notes"]
 
 
 def test_a_target_that_casts_no_shadow_is_refused_unwritten(ground):
@@ -257,3 +257,20 @@ def test_the_command_lines_cycles_check_agrees_under_a_roof_disabled_in_renders(
     rep = json.loads(report.read_text())["objects"]["Ground"]
     assert rep["ao_mean"] > 1.0 - TOL
     assert rep["cycles"]["mae"] < TOL
+
+
+@pytest.mark.parametrize("hide", ["eye", "disabled"])
+def test_an_instancer_hidden_in_the_viewport_is_named_in_the_notes(ground, hide):
+    """Cycles renders the instances of an instancer hidden in the viewport (ground 0.00,
+    measured); the viewport's depsgraph does not list them, so they do not occlude here (1.00)
+    and the report names the instancer."""
+    empty = _instanced(bpy.context.scene)
+    if hide == "eye":
+        empty.hide_set(True)
+    else:
+        empty.hide_viewport = True
+    opts = dict(properties.scene_options(bpy.context.scene), method="raytrace",
+                samples=SAMPLES, distance=DISTANCE, show_proxies=False)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert any(n.startswith("RoofInstance: hidden in the viewport, so their instances")
+               for n in rep["notes"]), rep["notes"]

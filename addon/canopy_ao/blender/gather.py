@@ -144,6 +144,35 @@ def check_writable(targets):
                             " (nothing was changed)")
 
 
+def _instances_anything(obj):
+    """True for an object that instances others (a collection, its vertices or faces, or
+    particles drawn as an object or a collection)."""
+    return obj.instance_type != 'NONE' or any(
+        ps.settings.render_type in ('OBJECT', 'COLLECTION')
+        for ps in getattr(obj, "particle_systems", ()))
+
+
+def _viewport_notes(context, depsgraph, vis, members):
+    """What the viewport's depsgraph hides from a bake that Cycles renders (docs/DESIGN.md,
+    'What occludes'): meshes disabled in viewports (not evaluated: read without modifiers and
+    shape keys), and the instances of instancers hidden in the viewport (not listed)."""
+    notes = []
+    unevaluated = sorted(n for n, o in members.items()
+                         if not o.evaluated_get(depsgraph).is_evaluated
+                         and not mesh_io.evaluated_is_original(o))
+    if unevaluated:
+        notes.append(f"{', '.join(unevaluated)}: disabled in viewports, so occluding as the "
+                     "mesh without its modifiers and shape keys (Cycles renders them "
+                     "deformed); enable them in viewports for the deformed shape")
+    hidden = sorted(o.name for o in context.scene.objects
+                    if _instances_anything(o) and vis.object_renders(o)
+                    and not o.visible_get(view_layer=context.view_layer))
+    if hidden:
+        notes.append(f"{', '.join(hidden)}: hidden in the viewport, so their instances do not "
+                     "occlude here (Cycles renders them); show them for the bake")
+    return notes
+
+
 def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     """Every mesh Cycles renders (visibility.py: trees shade a selected ground, also when hidden
     in the viewport) and every target as SceneItems.
@@ -155,13 +184,8 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     vis = RenderVisibility(context.view_layer)
     members = {o.name: o for o in context.scene.objects
                if is_candidate(o) and vis.mesh_renders(o)}
-    unevaluated = sorted(n for n, o in members.items()
-                         if not o.evaluated_get(depsgraph).is_evaluated
-                         and not mesh_io.evaluated_is_original(o))
-    if unevaluated and notes is not None:
-        notes.append(f"{', '.join(unevaluated)}: hidden in the viewport, so occluding as the "
-                     "mesh without its modifiers and shape keys (Cycles renders them "
-                     "deformed); show them (eye icon) for the deformed shape")
+    if notes is not None:
+        notes.extend(_viewport_notes(context, depsgraph, vis, members))
     for o in targets:
         members.setdefault(o.name, o)
     target_names = {o.name for o in targets}
