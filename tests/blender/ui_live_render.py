@@ -32,6 +32,17 @@ def wait_for_render(done):
     return False
 
 
+def _set_eevee(scene):
+    """Eevee's engine name: BLENDER_EEVEE_NEXT in 4.2-4.4, BLENDER_EEVEE before and after."""
+    for name in ('BLENDER_EEVEE_NEXT', 'BLENDER_EEVEE'):
+        try:
+            scene.render.engine = name
+            return name
+        except TypeError:
+            continue
+    raise AssertionError("no Eevee engine")
+
+
 def steps():
     import addon_utils
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
@@ -69,7 +80,7 @@ def steps():
     bpy.data.images["Render Result"].save_render(still)
     # Eevee (a GPU engine: it redraws a mesh only when the depsgraph updated it), Ctrl+F12.
     scene.frame_set(1)
-    scene.render.engine = 'BLENDER_EEVEE'
+    eevee = _set_eevee(scene)
     scene.render.filepath = os.path.join(TMP, "eevee_")
     done.clear()
     with bpy.context.temp_override(**window_ctx()):
@@ -84,8 +95,7 @@ def steps():
         scene.frame_set(frame)
         run_bake(bpy.context, [], opts)
         shots = {'CYCLES': [("Ctrl+F12", os.path.join(TMP, f"anim_{frame:04d}.png"))],
-                 'BLENDER_EEVEE': [("Eevee Ctrl+F12", os.path.join(TMP,
-                                                                  f"eevee_{frame:04d}.png"))]}
+                 eevee: [("Eevee Ctrl+F12", os.path.join(TMP, f"eevee_{frame:04d}.png"))]}
         if frame == 3:
             shots['CYCLES'].append(("F12", still))
         for engine, pairs in shots.items():
