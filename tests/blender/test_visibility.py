@@ -274,3 +274,22 @@ def test_an_instancer_hidden_in_the_viewport_is_named_in_the_notes(ground, hide)
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
     assert any(n.startswith("RoofInstance: hidden in the viewport, so their instances")
                for n in rep["notes"]), rep["notes"]
+
+
+@pytest.mark.parametrize("setting", ["render_only", "levels"])
+def test_modifiers_set_otherwise_for_renders_are_named_in_the_notes(ground, setting):
+    """Cycles' bake evaluates modifiers as a render does (a Displace shown in renders only
+    lifts the roof out of reach there: ground 1.00, measured; here 0.00): the report names
+    the object."""
+    roof = _roof(bpy.context.scene.collection)
+    if setting == "render_only":
+        lift = roof.modifiers.new("Lift", 'DISPLACE')
+        lift.strength, lift.show_viewport = 2 * DISTANCE, False
+    else:
+        roof.modifiers.new("Smooth", 'SUBSURF').render_levels = 3
+    opts = dict(properties.scene_options(bpy.context.scene), method="raytrace",
+                samples=SAMPLES, distance=DISTANCE, show_proxies=False)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert any(n.startswith("Roof: modifiers set differently for viewport and render")
+               for n in rep["notes"]), rep["notes"]
+    assert not any("Ground" in n for n in rep["notes"]), rep["notes"]

@@ -152,10 +152,19 @@ def _instances_anything(obj):
         for ps in getattr(obj, "particle_systems", ()))
 
 
+def _render_differs(obj):
+    """True when a modifier of obj is shown in viewports or renders only, or subdivides to
+    other levels in renders."""
+    return any(m.show_viewport != m.show_render
+               or getattr(m, "levels", None) != getattr(m, "render_levels", None)
+               for m in obj.modifiers)
+
+
 def _viewport_notes(context, depsgraph, vis, members):
     """What the viewport's depsgraph hides from a bake that Cycles renders (docs/DESIGN.md,
     'What occludes'): meshes disabled in viewports (not evaluated: read without modifiers and
-    shape keys), and the instances of instancers hidden in the viewport (not listed)."""
+    shape keys), modifiers set otherwise for renders, and the instances of instancers hidden in
+    the viewport (not listed)."""
     notes = []
     unevaluated = sorted(n for n, o in members.items()
                          if not o.evaluated_get(depsgraph).is_evaluated
@@ -164,6 +173,11 @@ def _viewport_notes(context, depsgraph, vis, members):
         notes.append(f"{', '.join(unevaluated)}: disabled in viewports, so occluding as the "
                      "mesh without its modifiers and shape keys (Cycles renders them "
                      "deformed); enable them in viewports for the deformed shape")
+    differ = sorted(n for n, o in members.items() if _render_differs(o))
+    if differ:
+        notes.append(f"{', '.join(differ)}: modifiers set differently for viewport and render "
+                     "(shown in one only, or other subdivision levels): the bake reads the "
+                     "viewport's shape, Cycles renders the other")
     hidden = sorted(o.name for o in context.scene.objects
                     if _instances_anything(o) and vis.object_renders(o)
                     and not o.visible_get(view_layer=context.view_layer))
