@@ -6,7 +6,9 @@ Each case is one argument list for `canopy_ao.cli.main(argv)` — the arguments 
 documented `blender -b scene.blend --addons canopy_ao --python-exit-code 1 --python-expr
 "import canopy_ao.cli; canopy_ao.cli.main()" -- ...` — drawn from the documented options with
 hostile values (nan, inf, 1e400, negative, huge integers, empty and odd names, unwritable
-paths, unknown flags). Many cases run in one Blender process (a worker started once, which
+paths, unknown flags), the scene's objects given random visibility settings (disabled in
+renders or viewports, hidden, no shadow rays, holdout, in a collection disabled in renders or
+excluded). Many cases run in one Blender process (a worker started once, which
 reopens a fresh copy of a small tree scene before every case), fed one at a time with a time
 limit like bench/fuzz.py, so a hang or a crash is attributed to its case and a new Blender
 takes over. A case passes when the CLI
@@ -83,6 +85,52 @@ def draw_argv(seed, case, tmp):
     if g.chance(0.05):
         argv.insert(int(g.r.integers(len(argv) + 1)), g.pick(["--bogus", "--samples", "-x"]))
     return argv
+
+
+# Visibility settings a case may give each object of the scene (docs/DESIGN.md, 'What
+# occludes'): render, viewport and ray visibility, holdout, and collections disabled in renders
+# or excluded from the view layer.
+VISIBILITY = ["hide_render", "hide_viewport", "hide", "no_shadow", "holdout",
+              "collection_hide_render", "collection_exclude"]
+
+
+def draw_visibility(seed, case):
+    """{object name: [settings]} for one case, from a stream of its own (the argument list's
+    draws stay as they were)."""
+    g = fuzz.Gen(seed + 1_000_003, case)
+    out = {}
+    for name in ("Leaves", "Trunk", "Ground"):
+        if g.chance(0.15):
+            out[name] = [g.pick(VISIBILITY) for _ in range(int(g.r.integers(1, 3)))]
+    return out
+
+
+def apply_visibility(settings):
+    import bpy
+    for name, flags in settings.items():
+        ob = bpy.data.objects[name]
+        for flag in flags:
+            if flag in ("hide_render", "hide_viewport"):
+                setattr(ob, flag, True)
+            elif flag == "hide":
+                try:
+                    ob.hide_set(True)
+                except RuntimeError:  # excluded from the view layer: Blender cannot hide it
+                    pass
+            elif flag == "no_shadow":
+                ob.visible_shadow = False
+            elif flag == "holdout":
+                ob.is_holdout = True
+            else:
+                coll = bpy.data.collections.new(f"{name}_{flag}")
+                bpy.context.scene.collection.children.link(coll)
+                coll.objects.link(ob)
+                if bpy.context.scene.collection.objects.get(ob.name) is not None:
+                    bpy.context.scene.collection.objects.unlink(ob)  # a second one: in both
+                if flag == "collection_hide_render":
+                    coll.hide_render = True
+                else:
+                    bpy.context.view_layer.layer_collection.children[coll.name].exclude = True
 
 
 # === Worker (inside Blender)
@@ -197,6 +245,8 @@ def worker(seed):
             shutil.copy(base, work)
             bpy.ops.wm.open_mainfile(filepath=work)
             argv = draw_argv(seed, case, tmp)
+            visibility = draw_visibility(seed, case)
+            apply_visibility(visibility)
             err, code = io.StringIO(), None
             try:
                 with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
@@ -214,7 +264,8 @@ def worker(seed):
                 status, detail = check_outcome(code, err.getvalue(), argv, tmp)
             name = label(argv)
             out.write(fuzz.Runner.PREFIX + json.dumps([case, name, status,
-                                                      f"{detail} | argv {argv}"]) + "\n")
+                                                      f"{detail} | argv {argv}"
+                                                      f" | visibility {visibility}"]) + "\n")
             out.flush()
             shutil.rmtree(tmp, ignore_errors=True)
 

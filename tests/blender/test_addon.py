@@ -604,7 +604,7 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     ob.scale = (2.0, 1.0, 0.5)  # non-uniform: normals by the inverse transpose, renormalised
     bpy.context.view_layer.update()
     dg = bpy.context.evaluated_depsgraph_get()
-    assert mio._evaluated_is_original(ob)
+    assert mio.evaluated_is_original(ob)
     fast = mio.evaluated_arrays(ob, dg)
     t = {}
     no_tris = mio.evaluated_arrays(ob, dg, triangles=False, timings=t)
@@ -613,7 +613,7 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     mod.strength = 0.0
     bpy.context.view_layer.update()
     dg = bpy.context.evaluated_depsgraph_get()
-    assert not mio._evaluated_is_original(ob)
+    assert not mio.evaluated_is_original(ob)
     copy = mio.evaluated_arrays(ob, dg)
     np.testing.assert_allclose(fast[0], copy[0], atol=1e-5)
     np.testing.assert_allclose(fast[1], copy[1], atol=1e-5)
@@ -627,9 +627,9 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     lat = bpy.data.objects.new("Lattice", bpy.data.lattices.new("Lattice"))
     bpy.context.scene.collection.objects.link(lat)
     ob.parent = lat
-    assert mio._evaluated_is_original(ob)
+    assert mio.evaluated_is_original(ob)
     ob.parent_type = 'LATTICE'  # deforms through a virtual modifier
-    assert not mio._evaluated_is_original(ob)
+    assert not mio.evaluated_is_original(ob)
 
 
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):

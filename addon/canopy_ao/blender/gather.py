@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 from . import mesh_io
+from .visibility import RenderVisibility, casts_shadow
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
 from ..core.scene import SceneItem, ray_length
@@ -99,7 +100,9 @@ def is_candidate(obj):
 
 def bake_targets(context, object_names):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
-    mesh that renders (renders()). Raises CanopyAOError when there are none or a name is wrong."""
+    mesh that renders and occludes (visibility.py). Raises CanopyAOError when there are none, a
+    name is wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays,
+    which a bake here cannot do)."""
     scene = context.scene
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
@@ -113,12 +116,19 @@ def bake_targets(context, object_names):
     else:
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
+            vis = RenderVisibility(context.view_layer)
             targets = [o for o in scene.objects
                        if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
-                       and renders(o)]
+                       and vis.mesh_renders(o)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets)
+    shadowless = [o.name for o in targets if not casts_shadow(o)]
+    if shadowless:
+        raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
+                            "Cycles' AO rays pass through it, its own included, which this "
+                            "bake cannot do; turn Shadow on, or bake other objects (nothing "
+                            "was changed)")
     return targets
 
 
@@ -147,22 +157,62 @@ def check_writable(targets):
                             " (nothing was changed)")
 
 
-def renders(obj):
-    """False for a mesh Cycles leaves out of the render, so out of its AO rays too: disabled
-    in renders, or an instancer (a particle emitter, a dupli-face parent) whose own mesh is
-    not shown in renders (Show Emitter off)."""
-    return not obj.hide_render and (not obj.is_instancer or obj.show_instancer_for_render)
+def _instances_anything(obj):
+    """True for an object that instances others (a collection, its vertices or faces, or
+    particles drawn as an object or a collection)."""
+    return obj.instance_type != 'NONE' or any(
+        ps.settings.render_type in ('OBJECT', 'COLLECTION')
+        for ps in getattr(obj, "particle_systems", ()))
 
 
-def scene_items(context, depsgraph, targets, opts, timings):
-    """Every visible mesh that renders (trees shade a selected ground) and every target as
-    SceneItems.
+def _render_differs(obj):
+    """True when a modifier of obj is shown in viewports or renders only, or subdivides to
+    other levels in renders."""
+    return any(m.show_viewport != m.show_render
+               or getattr(m, "levels", None) != getattr(m, "render_levels", None)
+               for m in obj.modifiers)
+
+
+def _viewport_notes(context, depsgraph, vis, members):
+    """What the viewport's depsgraph hides from a bake that Cycles renders (docs/DESIGN.md,
+    'What occludes'): meshes disabled in viewports (not evaluated: read without modifiers and
+    shape keys), modifiers set otherwise for renders, and the instances of instancers hidden in
+    the viewport (not listed)."""
+    notes = []
+    unevaluated = sorted(n for n, o in members.items()
+                         if not o.evaluated_get(depsgraph).is_evaluated
+                         and not mesh_io.evaluated_is_original(o))
+    if unevaluated:
+        notes.append(f"{', '.join(unevaluated)}: disabled in viewports, so occluding as the "
+                     "mesh without its modifiers and shape keys (Cycles renders them "
+                     "deformed); enable them in viewports for the deformed shape")
+    differ = sorted(n for n, o in members.items() if _render_differs(o))
+    if differ:
+        notes.append(f"{', '.join(differ)}: modifiers set differently for viewport and render "
+                     "(shown in one only, or other subdivision levels): the bake reads the "
+                     "viewport's shape, Cycles renders the other")
+    hidden = sorted(o.name for o in context.scene.objects
+                    if _instances_anything(o) and vis.object_renders(o)
+                    and not o.visible_get(view_layer=context.view_layer))
+    if hidden:
+        notes.append(f"{', '.join(hidden)}: hidden in the viewport, so their instances do not "
+                     "occlude here (Cycles renders them); show them for the bake")
+    return notes
+
+
+def scene_items(context, depsgraph, targets, opts, timings, notes=None):
+    """Every mesh Cycles renders (visibility.py: trees shade a selected ground, also when hidden
+    in the viewport) and every target as SceneItems.
 
     Returns (items, objects {name: object}, how {name: why this role}); IGNORE objects are left
-    out. Triangles are fetched only where the bake or a role guess needs them."""
+    out. Triangles are fetched only where the bake or a role guess needs them. notes: a list to
+    which a line is added for each occluder read without its modifiers (hidden in the viewport,
+    so the depsgraph did not evaluate it)."""
+    vis = RenderVisibility(context.view_layer)
     members = {o.name: o for o in context.scene.objects
-               if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
-               and renders(o)}
+               if is_candidate(o) and vis.mesh_renders(o)}
+    if notes is not None:
+        notes.extend(_viewport_notes(context, depsgraph, vis, members))
     for o in targets:
         members.setdefault(o.name, o)
     target_names = {o.name for o in targets}

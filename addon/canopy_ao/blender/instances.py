@@ -24,6 +24,7 @@ import bpy
 import numpy as np
 
 from . import gather, materials, mesh_io, ownership
+from .visibility import RenderVisibility
 from .. import core
 from ..core import forest, roles
 
@@ -35,8 +36,11 @@ MEAN_INSTANCES = 2000
 def instance_matrices(depsgraph):
     """{original object name: (object, matrices float64 (N, 4, 4), instancer names)} for every
     mesh instance, M mapping the object as it stands in the scene onto the instance; the
-    instancers are the objects whose particles or node tree made the instances (None: none)."""
+    instancers are the objects whose particles or node tree made the instances (None: none).
+    Only instances that occlude in Cycles (visibility.py: the instancer renders, both cast
+    shadows, a collection instance's own render flags)."""
     found = {}
+    vis = RenderVisibility(depsgraph.view_layer)
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
             continue
@@ -47,6 +51,8 @@ def instance_matrices(depsgraph):
         parent = inst.parent.original if inst.parent is not None else None
         if orig is None or orig == parent or orig.get(mesh_io.PROXY_PROP):
             continue  # no prototype object of its own (geometry made by the node tree)
+        if not vis.instance_renders(orig, parent):
+            continue
         entry = found.setdefault(orig.name, (orig, [], set()))
         entry[1].append(np.array(inst.matrix_world, dtype=np.float64))
         entry[2].add(parent.name if parent is not None else None)

@@ -52,8 +52,9 @@ class BakeJob:
         targets = gather.bake_targets(context, object_names)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
-        self.items, self.objects, self.how = gather.scene_items(context, depsgraph, targets,
-                                                                opts, self.timings)
+        self.gather_notes = []
+        self.items, self.objects, self.how = gather.scene_items(
+            context, depsgraph, targets, opts, self.timings, notes=self.gather_notes)
         # Every target's receivers, read now: vertices, or texels rasterised from its UVs.
         t0 = time.perf_counter()
         self.targets = [VertexTarget(it, self.objects[it.name], opts, depsgraph)
@@ -116,7 +117,7 @@ class BakeJob:
         if self.prototypes.realized:
             self.prototypes.bake_realized(self.plan)
             t0 = self._lap("instances", t0)
-        self.plan.notes.extend(self.prototypes.grass_lines())
+        self.plan.notes.extend(self.gather_notes + self.prototypes.grass_lines())
         if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)

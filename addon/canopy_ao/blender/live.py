@@ -27,7 +27,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import mesh_io
+from . import live_render, mesh_io
+from .live_render import is_render
 from .. import core
 from ..core import live as core_live
 from ..core.native import CanopyAOError
@@ -101,8 +102,11 @@ class Session:
             why = mesh_io.check_attribute(obj, self.attribute, False)
             if why:
                 raise CanopyAOError(why)
-        for obj in objs:
-            mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
+        if is_render(depsgraph):
+            live_render.write_frame(scene, depsgraph, objs, self.attribute, aos)
+        else:
+            for obj in objs:
+                mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
         tm["write"] = time.perf_counter() - t0
         tm["total"] += tm["write"]
         self.timings = tm
@@ -139,6 +143,7 @@ def begin(job):
     """After a live bake's commit: the scene's session and its record (saved with the file)."""
     session = Session(job)
     _SESSIONS[job.scene.name] = session
+    live_render.forget()
     job.scene[RECORD] = session.record
     # ID property arrays take and give numpy buffers (1M labels in < 1 ms); keys are indices,
     # as tree names may be longer than an ID property key.
@@ -170,6 +175,9 @@ def _rebuild(scene, depsgraph):
                                  if str(i) in stored}
         _SESSIONS[scene.name] = session = Session(job)
         return session
+    if is_render(depsgraph):
+        raise CanopyAOError("live AO is on but was never baked in this file: bake once with "
+                            "Live on (or the CLI's --live) before rendering")
     # Not the Cycles check: seconds of Cycles baking inside a frame change.
     job = BakeJob(ctx, [], dict(scene_options(scene), live=True, check_cycles=False))
     job.run()
@@ -228,6 +236,7 @@ def _on_frame_change(scene, depsgraph=None):
 def _forget(*_args):
     """Undo, redo and file loads replace every datablock: drop what the sessions cached."""
     _SESSIONS.clear()
+    live_render.forget()
 
 
 class CANOPY_AO_OT_live_stop(bpy.types.Operator):

@@ -28,7 +28,7 @@ def _vertex_normals(mesh, n):
     return out
 
 
-def _evaluated_is_original(obj):
+def evaluated_is_original(obj):
     """True when the evaluated mesh has the same geometry as obj.data, so it can be read without
     a to_mesh() copy (~35 ms per million vertices): no modifiers, no shape keys, not in edit
     mode (whose data lives in a BMesh until it is left), and no armature / lattice / curve
@@ -63,11 +63,15 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     triangles; the ray tracer's bake points count one corner per face).
     """
     t = time.perf_counter()
+    # The evaluated object's matrix: a render's depsgraph animates its own copies and leaves
+    # the original's matrix at the frame the viewport last showed.
+    evaluated = obj.evaluated_get(depsgraph)
+    matrix = np.array(evaluated.matrix_world, dtype=np.float64)
     ob_eval = None
-    if _evaluated_is_original(obj):
+    if evaluated_is_original(obj):
         mesh = obj.data
     else:
-        ob_eval = obj.evaluated_get(depsgraph)
+        ob_eval = evaluated
         mesh = ob_eval.to_mesh()
     try:
         n = len(mesh.vertices)
@@ -96,7 +100,7 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     finally:
         if ob_eval is not None:
             ob_eval.to_mesh_clear()
-    pos, nor = _to_world(co, nor, obj.matrix_world)
+    pos, nor = _to_world(co, nor, matrix)
     limit = native.LIMITS["coordinate"]
     bad = n - np.count_nonzero((np.abs(pos) <= limit).all(axis=1))  # NaN compares False
     if bad:
@@ -192,6 +196,34 @@ def write_ao_attribute(obj, name, ao, overwrite=False, checked=False):
     mesh.update_tag()
     mark_owned(obj, name, rgba)
     return attr
+
+
+def evaluated_ao_attribute(obj, depsgraph, name):
+    """The POINT FLOAT_COLOR attribute ``name`` of obj's mesh as the depsgraph evaluated it
+    (what that depsgraph's render draws); None when the depsgraph does not hold obj (not in
+    the render: evaluated_get would give the original); MeshIOError when the evaluated mesh has
+    none (a modifier dropped it, or no bake wrote it)."""
+    evaluated = obj.evaluated_get(depsgraph)
+    if not evaluated.is_evaluated:
+        return None
+    mesh = evaluated.data
+    attr = mesh.attributes.get(name)
+    if attr is None or attr.data_type != 'FLOAT_COLOR' or attr.domain != 'POINT':
+        raise MeshIOError(f"{obj.name}: its evaluated mesh has no '{name}' colour attribute per "
+                          "vertex (a modifier removes it, or no bake wrote it): live AO has "
+                          "nothing to write at this frame; bake again, or move the modifier")
+    if len(attr.data) != len(obj.data.vertices):
+        raise MeshIOError(f"{obj.name}: its modifiers change the vertex count, so live AO "
+                          "cannot be written per vertex")
+    return attr
+
+
+def write_evaluated_ao(attr, ao):
+    """Fill an attribute of an evaluated mesh (evaluated_ao_attribute) with AO: no tag, no
+    ownership record (the depsgraph's copy is dropped at its next evaluation; the original
+    mesh is not touched)."""
+    attr.data.foreach_set("color", native.require().gray_rgba(
+        np.ascontiguousarray(ao, dtype=np.float32)).reshape(-1))
 
 
 def write_float_attribute(obj, name, values, overwrite=False):

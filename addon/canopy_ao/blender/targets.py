@@ -166,7 +166,7 @@ class TexelTarget(Target):
                                      opts["resolution"], opts["margin"], opts["udim"],
                                      opts["texel_aa"])
         # Anti-aliased: the receivers are the texels' sub-samples, each casting its share of
-        # a texel's rays, averaged back to texels by finish() (texel_io._subsamples).
+        # a texel's rays, averaged back to texels by finish() (texel_points.subsamples).
         pos, nrm, tris = self.rx.sub or (self.rx.positions, self.rx.normals,
                                          self.rx.triangles)
         super().__init__(item, obj, pos, nrm)

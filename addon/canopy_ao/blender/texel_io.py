@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import materials, mesh_io
+from . import materials, mesh_io, texel_points
 from .files_io import Output, check_outputs, image_path, write_own_file
 from ..core import texel_budget
 # Kept under their old names for code that writes image files of its own through texel_io.
@@ -119,60 +119,10 @@ class TexelReceivers:
     sub: tuple | None = None  # k·aa² ..): positions, normals, triangles; None when aa is 1
 
 
-def _texel_reach(uvs, pos, tris, res):
-    """float64 (T,): how far (world) a sub-sample may lie from its texel's point: two texels'
-    width on the texel's own triangle (√(3D area / UV area) / res): a neighbour across an edge
-    stays within it, another island across a UV seam (near in UV, apart in 3D) does not."""
-    u, p = uvs.reshape(-1, 3, 2).astype(np.float64), pos.reshape(-1, 3, 3).astype(np.float64)
-    e, f = u[:, 1] - u[:, 0], u[:, 2] - u[:, 0]
-    uv_area = np.abs(e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0])
-    area = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(uv_area > 0, np.sqrt(area / uv_area), np.inf)
-    return 2.0 * scale[tris] / res
-
-
-# A texel's footprint's width, in texels: Cycles jitters its bake samples over the central half
-# of each texel (Blender's bake_differentials halves the UV derivative, "A = 0.5f / A"), so
-# ours averages that box (bench/texel_aa.py: edge texels 0.030 → 0.017 against a whole texel).
-FOOTPRINT = 0.5
-
-
-def _subsamples(uvs, pos, nrm, res, aa, pixels, positions, normals, triangles, tri_map, reach):
-    """The aa × aa sub-sample points of each texel in pixels (ascending), texel-major: pass
-    (a, b) rasterises the UVs shifted by minus FOOTPRINT × ((a + ½)/aa − ½, (b + ½)/aa − ½)
-    texels, so its texel centres are the sub-sample points of the unshifted image (the centres
-    of an aa × aa grid over the footprint's box); a sub-sample lies on whichever triangle
-    covers it there (across an edge: the neighbour), or, off the island, on the nearest one
-    (conservative coverage). One that a pass does not reach, or that lies farther than reach
-    (_texel_reach: across a UV seam on another surface) from its texel's point, keeps the
-    texel's own point. tri_map: the pass's triangle ids to the mesh's (or None)."""
-    cols = ([], [], [])  # per sub-sample: positions, normals, triangles of every texel
-    off = ((np.arange(aa) + 0.5) / aa - 0.5) * (FOOTPRINT / res)
-    for b in range(aa):
-        for a in range(aa):
-            ts = _core.rasterize_uv(np.ascontiguousarray(uvs - np.float32([off[a], off[b]])),
-                                    pos, nrm, resolution=(res, res), conservative=True)
-            px = np.asarray(ts.pixels)  # views of ts's buffers, read before ts goes
-            if not len(px):  # nothing covered: every sub-sample is its texel's own point
-                return tuple(np.repeat(x, aa * aa, 0) for x in (positions, normals, triangles))
-            at = np.minimum(np.searchsorted(px, pixels), len(px) - 1)
-            tp, tt = np.asarray(ts.positions).reshape(-1, 3)[at], np.asarray(ts.triangles)[at]
-            d = tp - positions
-            hit = (px[at] == pixels) & (np.einsum("ij,ij->i", d, d) <= reach * reach)
-            cols[0].append(np.where(hit[:, None], tp, positions))
-            cols[1].append(np.where(hit[:, None], np.asarray(ts.normals).reshape(-1, 3)[at],
-                                    normals))
-            cols[2].append(np.where(hit, tri_map[tt] if tri_map is not None else tt,
-                                    triangles).astype(np.int32))
-    return tuple(np.stack(c, axis=1).reshape((-1, 3) if c[0].ndim == 2 else -1)
-                 for c in cols)
-
-
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False, aa=1):
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
     UVs use, tile by tile, tiles_io.split_tiles), with aa × aa sub-samples each when aa > 1
-    (_subsamples). Raises CanopyAOError before reading anything when obj is not a mesh, has no
+    (texel_points.subsamples). Raises CanopyAOError before reading anything when obj is not a mesh, has no
     (such) UV map, or the sizes are wrong, before rasterising when the bake would not fit in
     the available memory (texel_budget.check_memory), and after reading when no texel centre
     falls inside a face of the UV map."""
@@ -205,12 +155,12 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
                                         else uvs[rows])
         tile_pos, tile_nrm = np.ascontiguousarray(pos[rows]), np.ascontiguousarray(nrm[rows])
         px, tp, tn, st, tt = rasterize(tile_uvs, tile_pos, tile_nrm, res, res)
-        reach = _texel_reach(tile_uvs, tile_pos, tt, res) if aa > 1 else None
+        reach = texel_points.reach(tile_uvs, tile_pos, tt, res) if aa > 1 else None
         tri_map = None
         if not isinstance(rows, slice):  # the tile's triangle k is the mesh's rows[3k] // 3
             tri_map = (rows[0::3] // 3).astype(np.int32)
             tt = tri_map[tt]
-        sub = (_subsamples(tile_uvs, tile_pos, tile_nrm, res, aa, px, tp, tn, tt, tri_map,
+        sub = (texel_points.subsamples(tile_uvs, tile_pos, tile_nrm, res, aa, px, tp, tn, tt, tri_map,
                            reach) if aa > 1 else ())
         got.append((px, tp, tn, tt) + sub)
         start = tiles[-1][2] if tiles else 0

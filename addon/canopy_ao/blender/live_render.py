@@ -1,0 +1,67 @@
+"""Live AO inside a render (F12, Ctrl+F12, ``blender -b … -a``): how a frame's AO reaches what
+the render draws (docs/DESIGN.md, 'Live and per-frame AO').
+
+A render's depsgraph animates its own copies of the data and never the originals. A tag on an
+original makes it copy that original again (and, for a mesh, its shape keys and its object):
+whatever animation had set on the copy goes back to the original's values, the frame the
+viewport last evaluated. So:
+- a target nothing keys (no action, driver or NLA track on its object, mesh or shape keys) is
+  written as in the viewport, original and tag: the copy made again is the same plus the AO,
+  and every engine redraws it;
+- a keyed target is written into the render's evaluated mesh, untagged. Its geometry is
+  evaluated again each frame when the keys change it (a shape key, a modifier's value); when
+  they do not (only its transform is keyed: no modifier, no shape key), Eevee, Workbench and
+  Cycles with Persistent Data draw the mesh they drew before, so the render says so once.
+"""
+
+import sys
+
+from . import mesh_io
+
+_WARNED = set()  # scenes told about keyed targets in an engine that may keep their AO
+
+
+def forget():
+    """A new session, a load or an undo: warn again."""
+    _WARNED.clear()
+
+
+def is_render(depsgraph):
+    """True for a render's depsgraph, which animates its own copies of the data."""
+    return getattr(depsgraph, "mode", 'VIEWPORT') == 'RENDER'
+
+
+def _keyed(idb):
+    ad = getattr(idb, "animation_data", None) if idb is not None else None
+    return ad is not None and (ad.action is not None or len(ad.drivers) > 0
+                               or len(ad.nla_tracks) > 0)
+
+
+def keyed(obj):
+    """True when animation data on obj, its mesh or its shape keys may set what a copy made
+    again from the original would lose."""
+    return _keyed(obj) or _keyed(obj.data) or _keyed(obj.data.shape_keys)
+
+
+def write_frame(scene, depsgraph, objs, attribute, aos):
+    """Write each target's AO {name: float32 (V,)} where this render draws it. The caller has
+    checked every target's ownership; a target the render does not hold is skipped."""
+    attrs = [mesh_io.evaluated_ao_attribute(obj, depsgraph, attribute) for obj in objs]
+    kept = []
+    for obj, attr in zip(objs, attrs):
+        if attr is None:  # not in this render
+            continue
+        if keyed(obj):
+            mesh_io.write_evaluated_ao(attr, aos[obj.name])
+            if mesh_io.evaluated_is_original(obj):  # no modifier or shape key to re-evaluate
+                kept.append(obj.name)
+        else:
+            mesh_io.write_ao_attribute(obj, attribute, aos[obj.name], checked=True)
+    engine = scene.render.engine
+    if kept and (engine != 'CYCLES' or scene.render.use_persistent_data) \
+            and scene.name not in _WARNED:
+        _WARNED.add(scene.name)
+        print(f"canopy_ao: warning: {', '.join(kept)}: keyed, so live AO goes into the "
+              "render's copy, and nothing keyed changes their geometry, so "
+              f"{'Cycles with Persistent Data' if engine == 'CYCLES' else engine} keeps its "
+              "first frame's AO", file=sys.stderr, flush=True)
