@@ -5,7 +5,7 @@ import time
 
 import numpy as np
 
-from . import mesh_io
+from . import mesh_io, opacity_io
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
 from ..core.scene import SceneItem
@@ -180,6 +180,8 @@ def scene_items(context, depsgraph, targets, opts, timings):
         polys = faces[0] if faces and len(faces[0]) == len(tris) else None
         items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source,
                                polygons=polys))
+        if len(tris):  # which triangles rays pass (the materials' alpha)
+            items[-1].opacity = opacity_io.item_opacity(obj, depsgraph, len(tris))
         objects[name] = obj
         how[name] = why
     return items, objects, how

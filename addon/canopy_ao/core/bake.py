@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 
-from . import cost, forest_tau, ladder, lighting, native, proxies, regression, trees
+from . import (cost, forest_tau, ladder, lighting, native, opacity, proxies, regression,
+               trees)
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, own_primitives, split_trees
 from .ladder import DEFAULT_TAU
@@ -45,6 +46,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
     plan.timings["trees"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
+    plan.notes.extend(opacity.notes(whole))
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
     if settings.method in ladder.TAU_METHODS + ("auto",) and (plan.fits or plan.trunks):
