@@ -77,6 +77,25 @@ Opacity opacity_arg(const py::object& materials, const py::object& uvs, const py
       a.texture = static_cast<const float*>(tex.data());
       a.height = static_cast<int>(tex.shape(0));
       a.width = static_cast<int>(tex.shape(1));
+    } else if (py::isinstance<py::tuple>(item)) {
+      // (texture, srgb, scale, offset): AlphaMaterial's post-interpolation transform
+      const auto t = py::reinterpret_borrow<py::tuple>(item);
+      if (py::len(t) != 4 || !py::isinstance<py::array>(t[0])) {
+        throw py::value_error("an opacity_alphas tuple must be (texture, srgb, scale, offset)");
+      }
+      keep->push_back(py::reinterpret_borrow<py::array>(t[0]));
+      const py::array& tex = keep->back();
+      require_dtype(tex, "opacity_alphas texture", py::dtype::of<float>(), "float32");
+      if (tex.ndim() != 2 || tex.shape(0) < 1 || tex.shape(1) < 1) {
+        throw py::value_error("an opacity_alphas texture must be float32 (H, W), got " +
+                              shape_str(tex));
+      }
+      a.texture = static_cast<const float*>(tex.data());
+      a.height = static_cast<int>(tex.shape(0));
+      a.width = static_cast<int>(tex.shape(1));
+      a.srgb = t[1].cast<bool>();
+      a.scale = t[2].cast<float>();
+      a.offset = t[3].cast<float>();
     } else {
       a.alpha = item.cast<float>();
     }
@@ -238,7 +257,9 @@ void bind_raytrace(py::module_& m) {
            "Blender's bake (needs normals). Opacity (raytrace.h, 'Opacity'): opacity_materials "
            "int32 (M,), each triangle's index into opacity_alphas (-1 = opaque); "
            "opacity_alphas, each material's alpha: a float, or a float32 (H, W) texture "
-           "(row 0 at v = 0, bilinear, repeat) read at the UVs opacity_uvs float32 (M, 3, 2); "
+           "(row 0 at v = 0, bilinear, repeat) read at the UVs opacity_uvs float32 (M, 3, 2), "
+           "or (texture, srgb, scale, offset): offset + scale * t, t the interpolated value "
+           "decoded from sRGB when srgb; "
            "a hit of alpha a stops a ray with probability a. The data are copied. Releases the GIL while "
            "the BVH builds. ValueError on bad input, CanopyAOError if Embree fails.")
       .def(

@@ -209,6 +209,7 @@ struct AlphaData {
   std::vector<float> constant;          // per material: the alpha when it has no texture
   std::vector<std::vector<float>> textures;  // per material: height × width alphas, or empty
   std::vector<int> width, height;
+  std::vector<AlphaMaterial> post;  // per material: srgb, scale, offset (AlphaMaterial)
   // The geometry id of the reversed winding (a device culling back faces: raytrace.cpp's
   // two_sided_indices gives triangle (a, c, b) there), else none.
   unsigned flipped_geometry = ~0u;
@@ -241,7 +242,13 @@ struct AlphaData {
     const std::size_t W = static_cast<std::size_t>(w);
     const float a0 = tex[y0 * W + x0] + (tex[y0 * W + x1] - tex[y0 * W + x0]) * tx;
     const float a1 = tex[y1 * W + x0] + (tex[y1 * W + x1] - tex[y1 * W + x0]) * tx;
-    return a0 + (a1 - a0) * ty;
+    const AlphaMaterial& p = post[static_cast<std::size_t>(mat)];
+    float t = a0 + (a1 - a0) * ty;
+    if (p.srgb) {  // Cycles' color_srgb_to_linear
+      t = t < 0.04045f ? std::max(t, 0.0f) * (1.0f / 12.92f)
+                       : std::pow((t + 0.055f) * (1.0f / 1.055f), 2.4f);
+    }
+    return p.offset + p.scale * t;
   }
 };
 
@@ -938,6 +945,7 @@ std::unique_ptr<AlphaData> alpha_data(const Opacity& opacity, std::size_t triang
   a->textures.resize(n);
   a->width.resize(n);
   a->height.resize(n);
+  a->post.resize(n);
   std::vector<bool> clear(n, false);  // a material some ray may pass
   for (std::size_t k = 0; k < n; ++k) {
     const AlphaMaterial& in = opacity.alphas[k];
@@ -953,6 +961,12 @@ std::unique_ptr<AlphaData> alpha_data(const Opacity& opacity, std::size_t triang
         if (!std::isfinite(x)) throw std::invalid_argument(what + "non-finite texture alpha");
         clear[k] = clear[k] || x < 1.0f;
       }
+      if (!std::isfinite(in.scale) || !std::isfinite(in.offset)) {
+        throw std::invalid_argument(what + "non-finite scale or offset");
+      }
+      a->post[k] = in;
+      a->post[k].texture = nullptr;
+      clear[k] = clear[k] || in.scale != 1.0f || in.offset != 0.0f || in.srgb;
       a->width[k] = in.width;
       a->height[k] = in.height;
     } else if (!std::isfinite(in.alpha)) {

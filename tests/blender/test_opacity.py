@@ -112,3 +112,31 @@ def test_a_material_not_understood_is_opaque_with_a_note_naming_it(clean):
     run_bake(bpy.context, ["Ground"], opts)
     opaque = mesh_io.read_ao_attribute(bpy.data.objects["Ground"], "CanopyAO")
     assert np.array_equal(noisy, opaque)
+
+
+def test_a_mix_with_a_transparent_bsdf_by_an_images_color_shades_as_in_cycles(clean):
+    """The other common card: Mix Shader (Transparent BSDF, Principled) whose factor is an
+    image's Color read through a UV Map node; here a black-and-white mask, white for v ≥ ½."""
+    img = bpy.data.images.new("Mask", 8, 8)
+    px = np.ones((8, 8, 4), np.float32)
+    px[:4, :, :3] = 0.0
+    img.pixels.foreach_set(px.ravel())
+    mat = bpy.data.materials.new("MaskCard")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    mix, clear = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeBsdfTransparent")
+    tex, uvmap = nt.nodes.new("ShaderNodeTexImage"), nt.nodes.new("ShaderNodeUVMap")
+    tex.image, uvmap.uv_map = img, "UVMap"
+    nt.links.new(uvmap.outputs["UV"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], mix.inputs[0])
+    nt.links.new(clear.outputs[0], mix.inputs[1])
+    nt.links.new(bsdf.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    ground = _scene(mat)
+    ours, cyc, _rep = _bake_both()
+    y = np.array([v.co.y for v in ground.data.vertices])
+    assert cyc[y < -0.5].mean() > 0.8 and cyc[y > 0.5].mean() < 0.4
+    assert abs(float(ours.mean()) - float(cyc.mean())) < 0.02
+    assert float(np.abs(ours - cyc).max()) < 0.1

@@ -143,3 +143,21 @@ TEST(Opacity, BadOpacityThrowsInvalidArgument) {
   empty.texture = one.data();  // a texture of no size
   EXPECT_THROW(card.tracer({empty}), std::invalid_argument);
 }
+
+TEST(Opacity, ATexturesValueIsDecodedFromSrgbAfterInterpolationThenScaled) {
+  // A uniform texel of 0.5 encoded: alpha = offset + scale · decode(0.5) = 1 − 0.214 (inverted).
+  const Card card(1.0f, 1.0f);
+  const Points r({0, 0, 0}, 64);
+  const RayTracer plain(card.view(), card.t.data(), 2);
+  const double blocked = 1.0 - mean(plain.ao(r.points(), r.normals(), opts(1024)));
+  std::vector<float> texels(4, 0.5f);
+  AlphaMaterial m;
+  m.texture = texels.data();
+  m.width = m.height = 2;
+  m.srgb = true;
+  m.scale = -1.0f;
+  m.offset = 1.0f;
+  const double alpha = 1.0 - 0.21404114;  // Cycles' color_srgb_to_linear(0.5)
+  EXPECT_NEAR(mean(card.tracer({m}).ao(r.points(), r.normals(), opts(1024))),
+              1.0 - alpha * blocked, 0.01);
+}

@@ -82,3 +82,32 @@ def test_bad_opacity_arrays_are_refused_by_name():
     with pytest.raises(ValueError, match="opacity_uvs"):
         _core.RayTracer(v, t, opacity_materials=np.int32([0]), opacity_alphas=[0.5],
                         opacity_uvs=np.zeros((1, 3), np.float32))
+
+
+def test_every_ray_passes_a_clear_card_texels_and_bent_normals_too():
+    """A card of alpha 0 stops nothing: a texel receiver on the ground (triangle_ids) and the
+    bent normals (the same rays) see the open sky."""
+    tracer = lighting.build_tracer(_card_items(0.0))
+    pts = np.float32([[0.2, 0.1, 0.0]] * 8)
+    nrm = np.float32([[0, 0, 1]] * 8)
+    ao, bent = tracer.ao(pts, nrm, samples=64, triangle_ids=np.zeros(8, np.int32),
+                         bent_normals=True)
+    assert np.all(ao == 1.0)
+    assert np.allclose(bent, [0, 0, 1], atol=0.05)
+
+
+def test_an_8bit_srgb_mask_is_handed_over_encoded_with_its_transform():
+    """A Mix Shader (Transparent, BSDF) by an sRGB mask's colour: alpha = the decoded colour,
+    decoded by the tracer after interpolation (as Cycles does), not per texel here."""
+    images = {"m": _px(1.0, rgb=np.array([[0, 0.5, 1, 1]] * 2, np.float32)[..., None])}
+    expr = ("mix", ("clamp", ("image", "m", "color")), ("const", 0.0), ("const", 1.0))
+    m = opacity.material_alpha("Mask", expr, images, encoded={"m"})
+    assert m.srgb and (m.scale, m.offset) == (1.0, 0.0)
+    assert m.texture[0].tolist() == pytest.approx([0, 0.5, 1, 1])
+    inv = opacity.material_alpha("Mask", ("mix", ("image", "m", "color"), ("const", 1.0),
+                                          ("const", 0.0)), images, encoded={"m"})
+    assert (inv.scale, inv.offset) == (-1.0, 1.0)
+    # anything else decodes texel by texel
+    other = opacity.material_alpha("Mask", ("math", "MULTIPLY", ("image", "m", "color"),
+                                            ("const", 1.0)), images, encoded={"m"})
+    assert not other.srgb and other.texture[0, 1] == pytest.approx(0.21404114, abs=1e-6)

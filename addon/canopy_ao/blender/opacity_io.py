@@ -26,7 +26,8 @@ class _Reader:
     """Builds one material's alpha expression (core/opacity.py), collecting its images."""
 
     def __init__(self):
-        self.images = {}  # image name -> float32 (H, W, 4) linear RGBA
+        self.images = {}  # image name -> float32 (H, W, 4) RGBA, colour linear unless encoded
+        self.encoded = set()  # images whose colour is sRGB-encoded (8-bit sRGB: core/opacity.py)
         self.uv_maps = set()
 
     def shader(self, socket):
@@ -121,6 +122,8 @@ class _Reader:
             return ("const", 1.0)
         if img.name not in self.images:
             self.images[img.name] = _pixels(img, out.name != "Alpha")
+            if img.colorspace_settings.name == "sRGB" and not img.is_float:
+                self.encoded.add(img.name)
         return ("image", img.name, "alpha" if out.name == "Alpha" else "color")
 
 
@@ -136,12 +139,9 @@ def _pixels(img, colour):
     px[..., :min(channels, 4)] = buf.reshape(h, w, channels)[..., :4]
     if channels < 3:
         px[..., 1:3] = px[..., :1]
-    if colour:
+    if colour:  # 8-bit sRGB stays encoded (core/opacity.py); other spaces must be linear
         space = img.colorspace_settings.name
-        if space == "sRGB" and not img.is_float:
-            c = px[..., :3]
-            px[..., :3] = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-        elif space not in LINEAR_SPACES and not img.is_float:
+        if space != "sRGB" and space not in LINEAR_SPACES and not img.is_float:
             raise opacity.NotUnderstood(f"its image '{img.name}' is in colour space '{space}'")
     return px
 
@@ -157,7 +157,7 @@ def material_alpha(mat):
     try:
         expr = reader.shader(out.inputs["Surface"])
         return opacity.material_alpha(mat.name, expr, reader.images,
-                                      next(iter(reader.uv_maps), "")), None
+                                      next(iter(reader.uv_maps), ""), reader.encoded), None
     except opacity.NotUnderstood as exc:
         return opacity.MaterialAlpha(mat.name), (f"material '{mat.name}': {exc}; its surfaces "
                                                   "are treated as opaque")

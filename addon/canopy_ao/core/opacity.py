@@ -12,6 +12,9 @@ An alpha expression is a nested tuple:
   ("invert", f, x)                      x + f (1 − 2x): Blender's Invert
   ("ramp", x, positions, alphas, mode)  a ColorRamp's Alpha (mode "LINEAR" or "CONSTANT")
 Every image in one expression must be read through the same UV map (the reader checks).
+An 8-bit sRGB image's colour is kept encoded (its key in ``encoded``): Cycles interpolates the
+encoded values and decodes the result, so an alpha that is offset + scale × such a colour is
+handed to the tracer in that form (MaterialAlpha.srgb), anything else decoded per texel.
 """
 
 from __future__ import annotations
@@ -45,6 +48,10 @@ class MaterialAlpha:
     alpha: float = 1.0
     texture: np.ndarray | None = None
     uv_map: str = ""
+    # texture's alpha = offset + scale × (the interpolated texel, sRGB-decoded when srgb)
+    srgb: bool = False
+    scale: float = 1.0
+    offset: float = 0.0
 
     @property
     def opaque(self):
@@ -62,9 +69,21 @@ class ItemOpacity:
     notes: list = field(default_factory=list)
 
 
-def evaluate(expr, images):
+def srgb_decode(c):
+    """sRGB-encoded values to linear (Cycles' color_srgb_to_linear)."""
+    c = np.asarray(c, np.float64)
+    return np.where(c < 0.04045, np.maximum(c, 0.0) / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _luminance(rgb):
+    """Blender's colour-to-float conversion: the scene-linear luminance (Rec. 709)."""
+    return np.asarray(rgb, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def evaluate(expr, images, encoded=frozenset()):
     """The alpha of expression ``expr``: a float, or a float64 (H, W) array when an image is in
-    it. images: key -> float32 (H, W, 4) straight RGBA pixels, colour already linear.
+    it. images: key -> float32 (H, W, 4) straight RGBA pixels, colour linear except for the
+    keys in ``encoded`` (sRGB-encoded, decoded here texel by texel).
     Raises NotUnderstood for what it cannot evaluate (images of different sizes, unknown ops)."""
     kind = expr[0]
     if kind == "const":
@@ -73,9 +92,9 @@ def evaluate(expr, images):
         px = images[expr[1]]
         if expr[2] == "alpha":
             return px[..., 3].astype(np.float64)
-        # Blender's colour-to-float conversion: the scene-linear luminance (Rec. 709)
-        return px[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
-    args = [evaluate(e, images) for e in expr[1:] if isinstance(e, tuple)]
+        rgb = px[..., :3]
+        return _luminance(srgb_decode(rgb) if expr[1] in encoded else rgb)
+    args = [evaluate(e, images, encoded) for e in expr[1:] if isinstance(e, tuple)]
     shapes = {np.shape(a) for a in args if np.ndim(a)}
     if len(shapes) > 1:
         raise NotUnderstood("its alpha combines images of different sizes")
@@ -106,9 +125,42 @@ def _ramp(x, positions, alphas, mode):
     return np.interp(x, pos, val)
 
 
-def material_alpha(name, expr, images, uv_map=""):
+def _affine(expr, encoded):
+    """(key, scale, offset) when ``expr`` is offset + scale × the colour of one encoded image
+    (through constant mixes, inverts and clamps of the colour alone), else None."""
+    kind = expr[0]
+    if kind == "image":
+        return (expr[1], 1.0, 0.0) if expr[2] == "color" and expr[1] in encoded else None
+    if kind == "clamp" and expr[1][0] == "image":  # an 8-bit colour is in [0, 1] already
+        return _affine(expr[1], encoded)
+    if kind == "mix":
+        f, x, y = expr[1:]
+        if f[0] == "clamp":
+            f = f[1]
+        if x[0] == "const" and y[0] == "const":
+            inner = _affine(f, encoded)
+            if inner is not None:  # x + f (y − x)
+                key, s, o = inner
+                return key, s * (y[1] - x[1]), x[1] + o * (y[1] - x[1])
+    if kind == "invert" and expr[1][0] == "const":
+        inner = _affine(expr[2], encoded)
+        if inner is not None:  # x + f (1 − 2x)
+            f, (key, s, o) = expr[1][1], inner
+            return key, s * (1 - 2 * f), o * (1 - 2 * f) + f
+    return None
+
+
+def material_alpha(name, expr, images, uv_map="", encoded=frozenset()):
     """The MaterialAlpha of material ``name`` whose alpha is ``expr`` (evaluate)."""
-    value = evaluate(expr, images)
+    affine = _affine(expr, encoded)
+    if affine is not None:
+        key, scale, offset = affine
+        tex = np.ascontiguousarray(_luminance(images[key][..., :3]), dtype=np.float32)
+        if float(np.min(offset + scale * srgb_decode(tex))) >= 1.0:
+            return MaterialAlpha(name)
+        return MaterialAlpha(name, texture=tex, uv_map=uv_map, srgb=True, scale=float(scale),
+                             offset=float(offset))
+    value = evaluate(expr, images, encoded)
     if np.ndim(value) == 0:
         return MaterialAlpha(name, alpha=float(np.clip(value, 0.0, 1.0)))
     tex = np.ascontiguousarray(np.clip(value, 0.0, 1.0), dtype=np.float32)
@@ -145,7 +197,8 @@ def tracer_args(items):
             continue
         index = np.array([-1 if a.opaque else len(alphas) + k
                           for k, a in enumerate(op.materials)], np.int32)
-        alphas.extend(a.texture if a.texture is not None else a.alpha for a in op.materials)
+        alphas.extend(a.alpha if a.texture is None else a.texture if not a.srgb else
+                      (a.texture, True, a.scale, a.offset) for a in op.materials)
         # a face's material index past the last slot takes the last, as Blender renders it
         mats.append(index[np.clip(np.asarray(op.triangle_material, np.int64), 0,
                                   len(op.materials) - 1)])

@@ -254,6 +254,12 @@ struct AlphaMaterial {
   const float* texture = nullptr;
   int width = 0;
   int height = 0;
+  /// A texture's alpha is offset + scale · t, t the interpolated texel value, decoded from
+  /// sRGB first when `srgb` (Cycles interpolates an 8-bit sRGB image's encoded values and
+  /// decodes the result).
+  bool srgb = false;
+  float scale = 1.0f;
+  float offset = 0.0f;
 };
 
 /// Which triangles are not opaque (raytrace.h, "Opacity"). Copied by the constructor.
