@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import _clear_scene, add_mesh
-from canopy_ao.blender import cycles_check, mesh_io, properties
+from canopy_ao.blender import cycles_check, materials, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 
 SAMPLES = 512
@@ -40,15 +40,19 @@ def _scene(material):
     card["canopy_ao_role"] = "CANOPY"
     uv = card.data.uv_layers.new(name="UVMap")
     corner_uv = {0: (0, 0), 1: (1, 0), 2: (1, 1), 3: (0, 1)}
-    for loop in card.data.loops:
-        uv.data[loop.index].uv = corner_uv[loop.vertex_index]
+    vals = np.float32([corner_uv[lp.vertex_index] for lp in card.data.loops]).ravel()
+    attr = card.data.attributes.get("UVMap")
+    if attr is not None and attr.data_type == "FLOAT2":  # Blender 3.5+: UV maps are attributes
+        attr.data.foreach_set("vector", vals)
+    else:
+        uv.data.foreach_set("uv", vals)
     card.data.materials.append(material)
     return ob
 
 
 def _principled(name):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    materials.enable_nodes(mat)
     bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     return mat, bsdf
 
@@ -122,7 +126,7 @@ def test_a_mix_with_a_transparent_bsdf_by_an_images_color_shades_as_in_cycles(cl
     px[:4, :, :3] = 0.0
     img.pixels.foreach_set(px.ravel())
     mat = bpy.data.materials.new("MaskCard")
-    mat.use_nodes = True
+    materials.enable_nodes(mat)
     nt = mat.node_tree
     bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
     out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
@@ -140,3 +144,26 @@ def test_a_mix_with_a_transparent_bsdf_by_an_images_color_shades_as_in_cycles(cl
     assert cyc[y < -0.5].mean() > 0.8 and cyc[y > 0.5].mean() < 0.4
     assert abs(float(ours.mean()) - float(cyc.mean())) < 0.02
     assert float(np.abs(ours - cyc).max()) < 0.1
+
+
+def test_the_command_line_reports_the_material_it_could_not_read(clean, tmp_path):
+    """The CLI as documented, on a saved scene: the bake succeeds and its JSON report's notes
+    name the material read as opaque."""
+    import json
+    import os
+    import subprocess
+    mat, bsdf = _principled("NoisyCard")
+    noise = mat.node_tree.nodes.new("ShaderNodeTexNoise")
+    mat.node_tree.links.new(noise.outputs["Fac"], bsdf.inputs["Alpha"])
+    _scene(mat)
+    blend, report = str(tmp_path / "cards.blend"), str(tmp_path / "report.json")
+    bpy.ops.wm.save_as_mainfile(filepath=blend, copy=True)
+    r = subprocess.run([bpy.app.binary_path, "-b", blend, "--factory-startup", "--addons",
+                        "canopy_ao", "--python-exit-code", "1", "--python-expr",
+                        "import canopy_ao.cli as c; c.main()", "--", "--objects", "Ground",
+                        "--method", "raytrace", "--samples", "16", "--report", report],
+                       env=dict(os.environ), capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, (r.stdout + r.stderr)[-2000:]
+    with open(report, encoding="utf-8") as f:
+        notes = json.load(f)["notes"]
+    assert any("NoisyCard" in n and "opaque" in n for n in notes), notes

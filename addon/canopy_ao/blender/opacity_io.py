@@ -10,6 +10,7 @@ Anything else makes the material opaque with a note naming it."""
 
 import numpy as np
 
+from . import materials
 from ..core import opacity
 
 # BSDFs that stop Cycles' shadow (and AO) rays: glass and transmission included (no caustics).
@@ -148,7 +149,7 @@ def _pixels(img, colour):
 
 def material_alpha(mat):
     """(opacity.MaterialAlpha, note or None) of material ``mat`` (None: an empty slot)."""
-    if mat is None or not mat.use_nodes or mat.node_tree is None:
+    if mat is None or not materials.uses_nodes(mat) or mat.node_tree is None:
         return opacity.MaterialAlpha(mat.name if mat else ""), None
     out = mat.node_tree.get_output_node("CYCLES")
     if out is None:
@@ -159,8 +160,12 @@ def material_alpha(mat):
         return opacity.material_alpha(mat.name, expr, reader.images,
                                       next(iter(reader.uv_maps), ""), reader.encoded), None
     except opacity.NotUnderstood as exc:
-        return opacity.MaterialAlpha(mat.name), (f"material '{mat.name}': {exc}; its surfaces "
-                                                  "are treated as opaque")
+        why = str(exc)
+    except (AttributeError, KeyError, IndexError, TypeError, ValueError) as exc:
+        # a node this Blender spells otherwise: never a failed bake, an opaque material
+        why = f"its nodes could not be read ({type(exc).__name__}: {exc})"
+    return opacity.MaterialAlpha(mat.name), (f"material '{mat.name}': {why}; its surfaces are "
+                                              "treated as opaque")
 
 
 def _uv_corners(mesh, name):
