@@ -111,3 +111,14 @@ def test_an_8bit_srgb_mask_is_handed_over_encoded_with_its_transform():
     other = opacity.material_alpha("Mask", ("math", "MULTIPLY", ("image", "m", "color"),
                                             ("const", 1.0)), images, encoded={"m"})
     assert not other.srgb and other.texture[0, 1] == pytest.approx(0.21404114, abs=1e-6)
+
+
+def test_a_material_many_items_share_reaches_the_tracer_once():
+    leaf = opacity.MaterialAlpha("Leaf", texture=np.zeros((64, 64), np.float32))
+    items = _card_items(0.5) + _card_items(0.5)[1:]
+    for it in items[1:]:
+        it.opacity = opacity.ItemOpacity([leaf], np.zeros(2, np.int32),
+                                         np.zeros((2, 3, 2), np.float32))
+    args = opacity.tracer_args(items)
+    assert len(args["opacity_alphas"]) == 1
+    assert args["opacity_materials"].tolist() == [-1, -1, 0, 0, 0, 0]

@@ -153,7 +153,7 @@ def scene_items(context, depsgraph, targets, opts, timings):
     for o in targets:
         members.setdefault(o.name, o)
     target_names = {o.name for o in targets}
-    items, objects, how = [], {}, {}
+    items, objects, how, alphas = [], {}, {}, {}  # alphas: each material's, read once
     for name, obj in members.items():
         # A declared role costs nothing; a guess needs the triangles (connected components).
         declared = declared_role(obj)
@@ -181,7 +181,7 @@ def scene_items(context, depsgraph, targets, opts, timings):
         items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source,
                                polygons=polys))
         if len(tris):  # which triangles rays pass (the materials' alpha)
-            items[-1].opacity = opacity_io.item_opacity(obj, depsgraph, len(tris))
+            items[-1].opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
         objects[name] = obj
         how[name] = why
     return items, objects, how

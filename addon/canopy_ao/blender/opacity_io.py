@@ -186,13 +186,20 @@ def _uv_corners(mesh, name):
     return uv.reshape(-1, 2)
 
 
-def item_opacity(obj, depsgraph, triangle_count):
+def item_opacity(obj, depsgraph, triangle_count, cache=None):
     """The opacity.ItemOpacity of ``obj`` (its evaluated mesh's loop triangles, of which there
     must be ``triangle_count``: the item's), or None when every material is opaque without a
-    note."""
-    read = [material_alpha(slot.material) for slot in obj.material_slots]
-    mats = [m for m, _n in read]
-    notes = [f"{obj.name}: {n}" for _m, n in read if n]
+    note. cache: a dict kept over one bake's objects, so a material many objects share is read
+    (its images' pixels) once and handed to the tracer once."""
+    cache = {} if cache is None else cache
+    mats, notes = [], []
+    for slot in obj.material_slots:
+        key = slot.material.name_full if slot.material is not None else None
+        if key not in cache:  # a material's note goes with the first object using it
+            cache[key] = material_alpha(slot.material)
+            if cache[key][1]:
+                notes.append(f"{obj.name}: {cache[key][1]}")
+        mats.append(cache[key][0])
     if all(m.opaque for m in mats):
         return opacity.ItemOpacity(mats, np.zeros(0, np.int32), notes=notes) if notes else None
     ob_eval = obj.evaluated_get(depsgraph)

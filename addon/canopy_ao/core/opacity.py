@@ -187,7 +187,7 @@ def tracer_args(items):
     if not any(getattr(it, "opacity", None) is not None
                and any(not m.opaque for m in it.opacity.materials) for it in items):
         return {}
-    mats, uvs, alphas = [], [], []
+    mats, uvs, alphas, slot = [], [], [], {}  # slot: id(MaterialAlpha) -> its index in alphas
     for it in items:
         m = len(it.triangles)
         op = getattr(it, "opacity", None)
@@ -195,10 +195,12 @@ def tracer_args(items):
             mats.append(np.full(m, -1, np.int32))
             uvs.append(np.zeros((m, 3, 2), np.float32))
             continue
-        index = np.array([-1 if a.opaque else len(alphas) + k
-                          for k, a in enumerate(op.materials)], np.int32)
-        alphas.extend(a.alpha if a.texture is None else a.texture if not a.srgb else
-                      (a.texture, True, a.scale, a.offset) for a in op.materials)
+        for a in op.materials:  # one copy of a material many items share (its texture)
+            if not a.opaque and id(a) not in slot:
+                slot[id(a)] = len(alphas)
+                alphas.append(a.alpha if a.texture is None else a.texture if not a.srgb else
+                              (a.texture, True, a.scale, a.offset))
+        index = np.array([slot.get(id(a), -1) for a in op.materials], np.int32)
         # a face's material index past the last slot takes the last, as Blender renders it
         mats.append(index[np.clip(np.asarray(op.triangle_material, np.int64), 0,
                                   len(op.materials) - 1)])
