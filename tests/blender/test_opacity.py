@@ -80,9 +80,11 @@ def test_a_uniform_card_of_alpha_a_shades_the_ground_as_in_cycles(clean, alpha):
     assert float(np.abs(ours - cyc).max()) < 0.1
 
 
-def test_a_textured_card_half_opaque_shades_the_ground_as_in_cycles(clean):
+@pytest.mark.parametrize("via", ["direct", "math", "ramp"])
+def test_a_textured_card_half_opaque_shades_the_ground_as_in_cycles(clean, via):
     """The card's image is clear for u < ½ (x < 0) and opaque beyond, read through the card's
-    UV map: the ground is open on one side and dark on the other, as in Cycles."""
+    UV map (directly, through a Math node's Greater Than 0.5, or a constant ColorRamp at 0.5):
+    the ground is open on one side and dark on the other, as in Cycles."""
     img = bpy.data.images.new("HalfCard", 16, 16, alpha=True)
     px = np.ones((16, 16, 4), np.float32)
     px[:, :8, 3] = 0.0
@@ -90,7 +92,20 @@ def test_a_textured_card_half_opaque_shades_the_ground_as_in_cycles(clean):
     mat, bsdf = _principled("TexturedCard")
     tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
     tex.image = img
-    mat.node_tree.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
+    nt = mat.node_tree
+    if via == "direct":
+        nt.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
+    elif via == "math":
+        node = nt.nodes.new("ShaderNodeMath")
+        node.operation, node.inputs[1].default_value = "GREATER_THAN", 0.5
+        nt.links.new(tex.outputs["Alpha"], node.inputs[0])
+        nt.links.new(node.outputs[0], bsdf.inputs["Alpha"])
+    else:
+        node = nt.nodes.new("ShaderNodeValToRGB")
+        node.color_ramp.interpolation = "CONSTANT"
+        node.color_ramp.elements[1].position = 0.5
+        nt.links.new(tex.outputs["Alpha"], node.inputs[0])
+        nt.links.new(node.outputs["Color"], bsdf.inputs["Alpha"])
     ground = _scene(mat)
     ours, cyc, _rep = _bake_both()
     x = np.array([v.co.x for v in ground.data.vertices])
