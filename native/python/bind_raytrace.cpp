@@ -259,9 +259,9 @@ void bind_raytrace(py::module_& m) {
            "opacity_alphas, each material's alpha: a float, or a float32 (H, W) texture "
            "(row 0 at v = 0, bilinear, repeat) read at the UVs opacity_uvs float32 (M, 3, 2), "
            "or (texture, srgb, scale, offset): offset + scale * t, t the interpolated value "
-           "decoded from sRGB when srgb; "
-           "a hit of alpha a stops a ray with probability a. The data are copied. Releases the GIL while "
-           "the BVH builds. ValueError on bad input, CanopyAOError if Embree fails.")
+           "decoded from sRGB when srgb; a hit of alpha a stops a ray with probability a. "
+           "The data are copied. Releases the GIL while the BVH builds. ValueError on bad "
+           "input, CanopyAOError if Embree fails.")
       .def(
           "ao",
           [](const RayTracer& self, const py::array& points, const py::array& normals,

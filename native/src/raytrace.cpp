@@ -266,9 +266,10 @@ inline bool stops(const RTCFilterFunctionNArguments* args, unsigned k, unsigned 
   if (a >= 1.0f) return true;
   if (!(a > 0.0f)) return false;
   const unsigned N = args->N;
-  std::uint64_t h = mix64(float_bits(RTCRayN_org_x(args->ray, N, k), RTCRayN_org_y(args->ray, N, k)));
-  h = mix64(h ^ float_bits(RTCRayN_org_z(args->ray, N, k), RTCRayN_dir_x(args->ray, N, k)));
-  h = mix64(h ^ float_bits(RTCRayN_dir_y(args->ray, N, k), RTCRayN_dir_z(args->ray, N, k)));
+  RTCRayN* ray = args->ray;
+  std::uint64_t h = mix64(float_bits(RTCRayN_org_x(ray, N, k), RTCRayN_org_y(ray, N, k)));
+  h = mix64(h ^ float_bits(RTCRayN_org_z(ray, N, k), RTCRayN_dir_x(ray, N, k)));
+  h = mix64(h ^ float_bits(RTCRayN_dir_y(ray, N, k), RTCRayN_dir_z(ray, N, k)));
   h = mix64(h ^ (0x9e3779b97f4a7c15ULL * (static_cast<std::uint64_t>(prim) + 1)));
   return static_cast<double>(h >> 11) * 0x1.0p-53 < static_cast<double>(a);
 }

@@ -121,15 +121,19 @@ class _Reader:
             raise opacity.NotUnderstood("its alpha reads images through several UV maps")
         if out.name == "Alpha" and img.alpha_mode == "NONE":
             return ("const", 1.0)
+        space = img.colorspace_settings.name
+        if out.name != "Alpha" and space not in LINEAR_SPACES | {"sRGB"} and not img.is_float:
+            # 8-bit sRGB stays encoded (core/opacity.py); other spaces must be linear
+            raise opacity.NotUnderstood(f"its image '{img.name}' is in colour space '{space}'")
         if img.name not in self.images:
-            self.images[img.name] = _pixels(img, out.name != "Alpha")
-            if img.colorspace_settings.name == "sRGB" and not img.is_float:
+            self.images[img.name] = _pixels(img)
+            if space == "sRGB" and not img.is_float:
                 self.encoded.add(img.name)
         return ("image", img.name, "alpha" if out.name == "Alpha" else "color")
 
 
-def _pixels(img, colour):
-    """float32 (H, W, 4) RGBA of ``img``, its colour linear when ``colour``."""
+def _pixels(img):
+    """float32 (H, W, 4) RGBA of ``img`` as bpy holds them."""
     w, h = int(img.size[0]), int(img.size[1])
     channels = int(img.channels)
     if w < 1 or h < 1 or len(img.pixels) != w * h * channels:
@@ -140,10 +144,6 @@ def _pixels(img, colour):
     px[..., :min(channels, 4)] = buf.reshape(h, w, channels)[..., :4]
     if channels < 3:
         px[..., 1:3] = px[..., :1]
-    if colour:  # 8-bit sRGB stays encoded (core/opacity.py); other spaces must be linear
-        space = img.colorspace_settings.name
-        if space != "sRGB" and space not in LINEAR_SPACES and not img.is_float:
-            raise opacity.NotUnderstood(f"its image '{img.name}' is in colour space '{space}'")
     return px
 
 

@@ -119,16 +119,17 @@
 // normal (no hemisphere) → (0, 0, 0); an empty scene → the unit normal (nothing blocks).
 //
 // Opacity (docs/DESIGN.md, 'Opacity of leaf cards'): a tracer may be given each triangle's
-// material and UVs and each material's alpha (a constant, or a float texture looked up bilinearly
-// with wrap, as Blender's Image Texture with Linear interpolation and Repeat extension). A hit on
-// a surface of alpha a in (0, 1) stops the ray with probability a: the ray goes on unless
-// hash(ray origin, ray direction, triangle) / 2^64 < a. A ray through surfaces of alphas a_i is
-// then open with probability Π(1 − a_i), Cycles' transparent-shadow throughput on its AO ray, so
-// the AO's expectation is Cycles' (a uniform card of alpha 0.5: 0.505 in Cycles); the decision
-// depends only on the ray and the triangle, so it is the same whatever the thread count, and the
-// same when Embree reports one hit twice. alpha ≤ 0 never stops a ray, alpha ≥ 1 always does.
-// Every ray honours it (bake, calibration, buried test, bent normals): it is in the occlusion
-// filter. Instanced meshes (Prototype) stay opaque.
+// material and UVs and each material's alpha (a constant, or a float texture looked up
+// bilinearly with wrap, as Blender's Image Texture with Linear interpolation and Repeat
+// extension). A hit on a surface of alpha a in (0, 1) stops the ray with probability a: the
+// ray goes on unless a hash of (ray origin, ray direction, triangle), taken as a number in
+// [0, 1), is below a. A ray through surfaces of alphas a_i is then open with probability
+// Π(1 − a_i), Cycles' transparent-shadow throughput on its AO ray, so the AO's expectation is
+// Cycles' (a uniform card of alpha 0.5 over a plane: 0.505 in Cycles); the decision depends
+// only on the ray and the triangle, so it is the same whatever the thread count, and the same
+// when Embree reports one hit twice. alpha ≤ 0 never stops a ray, alpha ≥ 1 always does.
+// Every ray honours it (bake, calibration, buried test, bent normals, texels): it is in the
+// occlusion filter. Instanced meshes (Prototype) stay opaque.
 //
 // Thread safety: a built RayTracer is immutable; ao() may be called from several threads at
 // once. Work inside one call runs on all cores (canopy_ao::parallel_for_blocks, capped by
