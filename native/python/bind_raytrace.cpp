@@ -64,35 +64,30 @@ Opacity opacity_arg(const py::object& materials, const py::object& uvs, const py
     }
     o.uvs = static_cast<const float*>(uv.data());
   }
+  // A texture, checked and kept alive in `keep`.
+  const auto texture = [keep](const py::handle h, AlphaMaterial* a) {
+    keep->push_back(py::reinterpret_borrow<py::array>(h));
+    const py::array& tex = keep->back();
+    require_dtype(tex, "opacity_alphas texture", py::dtype::of<float>(), "float32");
+    if (tex.ndim() != 2 || tex.shape(0) < 1 || tex.shape(1) < 1) {
+      throw py::value_error("an opacity_alphas texture must be float32 (H, W), got " +
+                            shape_str(tex));
+    }
+    a->texture = static_cast<const float*>(tex.data());
+    a->height = static_cast<int>(tex.shape(0));
+    a->width = static_cast<int>(tex.shape(1));
+  };
   for (const py::handle item : alphas) {
     AlphaMaterial a;
     if (py::isinstance<py::array>(item)) {
-      keep->push_back(py::reinterpret_borrow<py::array>(item));
-      const py::array& tex = keep->back();
-      require_dtype(tex, "opacity_alphas texture", py::dtype::of<float>(), "float32");
-      if (tex.ndim() != 2 || tex.shape(0) < 1 || tex.shape(1) < 1) {
-        throw py::value_error("an opacity_alphas texture must be float32 (H, W), got " +
-                              shape_str(tex));
-      }
-      a.texture = static_cast<const float*>(tex.data());
-      a.height = static_cast<int>(tex.shape(0));
-      a.width = static_cast<int>(tex.shape(1));
+      texture(item, &a);
     } else if (py::isinstance<py::tuple>(item)) {
       // (texture, srgb, scale, offset): AlphaMaterial's post-interpolation transform
       const auto t = py::reinterpret_borrow<py::tuple>(item);
       if (py::len(t) != 4 || !py::isinstance<py::array>(t[0])) {
         throw py::value_error("an opacity_alphas tuple must be (texture, srgb, scale, offset)");
       }
-      keep->push_back(py::reinterpret_borrow<py::array>(t[0]));
-      const py::array& tex = keep->back();
-      require_dtype(tex, "opacity_alphas texture", py::dtype::of<float>(), "float32");
-      if (tex.ndim() != 2 || tex.shape(0) < 1 || tex.shape(1) < 1) {
-        throw py::value_error("an opacity_alphas texture must be float32 (H, W), got " +
-                              shape_str(tex));
-      }
-      a.texture = static_cast<const float*>(tex.data());
-      a.height = static_cast<int>(tex.shape(0));
-      a.width = static_cast<int>(tex.shape(1));
+      texture(t[0], &a);
       a.srgb = t[1].cast<bool>();
       a.scale = t[2].cast<float>();
       a.offset = t[3].cast<float>();

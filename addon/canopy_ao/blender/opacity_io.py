@@ -53,7 +53,7 @@ class _Reader:
         if not socket.is_linked:
             v = socket.default_value
             if hasattr(v, "__len__"):
-                return ("const", float(np.dot(list(v)[:3], (0.2126, 0.7152, 0.0722))))
+                return ("const", float(opacity.luminance(list(v)[:3])))
             return ("const", float(v))
         node, out = self._source(socket)
         kind = node.type
@@ -82,8 +82,7 @@ class _Reader:
             if out.name == "Alpha":
                 vals = [e.color[3] for e in ramp.elements]
             else:
-                vals = [float(np.dot(list(e.color)[:3], (0.2126, 0.7152, 0.0722)))
-                        for e in ramp.elements]
+                vals = [float(opacity.luminance(list(e.color)[:3])) for e in ramp.elements]
             return ("ramp", self.value(node.inputs[0]), pos, vals, ramp.interpolation)
         raise opacity.NotUnderstood(f"its alpha comes from a '{node.name}' node")
 

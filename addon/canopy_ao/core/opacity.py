@@ -75,7 +75,7 @@ def srgb_decode(c):
     return np.where(c < 0.04045, np.maximum(c, 0.0) / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def _luminance(rgb):
+def luminance(rgb):
     """Blender's colour-to-float conversion: the scene-linear luminance (Rec. 709)."""
     return np.asarray(rgb, np.float64) @ np.array([0.2126, 0.7152, 0.0722])
 
@@ -93,7 +93,7 @@ def evaluate(expr, images, encoded=frozenset()):
         if expr[2] == "alpha":
             return px[..., 3].astype(np.float64)
         rgb = px[..., :3]
-        return _luminance(srgb_decode(rgb) if expr[1] in encoded else rgb)
+        return luminance(srgb_decode(rgb) if expr[1] in encoded else rgb)
     args = [evaluate(e, images, encoded) for e in expr[1:] if isinstance(e, tuple)]
     shapes = {np.shape(a) for a in args if np.ndim(a)}
     if len(shapes) > 1:
@@ -155,7 +155,7 @@ def material_alpha(name, expr, images, uv_map="", encoded=frozenset()):
     affine = _affine(expr, encoded)
     if affine is not None:
         key, scale, offset = affine
-        tex = np.ascontiguousarray(_luminance(images[key][..., :3]), dtype=np.float32)
+        tex = np.ascontiguousarray(luminance(images[key][..., :3]), dtype=np.float32)
         if float(np.min(offset + scale * srgb_decode(tex))) >= 1.0:
             return MaterialAlpha(name)
         return MaterialAlpha(name, texture=tex, uv_map=uv_map, srgb=True, scale=float(scale),
