@@ -82,15 +82,17 @@ Opacity opacity_arg(const py::object& materials, const py::object& uvs, const py
     if (py::isinstance<py::array>(item)) {
       texture(item, &a);
     } else if (py::isinstance<py::tuple>(item)) {
-      // (texture, srgb, scale, offset): AlphaMaterial's post-interpolation transform
+      // (texture, srgb, scale, offset, nearest): AlphaMaterial's lookup and transform
       const auto t = py::reinterpret_borrow<py::tuple>(item);
-      if (py::len(t) != 4 || !py::isinstance<py::array>(t[0])) {
-        throw py::value_error("an opacity_alphas tuple must be (texture, srgb, scale, offset)");
+      if (py::len(t) != 5 || !py::isinstance<py::array>(t[0])) {
+        throw py::value_error(
+            "an opacity_alphas tuple must be (texture, srgb, scale, offset, nearest)");
       }
       texture(t[0], &a);
       a.srgb = t[1].cast<bool>();
       a.scale = t[2].cast<float>();
       a.offset = t[3].cast<float>();
+      a.nearest = t[4].cast<bool>();
     } else {
       a.alpha = item.cast<float>();
     }
@@ -253,8 +255,9 @@ void bind_raytrace(py::module_& m) {
            "int32 (M,), each triangle's index into opacity_alphas (-1 = opaque); "
            "opacity_alphas, each material's alpha: a float, or a float32 (H, W) texture "
            "(row 0 at v = 0, bilinear, repeat) read at the UVs opacity_uvs float32 (M, 3, 2), "
-           "or (texture, srgb, scale, offset): offset + scale * t, t the interpolated value "
-           "decoded from sRGB when srgb; a hit of alpha a stops a ray with probability a. "
+           "or (texture, srgb, scale, offset, nearest): offset + scale * t, t the value "
+           "interpolated (the nearest texel's when nearest) and decoded from sRGB when srgb; "
+           "a hit of alpha a stops a ray with probability a. "
            "The data are copied. Releases the GIL while the BVH builds. ValueError on bad "
            "input, CanopyAOError if Embree fails.")
       .def(

@@ -229,21 +229,26 @@ struct AlphaData {
       v = w0 * c[1] + bu * c[3] + bv * c[5];
     }
     const int w = width[static_cast<std::size_t>(mat)], h = height[static_cast<std::size_t>(mat)];
-    // Blender's Linear interpolation, Repeat extension: texel centres at (i + ½) / size.
-    const double x = static_cast<double>(u) * w - 0.5, y = static_cast<double>(v) * h - 0.5;
-    const double fx = std::floor(x), fy = std::floor(y);
-    const auto wrap = [](double i, int n) {
+    const AlphaMaterial& p = post[static_cast<std::size_t>(mat)];
+    const auto wrap = [](double i, int n) {  // Repeat extension
       const double r = std::fmod(i, static_cast<double>(n));
       return static_cast<std::size_t>(r < 0 ? r + n : r);
     };
-    const std::size_t x0 = wrap(fx, w), x1 = wrap(fx + 1, w), y0 = wrap(fy, h),
-                      y1 = wrap(fy + 1, h);
-    const float tx = static_cast<float>(x - fx), ty = static_cast<float>(y - fy);
     const std::size_t W = static_cast<std::size_t>(w);
-    const float a0 = tex[y0 * W + x0] + (tex[y0 * W + x1] - tex[y0 * W + x0]) * tx;
-    const float a1 = tex[y1 * W + x0] + (tex[y1 * W + x1] - tex[y1 * W + x0]) * tx;
-    const AlphaMaterial& p = post[static_cast<std::size_t>(mat)];
-    float t = a0 + (a1 - a0) * ty;
+    float t;
+    if (p.nearest) {  // Closest: the texel holding the UV
+      t = tex[wrap(std::floor(static_cast<double>(v) * h), h) * W +
+              wrap(std::floor(static_cast<double>(u) * w), w)];
+    } else {  // Linear: texel centres at (i + ½) / size
+      const double x = static_cast<double>(u) * w - 0.5, y = static_cast<double>(v) * h - 0.5;
+      const double fx = std::floor(x), fy = std::floor(y);
+      const std::size_t x0 = wrap(fx, w), x1 = wrap(fx + 1, w), y0 = wrap(fy, h),
+                        y1 = wrap(fy + 1, h);
+      const float tx = static_cast<float>(x - fx), ty = static_cast<float>(y - fy);
+      const float a0 = tex[y0 * W + x0] + (tex[y0 * W + x1] - tex[y0 * W + x0]) * tx;
+      const float a1 = tex[y1 * W + x0] + (tex[y1 * W + x1] - tex[y1 * W + x0]) * tx;
+      t = a0 + (a1 - a0) * ty;
+    }
     if (p.srgb) {  // Cycles' color_srgb_to_linear
       t = t < 0.04045f ? std::max(t, 0.0f) * (1.0f / 12.92f)
                        : std::pow((t + 0.055f) * (1.0f / 1.055f), 2.4f);
@@ -967,7 +972,7 @@ std::unique_ptr<AlphaData> alpha_data(const Opacity& opacity, std::size_t triang
       }
       a->post[k] = in;
       a->post[k].texture = nullptr;
-      clear[k] = clear[k] || in.scale != 1.0f || in.offset != 0.0f || in.srgb;
+      clear[k] = clear[k] || in.scale != 1.0f || in.offset != 0.0f || in.srgb || in.nearest;
       a->width[k] = in.width;
       a->height[k] = in.height;
     } else if (!std::isfinite(in.alpha)) {

@@ -80,10 +80,11 @@ def test_a_uniform_card_of_alpha_a_shades_the_ground_as_in_cycles(clean, alpha):
     assert float(np.abs(ours - cyc).max()) < 0.1
 
 
-@pytest.mark.parametrize("via", ["direct", "math", "ramp"])
+@pytest.mark.parametrize("via", ["direct", "math", "ramp", "closest"])
 def test_a_textured_card_half_opaque_shades_the_ground_as_in_cycles(clean, via):
     """The card's image is clear for u < ½ (x < 0) and opaque beyond, read through the card's
-    UV map (directly, through a Math node's Greater Than 0.5, or a constant ColorRamp at 0.5):
+    UV map (directly, through a Math node's Greater Than 0.5, a constant ColorRamp at 0.5, or
+    directly from an image set to Closest interpolation):
     the ground is open on one side and dark on the other, as in Cycles."""
     img = bpy.data.images.new("HalfCard", 16, 16, alpha=True)
     px = np.ones((16, 16, 4), np.float32)
@@ -93,7 +94,9 @@ def test_a_textured_card_half_opaque_shades_the_ground_as_in_cycles(clean, via):
     tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
     tex.image = img
     nt = mat.node_tree
-    if via == "direct":
+    if via == "closest":
+        tex.interpolation = "Closest"
+    if via in ("direct", "closest"):
         nt.links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
     elif via == "math":
         node = nt.nodes.new("ShaderNodeMath")

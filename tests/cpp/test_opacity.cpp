@@ -161,3 +161,20 @@ TEST(Opacity, ATexturesValueIsDecodedFromSrgbAfterInterpolationThenScaled) {
   EXPECT_NEAR(mean(card.tracer({m}).ao(r.points(), r.normals(), opts(1024))),
               1.0 - alpha * blocked, 0.01);
 }
+
+TEST(Opacity, ClosestReadsTheTexelTheUvFallsIn) {
+  // Two texels, opaque then clear, on a 200 × 200 card at height 1. Under x = -90 (u = 0.05)
+  // the nearest texel is the opaque one; Linear blends in the clear one across the wrap.
+  const Card card(100.0f, 1.0f);
+  std::vector<float> texels = {1.0f, 0.0f};
+  AlphaMaterial m;
+  m.texture = texels.data();
+  m.width = 2;
+  m.height = 1;
+  const Points r({-90, 0, 0}, 16);
+  const double linear = mean(card.tracer({m}).ao(r.points(), r.normals(), opts(256)));
+  m.nearest = true;
+  const double nearest = mean(card.tracer({m}).ao(r.points(), r.normals(), opts(256)));
+  EXPECT_LT(nearest, 0.05);  // only rays past the card's edge, 10 units away at height 1
+  EXPECT_GT(linear, 0.2);
+}

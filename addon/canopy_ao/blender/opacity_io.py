@@ -30,6 +30,7 @@ class _Reader:
         self.images = {}  # image name -> float32 (H, W, 4) RGBA, colour linear unless encoded
         self.encoded = set()  # images whose colour is sRGB-encoded (8-bit sRGB: core/opacity.py)
         self.uv_maps = set()
+        self.interpolations = set()  # of the Image Texture nodes read
 
     def shader(self, socket):
         """The alpha of the shader reaching input ``socket``."""
@@ -116,6 +117,7 @@ class _Reader:
                 raise opacity.NotUnderstood(f"its Image Texture '{node.name}' is not read "
                                             "through a UV map")
         self.uv_maps.add(uv)
+        self.interpolations.add(node.interpolation)
         if len(self.uv_maps) > 1:
             raise opacity.NotUnderstood("its alpha reads images through several UV maps")
         if out.name == "Alpha" and img.alpha_mode == "NONE":
@@ -157,7 +159,8 @@ def material_alpha(mat):
     try:
         expr = reader.shader(out.inputs["Surface"])
         return opacity.material_alpha(mat.name, expr, reader.images,
-                                      next(iter(reader.uv_maps), ""), reader.encoded), None
+                                      next(iter(reader.uv_maps), ""), reader.encoded,
+                                      nearest=reader.interpolations == {"Closest"}), None
     except opacity.NotUnderstood as exc:
         why = str(exc)
     except (AttributeError, KeyError, IndexError, TypeError, ValueError) as exc:

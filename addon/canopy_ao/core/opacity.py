@@ -52,6 +52,7 @@ class MaterialAlpha:
     srgb: bool = False
     scale: float = 1.0
     offset: float = 0.0
+    nearest: bool = False  # the texel the UV falls in (Closest), not interpolated (Linear)
 
     @property
     def opaque(self):
@@ -150,8 +151,9 @@ def _affine(expr, encoded):
     return None
 
 
-def material_alpha(name, expr, images, uv_map="", encoded=frozenset()):
-    """The MaterialAlpha of material ``name`` whose alpha is ``expr`` (evaluate)."""
+def material_alpha(name, expr, images, uv_map="", encoded=frozenset(), nearest=False):
+    """The MaterialAlpha of material ``name`` whose alpha is ``expr`` (evaluate); nearest: its
+    images are read at the texel the UV falls in (Blender's Closest)."""
     affine = _affine(expr, encoded)
     if affine is not None:
         key, scale, offset = affine
@@ -159,14 +161,14 @@ def material_alpha(name, expr, images, uv_map="", encoded=frozenset()):
         if float(np.min(offset + scale * srgb_decode(tex))) >= 1.0:
             return MaterialAlpha(name)
         return MaterialAlpha(name, texture=tex, uv_map=uv_map, srgb=True, scale=float(scale),
-                             offset=float(offset))
+                             offset=float(offset), nearest=nearest)
     value = evaluate(expr, images, encoded)
     if np.ndim(value) == 0:
         return MaterialAlpha(name, alpha=float(np.clip(value, 0.0, 1.0)))
     tex = np.ascontiguousarray(np.clip(value, 0.0, 1.0), dtype=np.float32)
     if float(tex.min()) >= 1.0:
         return MaterialAlpha(name)  # an image that is opaque everywhere
-    return MaterialAlpha(name, texture=tex, uv_map=uv_map)
+    return MaterialAlpha(name, texture=tex, uv_map=uv_map, nearest=nearest)
 
 
 def notes(items):
@@ -198,8 +200,8 @@ def tracer_args(items):
         for a in op.materials:  # one copy of a material many items share (its texture)
             if not a.opaque and id(a) not in slot:
                 slot[id(a)] = len(alphas)
-                alphas.append(a.alpha if a.texture is None else a.texture if not a.srgb else
-                              (a.texture, True, a.scale, a.offset))
+                alphas.append(a.alpha if a.texture is None else
+                              (a.texture, a.srgb, a.scale, a.offset, a.nearest))
         index = np.array([slot.get(id(a), -1) for a in op.materials], np.int32)
         # a face's material index past the last slot takes the last, as Blender renders it
         mats.append(index[np.clip(np.asarray(op.triangle_material, np.int64), 0,

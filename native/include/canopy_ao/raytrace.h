@@ -261,6 +261,8 @@ struct AlphaMaterial {
   bool srgb = false;
   float scale = 1.0f;
   float offset = 0.0f;
+  /// The texel the UV falls in, not interpolated (Blender's Closest interpolation).
+  bool nearest = false;
 };
 
 /// Which triangles are not opaque (raytrace.h, "Opacity"). Copied by the constructor.
