@@ -36,12 +36,80 @@ RayTraceOptions options_arg(const py::object& samples, double distance, const py
   return o;
 }
 
+/// The Opacity of opacity_materials int32 (M,), opacity_uvs float32 (M, 3, 2) and
+/// opacity_alphas (a sequence: each a float, or a float32 (H, W) texture); `keep` holds the
+/// arrays until the build has copied them.
+Opacity opacity_arg(const py::object& materials, const py::object& uvs, const py::object& alphas,
+                    std::size_t m, std::vector<py::array>* keep) {
+  Opacity o;
+  if (materials.is_none() && uvs.is_none() && alphas.is_none()) return o;
+  if (materials.is_none() || alphas.is_none()) {
+    throw py::value_error("give opacity_materials and opacity_alphas together");
+  }
+  keep->push_back(materials.cast<py::array>());
+  const py::array& mat = keep->back();
+  require_dtype(mat, "opacity_materials", py::dtype::of<std::int32_t>(), "int32");
+  if (mat.ndim() != 1 || static_cast<std::size_t>(mat.shape(0)) != m) {
+    throw py::value_error("opacity_materials must be int32 (M,) like triangles' rows, got " +
+                          shape_str(mat));
+  }
+  o.materials = static_cast<const std::int32_t*>(mat.data());
+  if (!uvs.is_none()) {
+    keep->push_back(uvs.cast<py::array>());
+    const py::array& uv = keep->back();
+    require_dtype(uv, "opacity_uvs", py::dtype::of<float>(), "float32");
+    if (uv.ndim() != 3 || static_cast<std::size_t>(uv.shape(0)) != m || uv.shape(1) != 3 ||
+        uv.shape(2) != 2) {
+      throw py::value_error("opacity_uvs must be float32 (M, 3, 2), got " + shape_str(uv));
+    }
+    o.uvs = static_cast<const float*>(uv.data());
+  }
+  // A texture, checked and kept alive in `keep`.
+  const auto texture = [keep](const py::handle h, AlphaMaterial* a) {
+    keep->push_back(py::reinterpret_borrow<py::array>(h));
+    const py::array& tex = keep->back();
+    require_dtype(tex, "opacity_alphas texture", py::dtype::of<float>(), "float32");
+    if (tex.ndim() != 2 || tex.shape(0) < 1 || tex.shape(1) < 1) {
+      throw py::value_error("an opacity_alphas texture must be float32 (H, W), got " +
+                            shape_str(tex));
+    }
+    a->texture = static_cast<const float*>(tex.data());
+    a->height = static_cast<int>(tex.shape(0));
+    a->width = static_cast<int>(tex.shape(1));
+  };
+  for (const py::handle item : alphas) {
+    AlphaMaterial a;
+    if (py::isinstance<py::array>(item)) {
+      texture(item, &a);
+    } else if (py::isinstance<py::tuple>(item)) {
+      // (texture, srgb, scale, offset, nearest): AlphaMaterial's lookup and transform
+      const auto t = py::reinterpret_borrow<py::tuple>(item);
+      if (py::len(t) != 5 || !py::isinstance<py::array>(t[0])) {
+        throw py::value_error(
+            "an opacity_alphas tuple must be (texture, srgb, scale, offset, nearest)");
+      }
+      texture(t[0], &a);
+      a.srgb = t[1].cast<bool>();
+      a.scale = t[2].cast<float>();
+      a.offset = t[3].cast<float>();
+      a.nearest = t[4].cast<bool>();
+    } else {
+      a.alpha = item.cast<float>();
+    }
+    o.alphas.push_back(a);
+  }
+  return o;
+}
+
 std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::array& triangles,
                                        const py::object& prototypes = py::none(),
                                        const py::object& instance_prototypes = py::none(),
                                        const py::object& instance_matrices = py::none(),
                                        const py::object& normals = py::none(),
-                                       const py::object& polygons = py::none()) {
+                                       const py::object& polygons = py::none(),
+                                       const py::object& opacity_materials = py::none(),
+                                       const py::object& opacity_uvs = py::none(),
+                                       const py::object& opacity_alphas = py::none()) {
   const PointsView v = points_arg(vertices, "vertices", /*allow_empty=*/true);
   std::size_t m = 0;
   const std::int32_t* t = triangles_arg(triangles, "triangles", v.size, &m);
@@ -117,8 +185,9 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
       std::copy(mat + 16 * k, mat + 16 * (k + 1), placed[k].matrix);
     }
   }
+  const Opacity opacity = opacity_arg(opacity_materials, opacity_uvs, opacity_alphas, m, &keep);
   py::gil_scoped_release release;
-  return std::make_unique<RayTracer>(v, t, m, shading, protos, placed);
+  return std::make_unique<RayTracer>(v, t, m, shading, opacity, protos, placed);
 }
 
 /// The AO (N,), or (AO, bent normals float32 (N, 3)) when `bent` (raytrace.h, "Bent normals").
@@ -166,9 +235,11 @@ void bind_raytrace(py::module_& m) {
       .def(py::init(&make_tracer), py::arg("vertices"), py::arg("triangles"),
            py::arg("prototypes") = py::none(), py::arg("instance_prototypes") = py::none(),
            py::arg("instance_matrices") = py::none(), py::arg("normals") = py::none(),
-           py::arg("polygons") = py::none(),
+           py::arg("polygons") = py::none(), py::arg("opacity_materials") = py::none(),
+           py::arg("opacity_uvs") = py::none(), py::arg("opacity_alphas") = py::none(),
            "RayTracer(vertices, triangles, prototypes=None, instance_prototypes=None, "
-           "instance_matrices=None, normals=None, polygons=None)\n\n"
+           "instance_matrices=None, normals=None, polygons=None, opacity_materials=None, "
+           "opacity_uvs=None, opacity_alphas=None)\n\n"
            "vertices: float32 (V, 3); triangles: int32 (M, 3), indices in [0, V). M may be 0 "
            "(nothing occludes: AO = 1). Instanced meshes (Embree instances: each prototype's "
            "BVH built once): prototypes, a sequence of (vertices float32 (P, 3), triangles "
@@ -180,8 +251,15 @@ void bind_raytrace(py::module_& m) {
            "bake starts it (each corner's bake point, raytrace.h 'Origins'), without them on "
            "the surface a hair from the vertex. polygons: int32 (M,), each triangle's face "
            "(a quad's two triangles share one), so a vertex has one corner per face as in "
-           "Blender's bake (needs normals). The data are copied. Releases the GIL while "
-           "the BVH builds. ValueError on bad input, CanopyAOError if Embree fails.")
+           "Blender's bake (needs normals). Opacity (raytrace.h, 'Opacity'): opacity_materials "
+           "int32 (M,), each triangle's index into opacity_alphas (-1 = opaque); "
+           "opacity_alphas, each material's alpha: a float, or a float32 (H, W) texture "
+           "(row 0 at v = 0, bilinear, repeat) read at the UVs opacity_uvs float32 (M, 3, 2), "
+           "or (texture, srgb, scale, offset, nearest): offset + scale * t, t the value "
+           "interpolated (the nearest texel's when nearest) and decoded from sRGB when srgb; "
+           "a hit of alpha a stops a ray with probability a. "
+           "The data are copied. Releases the GIL while the BVH builds. ValueError on bad "
+           "input, CanopyAOError if Embree fails.")
       .def(
           "ao",
           [](const RayTracer& self, const py::array& points, const py::array& normals,
@@ -243,6 +321,8 @@ void bind_raytrace(py::module_& m) {
       .def_property_readonly("vertex_count", &RayTracer::vertex_count)
       .def_property_readonly("triangle_count", &RayTracer::triangle_count)
       .def_property_readonly("instance_count", &RayTracer::instance_count)
+      .def_property_readonly("has_opacity", &RayTracer::has_opacity,
+                             "Whether some triangle is not opaque (opacity_materials).")
       .def_property_readonly("has_vertex_normals", &RayTracer::has_vertex_normals,
                              "Whether vertex receivers start at Cycles' bake point.")
       .def_property_readonly("corners_per_vertex", &RayTracer::corners_per_vertex,

@@ -201,6 +201,84 @@ inline void onb(Vec3 n, Vec3* t, Vec3* b) {
   *b = {c, sign + n.y * n.y * a, -n.y};
 }
 
+// === Opacity
+/// A tracer's opacity (raytrace.h, "Opacity"), copied from Opacity at construction.
+struct AlphaData {
+  std::vector<std::int32_t> materials;  // M: index into the per-material arrays, −1 = opaque
+  std::vector<float> uvs;               // 6M corner (u, v), or empty
+  std::vector<float> constant;          // per material: the alpha when it has no texture
+  std::vector<std::vector<float>> textures;  // per material: height × width alphas, or empty
+  std::vector<int> width, height;
+  std::vector<AlphaMaterial> post;  // per material: srgb, scale, offset (AlphaMaterial)
+  // The geometry id of the reversed winding (a device culling back faces: raytrace.cpp's
+  // two_sided_indices gives triangle (a, c, b) there), else none.
+  unsigned flipped_geometry = ~0u;
+
+  /// The alpha of triangle `prim` at Embree's barycentrics (bu, bv) on geometry `geom`.
+  float alpha(unsigned prim, unsigned geom, float bu, float bv) const {
+    const std::int32_t mat = materials[prim];
+    if (mat < 0) return 1.0f;
+    const std::vector<float>& tex = textures[static_cast<std::size_t>(mat)];
+    if (tex.empty()) return constant[static_cast<std::size_t>(mat)];
+    if (geom == flipped_geometry) std::swap(bu, bv);
+    float u = 0.0f, v = 0.0f;
+    if (!uvs.empty()) {
+      const float* c = uvs.data() + 6 * static_cast<std::size_t>(prim);
+      const float w0 = 1.0f - bu - bv;
+      u = w0 * c[0] + bu * c[2] + bv * c[4];
+      v = w0 * c[1] + bu * c[3] + bv * c[5];
+    }
+    const int w = width[static_cast<std::size_t>(mat)], h = height[static_cast<std::size_t>(mat)];
+    const AlphaMaterial& p = post[static_cast<std::size_t>(mat)];
+    const auto wrap = [](double i, int n) {  // Repeat extension
+      const double r = std::fmod(i, static_cast<double>(n));
+      return static_cast<std::size_t>(r < 0 ? r + n : r);
+    };
+    const std::size_t W = static_cast<std::size_t>(w);
+    float t;
+    if (p.nearest) {  // Closest: the texel holding the UV
+      t = tex[wrap(std::floor(static_cast<double>(v) * h), h) * W +
+              wrap(std::floor(static_cast<double>(u) * w), w)];
+    } else {  // Linear: texel centres at (i + ½) / size
+      const double x = static_cast<double>(u) * w - 0.5, y = static_cast<double>(v) * h - 0.5;
+      const double fx = std::floor(x), fy = std::floor(y);
+      const std::size_t x0 = wrap(fx, w), x1 = wrap(fx + 1, w), y0 = wrap(fy, h),
+                        y1 = wrap(fy + 1, h);
+      const float tx = static_cast<float>(x - fx), ty = static_cast<float>(y - fy);
+      const float a0 = tex[y0 * W + x0] + (tex[y0 * W + x1] - tex[y0 * W + x0]) * tx;
+      const float a1 = tex[y1 * W + x0] + (tex[y1 * W + x1] - tex[y1 * W + x0]) * tx;
+      t = a0 + (a1 - a0) * ty;
+    }
+    if (p.srgb) {  // Cycles' color_srgb_to_linear
+      t = t < 0.04045f ? std::max(t, 0.0f) * (1.0f / 12.92f)
+                       : std::pow((t + 0.055f) * (1.0f / 1.055f), 2.4f);
+    }
+    return p.offset + p.scale * t;
+  }
+};
+
+inline std::uint64_t float_bits(float a, float b) {
+  std::uint32_t x, y;
+  std::memcpy(&x, &a, 4);
+  std::memcpy(&y, &b, 4);
+  return (static_cast<std::uint64_t>(y) << 32) | x;
+}
+
+/// Whether hit k (on triangle prim, alpha a) stops its ray: always at a ≥ 1, never at a ≤ 0,
+/// else when a hash of the ray (origin, direction) and the triangle, in [0, 1), is below a
+/// (raytrace.h, "Opacity"): the ray's own data, so any thread count gives the same answer.
+inline bool stops(const RTCFilterFunctionNArguments* args, unsigned k, unsigned prim, float a) {
+  if (a >= 1.0f) return true;
+  if (!(a > 0.0f)) return false;
+  const unsigned N = args->N;
+  RTCRayN* ray = args->ray;
+  std::uint64_t h = mix64(float_bits(RTCRayN_org_x(ray, N, k), RTCRayN_org_y(ray, N, k)));
+  h = mix64(h ^ float_bits(RTCRayN_org_z(ray, N, k), RTCRayN_dir_x(ray, N, k)));
+  h = mix64(h ^ float_bits(RTCRayN_dir_y(ray, N, k), RTCRayN_dir_z(ray, N, k)));
+  h = mix64(h ^ (0x9e3779b97f4a7c15ULL * (static_cast<std::uint64_t>(prim) + 1)));
+  return static_cast<double>(h >> 11) * 0x1.0p-53 < static_cast<double>(a);
+}
+
 // === Own primitives
 /// What a query hands to the filter: Embree passes filters a pointer to `base`, the first
 /// member, so the filter can cast it back (standard layout).
@@ -212,13 +290,14 @@ struct TraceContext {
   // When set, ray ids are slots of the current batch instead of query points, and ray_skip[slot]
   // is the one triangle that ray skips (−1 = none): Cycles' bake point (raytrace.h, "Origins").
   const std::int32_t* ray_skip = nullptr;
+  const AlphaData* alpha = nullptr;  // the tracer's opacity, or null: every triangle opaque
 };
 static_assert(std::is_standard_layout<TraceContext>::value, "cast from the Embree context");
 
 /// Occlusion filter on every triangle geometry: rejects a hit on the ray's own receiver's
 /// triangles (ray id = query point), so traversal goes on past them. O(1) per hit: a triangle is
 /// a vertex's own when one of its three indices is that vertex.
-void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
+void skip_own(const RTCFilterFunctionNArguments* args) {
   const auto* c = reinterpret_cast<const TraceContext*>(args->context);
   if (c->ray_skip) {
     for (unsigned k = 0; k < args->N; ++k) {
@@ -243,6 +322,22 @@ void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
       const std::uint32_t* t = c->indices + 3 * static_cast<std::size_t>(prim);
       if (t[0] == v || t[1] == v || t[2] == v) args->valid[k] = 0;
     }
+  }
+}
+
+/// The occlusion filter on the tracer's own triangles: skip_own, then a hit on a surface that
+/// is not opaque lets its ray through as raytrace.h's "Opacity" says.
+void skip_own_primitives(const RTCFilterFunctionNArguments* args) {
+  skip_own(args);
+  const auto* c = reinterpret_cast<const TraceContext*>(args->context);
+  if (c->alpha == nullptr) return;
+  for (unsigned k = 0; k < args->N; ++k) {
+    if (args->valid[k] == 0) continue;
+    const unsigned prim = RTCHitN_primID(args->hit, args->N, k);
+    const float a = c->alpha->alpha(prim, RTCHitN_geomID(args->hit, args->N, k),
+                                    RTCHitN_u(args->hit, args->N, k),
+                                    RTCHitN_v(args->hit, args->N, k));
+    if (!stops(args, k, prim, a)) args->valid[k] = 0;
   }
 }
 
@@ -563,6 +658,7 @@ struct RayTracer::Impl {
   DevicePtr device;
   std::vector<std::unique_ptr<Prototype>> prototypes;  // instanced meshes (occluders only)
   ScenePtr scene;
+  std::unique_ptr<AlphaData> alpha;  // the triangles' opacity, or null: all opaque
 
   Vec3 vertex(std::uint32_t i) const {
     return {vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]};
@@ -855,9 +951,79 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
                      std::size_t triangle_count, const BakeShading& shading,
                      const std::vector<Prototype>& prototypes,
                      const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
+    : RayTracer(vertices, triangles, triangle_count, shading, Opacity{}, prototypes, instances,
+                build) {}
+
+namespace {
+/// The AlphaData of `opacity` over `triangle_count` triangles (validated), or null when every
+/// triangle is opaque (then the tracer is the same as without it).
+std::unique_ptr<AlphaData> alpha_data(const Opacity& opacity, std::size_t triangle_count) {
+  if (opacity.materials == nullptr || triangle_count == 0) return nullptr;
+  const std::size_t n = opacity.alphas.size();
+  auto a = std::make_unique<AlphaData>();
+  a->constant.resize(n);
+  a->textures.resize(n);
+  a->width.resize(n);
+  a->height.resize(n);
+  a->post.resize(n);
+  std::vector<bool> clear(n, false);  // a material some ray may pass
+  for (std::size_t k = 0; k < n; ++k) {
+    const AlphaMaterial& in = opacity.alphas[k];
+    const std::string what = "opacity material " + std::to_string(k) + ": ";
+    if (in.texture != nullptr) {
+      if (in.width < 1 || in.height < 1) {
+        throw std::invalid_argument(what + "texture size must be positive, got " +
+                                    std::to_string(in.width) + " x " + std::to_string(in.height));
+      }
+      const std::size_t count = static_cast<std::size_t>(in.width) * in.height;
+      a->textures[k].assign(in.texture, in.texture + count);
+      for (float x : a->textures[k]) {
+        if (!std::isfinite(x)) throw std::invalid_argument(what + "non-finite texture alpha");
+        clear[k] = clear[k] || x < 1.0f;
+      }
+      if (!std::isfinite(in.scale) || !std::isfinite(in.offset)) {
+        throw std::invalid_argument(what + "non-finite scale or offset");
+      }
+      a->post[k] = in;
+      a->post[k].texture = nullptr;
+      clear[k] = clear[k] || in.scale != 1.0f || in.offset != 0.0f || in.srgb || in.nearest;
+      a->width[k] = in.width;
+      a->height[k] = in.height;
+    } else if (!std::isfinite(in.alpha)) {
+      throw std::invalid_argument(what + "non-finite alpha");
+    }
+    a->constant[k] = in.alpha;
+    clear[k] = clear[k] || (in.texture == nullptr && in.alpha < 1.0f);
+  }
+  a->materials.assign(opacity.materials, opacity.materials + triangle_count);
+  bool any = false;
+  for (std::size_t j = 0; j < triangle_count; ++j) {
+    const std::int32_t mat = a->materials[j];
+    if (mat < -1 || mat >= static_cast<std::int32_t>(n)) {
+      std::ostringstream s;
+      s << "opacity materials[" << j << "] = " << mat << " outside [-1, " << n << ")";
+      throw std::invalid_argument(s.str());
+    }
+    any = any || (mat >= 0 && clear[static_cast<std::size_t>(mat)]);
+  }
+  if (opacity.uvs != nullptr) {
+    a->uvs.assign(opacity.uvs, opacity.uvs + 6 * triangle_count);
+    for (float x : a->uvs) {
+      if (!std::isfinite(x)) throw std::invalid_argument("opacity uvs: non-finite coordinate");
+    }
+  }
+  return any ? std::move(a) : nullptr;
+}
+}  // namespace
+
+RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
+                     std::size_t triangle_count, const BakeShading& shading,
+                     const Opacity& opacity, const std::vector<Prototype>& prototypes,
+                     const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   check_mesh(vertices, triangles, triangle_count, "");
+  m.alpha = alpha_data(opacity, triangle_count);
   const PointsView vertex_normals = shading.vertex_normals;
   if (shading.polygons != nullptr && triangle_count > 0) {
     if (vertex_normals.size == 0) {
@@ -964,7 +1130,9 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
       }
     }
     if (!m.vertex_normals.empty() && vertices.size > 0) m.build_bake_corners(vertices.size);
-    // Both windings share primitive ids, so one filter on the original indices serves both.
+    // Both windings share primitive ids, so one filter on the original indices serves both
+    // (the opacity's barycentrics swap on the second: AlphaData::flipped_geometry).
+    if (m.alpha && culls) m.alpha->flipped_geometry = 1;
     for (int w = 0; w < (culls ? 2 : 1); ++w) {
       attach_triangles(m.device.get(), m.scene.get(), m.vertices.data(), vertices.size,
                        m.indices.data() + 3 * triangle_count * w, triangle_count,
@@ -1022,6 +1190,7 @@ float RayTracer::auto_offset() const { return impl_->auto_offset; }
 std::size_t RayTracer::vertex_count() const { return impl_->vertex_count; }
 std::size_t RayTracer::triangle_count() const { return impl_->triangle_count; }
 std::size_t RayTracer::instance_count() const { return impl_->instance_count; }
+bool RayTracer::has_opacity() const { return impl_->alpha != nullptr; }
 bool RayTracer::has_vertex_normals() const { return !impl_->vertex_normals.empty(); }
 
 double RayTracer::corners_per_vertex() const {
@@ -1168,6 +1337,7 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       context.own_triangle = own.triangle_ids;
     }
     context.indices = m.indices.data();
+    context.alpha = m.alpha.get();
 
     auto flush = [&] {
       embree::occluded(scene, &context.base, rays, filled);

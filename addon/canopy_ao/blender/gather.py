@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from . import mesh_io
+from . import mesh_io, opacity_io
 from .visibility import RenderVisibility, casts_shadow
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
@@ -216,7 +216,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     for o in targets:
         members.setdefault(o.name, o)
     target_names = {o.name for o in targets}
-    items, objects, how = [], {}, {}
+    items, objects, how, alphas = [], {}, {}, {}  # alphas: each material's, read once
     for name, obj in members.items():
         # A declared role costs nothing; a guess needs the triangles (connected components).
         declared = declared_role(obj)
@@ -243,6 +243,8 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
         polys = faces[0] if faces and len(faces[0]) == len(tris) else None
         items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source,
                                polygons=polys))
+        if len(tris):  # which triangles rays pass (the materials' alpha)
+            items[-1].opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
         objects[name] = obj
         how[name] = why
     return items, objects, how

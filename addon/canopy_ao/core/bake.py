@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 
-from . import cost, forest_tau, ladder, lighting, native, proxies, regression, trees
+from . import cost, forest_tau, ladder, lighting, native, opacity, proxies, regression, trees
+from . import forest as _forest
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, own_primitives, split_trees
 from .ladder import DEFAULT_TAU
@@ -46,6 +47,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
     plan.timings["trees"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
+    plan.notes.extend(opacity.notes(whole))
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
     if settings.method in ladder.TAU_METHODS + ("auto",) and (plan.fits or plan.trunks):
@@ -54,15 +56,15 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
         plan.timings["scene_plan"] = time.perf_counter() - t0
 
     if prototypes:
-        _attach(plan, prototypes, None)
+        _forest.attach(plan, prototypes, None)
     # Grass has no proxies to calibrate, nor has a ground under instanced trees alone, but
     # auto still weighs their laws against rays.
     proxyless_auto = (settings.method == "auto" and not plan.fits
                       and (any(it.role == "GRASS" for it in items)
-                           or bool(forest_meshes(prototypes))))
+                           or bool(_forest.traced_meshes(prototypes))))
     needs_tracer = settings.method in ("raytrace", "hybrid") or proxyless_auto or (
         settings.method == "auto" or settings.tau is None) and bool(plan.fits) or (
-        settings.tau is None and settings.method != "hybrid" and bool(forest_meshes(prototypes)))
+        settings.tau is None and settings.method != "hybrid" and bool(_forest.traced_meshes(prototypes)))
     if needs_tracer:
         t0 = time.perf_counter()
         try:
@@ -257,11 +259,6 @@ def evaluate_item(plan: Plan, item: SceneItem) -> ItemResult:
                       time.perf_counter() - t0, item.tree_source, item.tree_why)
 
 
-def forest_meshes(prototypes) -> list:
-    """The prototypes that carry triangles for the ray tracer (forest.Prototype.mesh)."""
-    return [p for p in prototypes or () if p.mesh is not None and len(p.mesh[1])]
-
-
 @refusals_are_user_errors
 def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     """Make instanced trees occlude every item evaluate_item() bakes with this plan.
@@ -271,9 +268,9 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     the instances' shells, and an exact-rung plan's tracer is rebuilt with the instances, but
     a calibration already done did not see them; prepare(items, settings, prototypes) does
     (the add-on's bake job passes them there)."""
-    _attach(plan, prototypes, epsilon)
+    _forest.attach(plan, prototypes, epsilon)
     if (plan.forest is not None and plan.method == "raytrace" and plan.tracer is not None
-            and not lighting.traces_instances(plan) and forest_meshes(prototypes)):
+            and not lighting.traces_instances(plan) and _forest.traced_meshes(prototypes)):
         t0 = time.perf_counter()
         bases = {}
         plan.tracer = lighting.build_tracer(plan.tracer_items, bases, prototypes)
@@ -285,24 +282,6 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
         # choice was checked under the forest.
         plan.notes.append("the method and τ were chosen against rays that do not see the "
                           "instanced trees (attached after prepare: pass them to prepare)")
-
-
-def _attach(plan: Plan, prototypes, epsilon) -> None:
-    """plan.forest: the instances' shells and trunks as occluders, and the note saying so."""
-    from . import forest as _forest
-    t0 = time.perf_counter()
-    eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
-    plan.forest = _forest.Forest(prototypes, epsilon=eps, distance=plan.settings.distance) \
-        if prototypes else None
-    plan.timings["forest"] = time.perf_counter() - t0
-    if plan.forest is not None:
-        # The scene's own trees may all be instances: then "no CANOPY object" is not news.
-        plan.notes = [n for n in plan.notes if not n.startswith("no CANOPY object")]
-        plan.notes.append(
-            f"forest: {plan.forest.instances} instance(s) of {len(plan.forest.prototypes)} "
-            f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
-            f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
-            "per receiver)")
 
 
 def report(plan: Plan, results) -> dict:

@@ -18,6 +18,7 @@ non-uniform scale and shear need no refit and no approximation.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -311,3 +312,25 @@ def tracer_instances(prototypes):
     m[:, 3, :] = (0.0, 0.0, 0.0, 1.0)  # affine, as Embree's instance transform
     return {"prototypes": meshes, "instance_prototypes": np.concatenate(which),
             "instance_matrices": np.ascontiguousarray(m, np.float32)}
+
+
+def traced_meshes(prototypes) -> list:
+    """The prototypes that carry triangles for the ray tracer (forest.Prototype.mesh)."""
+    return [p for p in prototypes or () if p.mesh is not None and len(p.mesh[1])]
+
+
+def attach(plan, prototypes, epsilon) -> None:
+    """plan.forest: the instances' shells and trunks as occluders, and the note saying so."""
+    t0 = time.perf_counter()
+    eps = plan.settings.forest_epsilon if epsilon is None else float(epsilon)
+    plan.forest = Forest(prototypes, epsilon=eps, distance=plan.settings.distance) \
+        if prototypes else None
+    plan.timings["forest"] = time.perf_counter() - t0
+    if plan.forest is not None:
+        # The scene's own trees may all be instances: then "no CANOPY object" is not news.
+        plan.notes = [n for n in plan.notes if not n.startswith("no CANOPY object")]
+        plan.notes.append(
+            f"forest: {plan.forest.instances} instance(s) of {len(plan.forest.prototypes)} "
+            f"prototype(s), {plan.forest.shell_count} shells, {plan.forest.solid_count} trunks "
+            f"as occluders (ε {plan.forest.epsilon:g}, at most {plan.forest.max_candidates} "
+            "per receiver)")

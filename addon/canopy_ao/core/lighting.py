@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from . import ray_budget, texel_budget
+from . import opacity, ray_budget, texel_budget
 from .native import CanopyAOError, _core
 from .scene import Plan, ray_length
 
@@ -303,7 +303,7 @@ def _scene_triangles(items, bases=None, shading=None):
     if not verts:
         raise CanopyAOError("the scene has no triangles")
     if shading is not None:
-        shading.update(bake_shading(kept))
+        shading.update(bake_shading(kept), **opacity.tracer_args(kept))
     return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
 

@@ -43,6 +43,9 @@ class SceneItem:
     # diagonal or an n-gon's fan is one face corner, as Cycles bakes it (native raytrace.h,
     # 'Origins'); None counts every triangle a corner.
     polygons: np.ndarray | None = None
+    # opacity.ItemOpacity: which of its triangles rays may pass (their material's alpha), or
+    # None: every triangle opaque
+    opacity: object = None
 
     def __post_init__(self):
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float32).reshape(-1, 3)

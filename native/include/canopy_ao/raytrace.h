@@ -121,6 +121,19 @@
 // trace. Fallbacks: every ray blocked (no open direction) → the unit surface normal; zero-length
 // normal (no hemisphere) → (0, 0, 0); an empty scene → the unit normal (nothing blocks).
 //
+// Opacity (docs/DESIGN.md, 'Opacity of leaf cards'): a tracer may be given each triangle's
+// material and UVs and each material's alpha (a constant, or a float texture looked up
+// bilinearly with wrap, as Blender's Image Texture with Linear interpolation and Repeat
+// extension). A hit on a surface of alpha a in (0, 1) stops the ray with probability a: the
+// ray goes on unless a hash of (ray origin, ray direction, triangle), taken as a number in
+// [0, 1), is below a. A ray through surfaces of alphas a_i is then open with probability
+// Π(1 − a_i), Cycles' transparent-shadow throughput on its AO ray, so the AO's expectation is
+// Cycles' (a uniform card of alpha 0.5 over a plane: 0.505 in Cycles); the decision depends
+// only on the ray and the triangle, so it is the same whatever the thread count, and the same
+// when Embree reports one hit twice. alpha ≤ 0 never stops a ray, alpha ≥ 1 always does.
+// Every ray honours it (bake, calibration, buried test, bent normals, texels): it is in the
+// occlusion filter. Instanced meshes (Prototype) stay opaque.
+//
 // Thread safety: a built RayTracer is immutable; ao() may be called from several threads at
 // once. Work inside one call runs on all cores (canopy_ao::parallel_for_blocks, capped by
 // set_max_threads); the BVH build honours the same cap.
@@ -243,6 +256,35 @@ struct BakeShading {
   const std::int32_t* polygons = nullptr;
 };
 
+/// One material's alpha (1 = opaque, 0 = transparent; raytrace.h, "Opacity").
+struct AlphaMaterial {
+  /// The alpha of an untextured material (used when `texture` is null).
+  float alpha = 1.0f;
+  /// `height` rows of `width` alphas, row 0 at v = 0 (Blender's image pixel order), or null.
+  /// Looked up bilinearly at (u·width − ½, v·height − ½), wrapped (Repeat).
+  const float* texture = nullptr;
+  int width = 0;
+  int height = 0;
+  /// A texture's alpha is offset + scale · t, t the interpolated texel value, decoded from
+  /// sRGB first when `srgb` (Cycles interpolates an 8-bit sRGB image's encoded values and
+  /// decodes the result).
+  bool srgb = false;
+  float scale = 1.0f;
+  float offset = 0.0f;
+  /// The texel the UV falls in, not interpolated (Blender's Closest interpolation).
+  bool nearest = false;
+};
+
+/// Which triangles are not opaque (raytrace.h, "Opacity"). Copied by the constructor.
+struct Opacity {
+  /// #M entries: each triangle's index into `alphas`, −1 = opaque; or null: all opaque.
+  const std::int32_t* materials = nullptr;
+  /// #M by 6: each triangle's three corners' (u, v) in triangle order, or null (then every
+  /// textured material is read at (0, 0)).
+  const float* uvs = nullptr;
+  std::vector<AlphaMaterial> alphas;
+};
+
 // === Ray tracer
 /// An Embree scene of two-sided triangles, built once (expensive: reuse it for many queries).
 class RayTracer {
@@ -269,6 +311,13 @@ class RayTracer {
   RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
             const BakeShading& shading, const std::vector<Prototype>& prototypes,
             const std::vector<Instance>& instances, const RayTracerBuildOptions& build = {});
+  /// Same, with each triangle's opacity (Opacity; raytrace.h, "Opacity"). Throws
+  /// std::invalid_argument for a material index outside [−1, #alphas), a texture without
+  /// pixels or a positive size, or a non-finite alpha or UV.
+  RayTracer(PointsView vertices, const std::int32_t* triangles, std::size_t triangle_count,
+            const BakeShading& shading, const Opacity& opacity,
+            const std::vector<Prototype>& prototypes, const std::vector<Instance>& instances,
+            const RayTracerBuildOptions& build = {});
   ~RayTracer();
   RayTracer(RayTracer&&) noexcept;
   RayTracer& operator=(RayTracer&&) noexcept;
@@ -299,6 +348,8 @@ class RayTracer {
   std::size_t vertex_count() const;
   std::size_t triangle_count() const;
   std::size_t instance_count() const;
+  /// Whether some triangle is not opaque (built with an Opacity naming one).
+  bool has_opacity() const;
   /// Whether vertex receivers start at Cycles' bake point (built with vertex normals).
   bool has_vertex_normals() const;
   /// The mean number of corners ("Origins" above) of the mesh's vertices: what per-corner rays
