@@ -25,8 +25,10 @@ TMP = tempfile.mkdtemp(prefix="canopy_ao_ui_render_")
 
 
 def wait_for_render(done):
+    """Until the render job has finished: its render_complete handler has run and the job is
+    gone (render_complete runs before the job ends; a render started then is cancelled)."""
     for _ in range(600):
-        if done:
+        if done and not bpy.app.is_job_running('RENDER'):
             return True
         yield 0.1
     return False
