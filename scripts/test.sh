@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test on every supported Debian stack: the legs of the test matrix.
-#   host    this machine (Debian 12: Blender 3.4, Embree 3, OIIO 2.4, Python 3.11)
+#   host    this machine (Debian 12: Blender 3.4, Embree 3, OIIO 2.4, Python 3.11), and the
+#           portable zip in a bare Debian 12 root (tests/portable/test_portable.sh)
 #   trixie  a cached Debian 13 chroot (Blender 4.3, Embree 4, OIIO 2.5, Python 3.13)
 #   sid     a cached Debian unstable chroot (Blender 5.x, Embree 4, OIIO 3.1, Python 3.14)
 # Each leg builds and runs the whole suite (scripts/test_suite.sh) in its own build folder.
@@ -21,7 +22,12 @@ as_root=()
 run_leg() {
   local leg=$1
   if [[ $leg == host ]]; then
-    CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh
+    local ok=0
+    CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh || ok=$?
+    # The portable zip in a bare root of this Debian (cached beside the chroots; ~10 s then).
+    echo "== Portable zip test (tests/portable/test_portable.sh)"
+    tests/portable/test_portable.sh || ok=1
+    return "$ok"
   else
     local ok=0
     wait "${setup_pid[$leg]}" || ok=$?

@@ -1,0 +1,89 @@
+#!/usr/bin/env bash
+# The portable extension zip (docs/PORTABILITY.md): the native module built without
+# OpenImageIO for one Python, with the Embree and TBB it links carried beside it under names of
+# their own (libembree3-canopyao.so.3, libtbb-canopyao.so.12: SONAME and DT_NEEDED patched, found
+# through an $ORIGIN RUNPATH), so it loads where the system has neither and never binds to the
+# copies Blender itself loaded. Called by scripts/build_extension.sh --portable.
+#   scripts/build_portable.sh OUT_DIR [PYTHON_VERSION]   (default: this system's python3)
+# Prints the zip's path on its last line: OUT_DIR/canopy_ao-<version>-linux_x64-cp<XY>.zip.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=$1
+pyver=${2:-$(/usr/bin/python3 -c 'import sys; print("%d.%d" % sys.version_info[:2])')}
+[[ $pyver =~ ^3\.[0-9]+$ ]] || { echo "build_portable.sh: Python version must be 3.N, got '$pyver'" >&2; exit 2; }
+python=/usr/bin/python$pyver
+[[ -x $python ]] || { echo "build_portable.sh: $python is missing (the Python headers come from the distribution's python$pyver-dev)" >&2; exit 1; }
+command -v patchelf >/dev/null || { echo "build_portable.sh: patchelf is missing (apt-get install patchelf)" >&2; exit 1; }
+tag=cp${pyver/./}
+build=${CANOPY_AO_PORTABLE_BUILD_DIR:-build-portable-$tag}
+
+# The normal build's flags, but no OpenImageIO, no tests, and the module stays in the build
+# folder (addon/canopy_ao/ keeps the system build's module).
+cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DCANOPY_AO_WITH_OIIO=OFF \
+  -DCANOPY_AO_COPY_TO_ADDON=OFF -DCANOPY_AO_TESTS=OFF -DCANOPY_AO_BENCH=OFF \
+  -DCANOPY_AO_PYTHON_VERSION="$pyver" -DPython_EXECUTABLE="$python" >/dev/null
+cmake --build "$build" -j"$(nproc)" --target _core >/dev/null
+suffix=$("$python" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
+built=$build/_core$suffix
+[[ -f $built ]] || { echo "build_portable.sh: $built was not built" >&2; exit 1; }
+
+stage=$(mktemp -d)
+trap 'rm -rf "$stage"' EXIT
+pkg=$stage/canopy_ao
+mkdir "$pkg"
+tar -C addon/canopy_ao --exclude=__pycache__ --exclude='_core*.so' --exclude='*.pyc' -cf - . |
+  tar -C "$pkg" -xf -
+cp "$built" "$pkg/"
+module=$pkg/_core$suffix
+
+# Every shared library the module needs that is not the C/C++ runtime is carried, renamed
+# (libX.so.N -> libX-canopyao.so.N); anything else it needs is an error.
+runtime='^(libc|libm|libstdc\+\+|libgcc_s|libpthread|libdl|libmvec|ld-linux-x86-64)\.so'
+declare -A renamed
+bundle() {  # bundle FILE: copy FILE's non-runtime dependencies beside it, renamed, recursively
+  local f=$1 lib path new
+  for lib in $(readelf -d "$f" | sed -n 's/.*(NEEDED).*\[\(.*\)\]/\1/p'); do
+    [[ $lib =~ $runtime ]] && continue
+    case $lib in libembree*|libtbb*) ;; *)
+      echo "build_portable.sh: $(basename "$f") needs $lib, which the portable zip cannot carry" >&2
+      exit 1 ;;
+    esac
+    if [[ -z ${renamed[$lib]:-} ]]; then
+      path=$(ldd "$built" | awk -v l="$lib" '$1 == l {print $3}')
+      [[ -f $path ]] || { echo "build_portable.sh: $lib not found on this system" >&2; exit 1; }
+      new=$(echo "$lib" | sed -E 's/^(lib[^.]+)\.so/\1-canopyao.so/')
+      renamed[$lib]=$new
+      cp -L "$path" "$pkg/$new"
+      chmod 644 "$pkg/$new"
+      patchelf --set-soname "$new" "$pkg/$new"
+      bundle "$pkg/$new"
+    fi
+    patchelf --replace-needed "$lib" "${renamed[$lib]}" "$f"
+  done
+  patchelf --set-rpath '$ORIGIN' "$f"
+}
+bundle "$module"
+
+version=$(sed -n 's/^version = "\(.*\)"/\1/p' addon/canopy_ao/blender_manifest.toml)
+mkdir -p "$out"
+dest=$(cd "$out" && pwd)/canopy_ao-$version-linux_x64-$tag.zip
+# Where Blender has extensions, it checks the package (this Debian's Blender may be older).
+bversion=$(scripts/blender_version.sh 2>/dev/null || echo 0)
+if [[ $(printf '%s\n' "$bversion" 4.2 | sort -V | head -n1) == 4.2 ]]; then
+  blender --factory-startup --command extension validate "$pkg" >"$stage/validate.log" 2>&1 ||
+    { cat "$stage/validate.log" >&2; echo "build_portable.sh: Blender's validate failed" >&2; exit 1; }
+fi
+# The package's files at the zip's top level, as Blender's 'extension build' lays them out.
+"$python" - "$pkg" "$dest" <<'PY'
+import os, sys, zipfile
+src, dest = sys.argv[1], sys.argv[2]
+tmp = dest + ".tmp"
+with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+    for root, dirs, files in os.walk(src):
+        dirs.sort()
+        for name in sorted(files):
+            path = os.path.join(root, name)
+            z.write(path, os.path.relpath(path, src))
+os.replace(tmp, dest)
+PY
+echo "$dest"

@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# The portable extension zip proves itself (docs/PORTABILITY.md):
+#  1. it is built (scripts/build_extension.sh --portable) for this system's Python;
+#  2. readelf/objdump: the module and the libraries it carries need nothing but the C/C++
+#     runtime and each other, and no glibc symbol newer than 2.34 nor libstdc++ one newer than
+#     3.4.29;
+#  3. in a bare root of this Debian (debootstrap minbase + python3 + python3-numpy, cached by
+#     scripts/bare_root.sh), with an empty environment, the zip's module imports and bakes
+#     ray-traced, proxy and texel AO (tests/portable/bake_probe.py), bit-identical to what the
+#     Debian build's module (addon/canopy_ao/) gives on this machine; the Debian build's module
+#     itself must fail to load there (the root holds no Embree, TBB or OpenImageIO).
+# Run by scripts/test.sh on the host leg. Needs root for the bare root (sudo otherwise).
+#   tests/portable/test_portable.sh [SUITE]   (default: this machine's Debian codename)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+suite=${1:-$(. /etc/os-release && echo "$VERSION_CODENAME")}
+as_root=()
+[[ $(id -u) -eq 0 ]] || as_root=(sudo --preserve-env=CANOPY_AO_CHROOTS)
+fail() { echo "test_portable.sh: FAILED: $*" >&2; exit 1; }
+
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+chmod 755 "$tmp"
+"${as_root[@]}" scripts/bare_root.sh "$suite" setup
+echo "== portable zip: build"
+zip=$(scripts/build_extension.sh --portable --out "$tmp/dist" | tail -n1)
+echo "built $(basename "$zip")"
+/usr/bin/python3 -m zipfile -e "$zip" "$tmp/pkg"
+ls "$tmp/pkg"/_core*.so >/dev/null || fail "the zip holds no _core*.so"
+
+echo "== portable zip: load-time needs (readelf, objdump)"
+runtime='^(libc|libm|libstdc\+\+|libgcc_s|libpthread|libdl|libmvec|ld-linux-x86-64)\.so'
+carried=$(cd "$tmp/pkg" && ls lib*-canopyao.so.* 2>/dev/null || true)
+[[ -n $carried ]] || fail "the zip carries no libraries (Embree, TBB)"
+for f in "$tmp/pkg"/_core*.so "$tmp/pkg"/lib*-canopyao.so.*; do
+  name=$(basename "$f")
+  for lib in $(readelf -d "$f" | sed -n 's/.*(NEEDED).*\[\(.*\)\]/\1/p'); do
+    [[ $lib =~ $runtime ]] && continue
+    grep -qxF "$lib" <<<"$carried" || fail "$name needs $lib, which is neither the runtime nor carried"
+  done
+  readelf -d "$f" | grep -q 'RUNPATH.*\[\$ORIGIN\]' || fail "$name has no \$ORIGIN RUNPATH"
+  glibc=$(objdump -T "$f" | grep -oE '\bGLIBC_[0-9.]+' | sed 's/GLIBC_//' | sort -uV | tail -n1)
+  cxx=$(objdump -T "$f" | grep -oE '\bGLIBCXX_[0-9.]+' | sed 's/GLIBCXX_//' | sort -uV | tail -n1)
+  echo "$name: newest GLIBC_$glibc GLIBCXX_${cxx:-none}"
+  [[ $(printf '%s\n' "$glibc" 2.34 | sort -V | tail -n1) == 2.34 ]] ||
+    fail "$name needs GLIBC_$glibc, newer than the 2.34 baseline"
+  [[ -z $cxx || $(printf '%s\n' "$cxx" 3.4.29 | sort -V | tail -n1) == 3.4.29 ]] ||
+    fail "$name needs GLIBCXX_$cxx, newer than the 3.4.29 baseline"
+done
+
+echo "== portable zip: bake in a bare $suite root (python3 + numpy only)"
+cp tests/portable/bake_probe.py "$tmp/"
+mkdir "$tmp/debian"
+cp addon/canopy_ao/_core*.so "$tmp/debian/"
+chmod -R a+rX "$tmp"
+if "${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 /pkg/bake_probe.py /pkg/debian \
+    >"$tmp/debian.log" 2>&1; then
+  fail "the Debian build's module loaded in the bare root: the root is not bare"
+fi
+grep -q 'cannot open shared object file' "$tmp/debian.log" ||
+  { cat "$tmp/debian.log" >&2; fail "the Debian build's module failed in the bare root for another reason"; }
+echo "the Debian build's module does not load there: $(grep -o 'lib[^:]*: cannot open shared object file' "$tmp/debian.log" | head -n1)"
+"${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 /pkg/bake_probe.py /pkg/pkg \
+  >"$tmp/bare.log" 2>&1 || { cat "$tmp/bare.log" >&2; fail "the portable module does not bake in the bare root"; }
+/usr/bin/python3 tests/portable/bake_probe.py addon/canopy_ao >"$tmp/host.log" ||
+  fail "the Debian build's module does not bake on this machine"
+/usr/bin/python3 - "$tmp/bare.log" "$tmp/host.log" <<'PY'
+import json, sys
+bare, host = (json.loads(open(p).read().split("PROBE ", 1)[1]) for p in sys.argv[1:])
+assert bare.pop("module") == host.pop("module"), "the zip's module is for another Python"
+diff = [k for k in host if bare.get(k) != host[k]]
+assert not diff, f"the portable module's {', '.join(diff)} AO differs from the Debian build's"
+print(f"bare root bake bit-identical to the Debian build's: {', '.join(sorted(host))}")
+PY
+echo "portable zip OK: $(basename "$zip")"
