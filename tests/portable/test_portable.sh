@@ -8,7 +8,11 @@
 #     scripts/bare_root.sh), with an empty environment, the zip's module imports and bakes
 #     ray-traced, proxy and texel AO (tests/portable/bake_probe.py), bit-identical to what the
 #     Debian build's module (addon/canopy_ao/) gives on this machine; the Debian build's module
-#     itself must fail to load there (the root holds no Embree, TBB or OpenImageIO).
+#     itself must fail to load there (the root holds no Embree, TBB or OpenImageIO);
+#  4. in this Debian's Blender, the zip's package (module without OpenImageIO: images written by
+#     core/image_files.py) bakes texel images in EXR, PNG and TGA holding the same pixels as the
+#     repository's add-on (OpenImageIO) writes, and re-bakes over those files without Overwrite
+#     (it reads their ownership records).
 # Run by scripts/test.sh on the host leg. Needs root for the bare root (sudo otherwise).
 #   tests/portable/test_portable.sh [SUITE]   (default: this machine's Debian codename)
 set -euo pipefail
@@ -71,5 +75,45 @@ assert bare.pop("module") == host.pop("module"), "the zip's module is for anothe
 diff = [k for k in host if bare.get(k) != host[k]]
 assert not diff, f"the portable module's {', '.join(diff)} AO differs from the Debian build's"
 print(f"bare root bake bit-identical to the Debian build's: {', '.join(sorted(host))}")
+PY
+echo "== portable zip: texel images in this Debian's Blender, without OpenImageIO"
+blender -b --factory-startup --python examples/make_scene.py -- \
+  --scene round_tree --quick --out "$tmp/scene.blend" >"$tmp/scene.log" 2>&1 ||
+  { cat "$tmp/scene.log" >&2; fail "could not make the example scene"; }
+mkdir -p "$tmp/us-repo/addons" "$tmp/us-zip/addons"
+ln -s "$PWD/addon/canopy_ao" "$tmp/us-repo/addons/canopy_ao"
+ln -s "$tmp/pkg" "$tmp/us-zip/addons/canopy_ao"
+bake() {  # bake WHICH(repo|zip) FORMAT DIR: a texel bake with that package's CLI
+  local check="assert hasattr(m, 'write_image') == ('$1' == 'repo'), m.__file__"
+  BLENDER_USER_SCRIPTS="$tmp/us-$1" blender -b "$tmp/scene.blend" --factory-startup \
+    --addons canopy_ao --python-exit-code 1 --python-expr \
+    "import canopy_ao._core as m, canopy_ao.cli as c; $check; c.main()" -- \
+    --all --method sphere --mode texel --resolution 48 --image-format "$2" --image-dir "$3" \
+    >"$tmp/bake.log" 2>&1 || { cat "$tmp/bake.log" >&2; fail "the $1 package's $2 bake into $3 failed"; }
+}
+for fmt in exr png tga; do
+  bake repo "$fmt" "$tmp/img-repo-$fmt"
+  bake zip "$fmt" "$tmp/img-zip-$fmt"
+  cp -r "$tmp/img-repo-$fmt" "$tmp/img-over-$fmt"
+  bake zip "$fmt" "$tmp/img-over-$fmt"  # over OpenImageIO's files, no Overwrite: its own
+  bake zip "$fmt" "$tmp/img-zip-$fmt"   # over its own files, no Overwrite
+done
+/usr/bin/python3 - "$tmp" <<'PY'
+import glob, os, sys
+import numpy as np
+sys.path.insert(0, "addon")
+from canopy_ao import _core  # the Debian build's: OpenImageIO reads every file
+tmp, n = sys.argv[1], 0
+for fmt in ("exr", "png", "tga"):
+    ref = sorted(glob.glob(f"{tmp}/img-repo-{fmt}/*"))
+    for got in (sorted(glob.glob(f"{tmp}/img-zip-{fmt}/*")), sorted(glob.glob(f"{tmp}/img-over-{fmt}/*"))):
+      assert ref and [os.path.basename(p) for p in ref] == [os.path.basename(p) for p in got], (ref, got)
+      for a, b in zip(ref, got):
+        pa, pb = _core.read_image(a), _core.read_image(b)
+        assert pa.shape == pb.shape and np.array_equal(pa, pb), f"{b} differs from {a}"
+        assert pa.min() < pa.max(), f"{a} is flat"
+        assert open(a, "rb").read() != open(b, "rb").read() or "over" in b, "same writer?"
+        n += 1
+print(f"{n} texel images written without OpenImageIO hold the same pixels")
 PY
 echo "portable zip OK: $(basename "$zip")"

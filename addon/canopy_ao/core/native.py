@@ -38,7 +38,7 @@ def refusals_are_user_errors(fn):
 _REQUIRED = ("Ellipsoid", "fit_sphere", "fit_ellipsoid", "fit_shells", "ao_occluders",
              "ao_canopy_sphere", "ao_canopy_ellipsoid", "ao_canopy_shells", "ao_medium_shells",
              "ao_reeves_blau", "ao_grass", "RayTracer", "DensityGrid", "OccluderField",
-             "rasterize_uv", "splat_texels", "write_image", "ao_near_far", "OcclusionFeatures",
+             "rasterize_uv", "splat_texels", "ao_near_far", "OcclusionFeatures",
              "expand_features", "predict_features",
              "to_world", "gray_rgba", "ScenePlan", "ForestOccluders", "GrassCover")
 
