@@ -2,10 +2,10 @@
 # Builds the Blender 4.2+ extension zip of Canopy AO, carrying the native module built for the
 # Python and platform of the Blender installed here, and validates its manifest.
 #   scripts/build_extension.sh [--out DIR]      (default DIR: out/)
-#   scripts/build_extension.sh --portable [--python 3.N] [--out DIR]
-#     the portable zip (docs/PORTABILITY.md, scripts/build_portable.sh) for Python 3.N (default:
-#     this system's python3): out/canopy_ao-<version>-linux_x64-cp3N.zip, needing no Embree,
-#     TBB or OpenImageIO on the system
+#   scripts/build_extension.sh --portable [--python 3.N|INTERPRETER] [--out DIR]
+#     the portable zip (docs/PORTABILITY.md, scripts/build_portable.sh) for Python 3.N or that
+#     interpreter (default: this system's python3): out/canopy_ao-<version>-linux_x64-cp3N.zip,
+#     needing no Embree, TBB or OpenImageIO on the system
 # Prints the zip's path on its last line. Install it with
 #   blender --command extension install-file -r user_default -e ZIP
 # or in Blender: Edit > Preferences > Get Extensions > Install from Disk.
@@ -17,7 +17,7 @@ while (($#)); do
     --out) out=$2; shift 2 ;;
     --portable) portable=1; shift ;;
     --python) pyver=$2; shift 2 ;;
-    *) echo "build_extension.sh: unknown argument '$1' (use --out DIR, --portable, --python 3.N)" >&2
+    *) echo "build_extension.sh: unknown argument '$1' (use --out DIR, --portable, --python 3.N|INTERPRETER)" >&2
        exit 2 ;;
   esac
 done

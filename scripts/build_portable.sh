@@ -4,15 +4,18 @@
 # their own (libembree3-canopyao.so.3, libtbb-canopyao.so.12: SONAME and DT_NEEDED patched, found
 # through an $ORIGIN RUNPATH), so it loads where the system has neither and never binds to the
 # copies Blender itself loaded. Called by scripts/build_extension.sh --portable.
-#   scripts/build_portable.sh OUT_DIR [PYTHON_VERSION]   (default: this system's python3)
-# Prints the zip's path on its last line: OUT_DIR/canopy_ao-<version>-linux_x64-cp<XY>.zip.
+#   scripts/build_portable.sh OUT_DIR [PYTHON]
+# PYTHON: a version 3.N (/usr/bin/python3.N, headers from the distribution's python3.N-dev) or
+# the path of an interpreter with its headers (e.g. a pyenv 3.13 on Debian 12); default: this
+# system's python3. Prints the zip's path on its last line:
+# OUT_DIR/canopy_ao-<version>-linux_x64-cp<XY>.zip.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=$1
-pyver=${2:-$(/usr/bin/python3 -c 'import sys; print("%d.%d" % sys.version_info[:2])')}
-[[ $pyver =~ ^3\.[0-9]+$ ]] || { echo "build_portable.sh: Python version must be 3.N, got '$pyver'" >&2; exit 2; }
-python=/usr/bin/python$pyver
-[[ -x $python ]] || { echo "build_portable.sh: $python is missing (the Python headers come from the distribution's python$pyver-dev)" >&2; exit 1; }
+python=${2:-/usr/bin/python3}
+[[ $python == */* ]] || python=/usr/bin/python$python
+[[ -x $python ]] || { echo "build_portable.sh: no Python interpreter '$python' (give 3.N for /usr/bin/python3.N, with its python3.N-dev, or an interpreter's path)" >&2; exit 1; }
+pyver=$("$python" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
 command -v patchelf >/dev/null || { echo "build_portable.sh: patchelf is missing (apt-get install patchelf)" >&2; exit 1; }
 tag=cp${pyver/./}
 build=${CANOPY_AO_PORTABLE_BUILD_DIR:-build-portable-$tag}

@@ -93,3 +93,53 @@ def test_bad_input_is_a_clear_error(tmp_path):
     (tmp_path / "b.png").write_bytes(b"not an image")
     with pytest.raises(ValueError, match="no EXR, PNG or TGA"):
         image_files.read_image(str(tmp_path / "b.png"))
+
+
+def _png_filtered(codes, filters):
+    """A PNG of uint8 codes (H, W, C) whose row y uses filter filters[y % len] (the PNG
+    specification's encoder, written independently of the reader)."""
+    import struct
+    import zlib
+    h, w, c = codes.shape
+    rows, prev = [], [0] * (w * c)
+    for y in range(h):
+        line, f = codes[y].reshape(-1).tolist(), filters[y % len(filters)]
+        out = []
+        for i, x in enumerate(line):
+            a = line[i - c] if i >= c else 0
+            b, cc = prev[i], prev[i - c] if i >= c else 0
+            pa, pb, pc = abs(b - cc), abs(a - cc), abs(a + b - 2 * cc)
+            pred = [0, a, b, (a + b) >> 1,
+                    a if pa <= pb and pa <= pc else (b if pb <= pc else cc)][f]
+            out.append((x - pred) & 0xFF)
+        rows.append(bytes([f] + out))
+        prev = line
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+            + chunk(b"tEXt", b"canopy_ao\0" + RECORD.encode("ascii", "replace"))
+            + chunk(b"IDAT", zlib.compress(b"".join(rows))) + chunk(b"IEND", b""))
+
+
+def test_reads_every_png_row_filter(tmp_path):
+    codes = np.random.default_rng(9).integers(0, 256, (10, 7, 3), dtype=np.uint8)
+    path = tmp_path / "f.png"
+    path.write_bytes(_png_filtered(codes, [0, 1, 2, 3, 4]))
+    got = image_files.read_image(str(path), bottom_up=False)
+    np.testing.assert_array_equal(stored(got, "PNG"), codes)
+    assert image_files.read_image_attributes(str(path))["canopy_ao"] == RECORD.encode(
+        "ascii", "replace").decode("latin-1")
+
+
+@pytest.mark.parametrize("fmt", ["EXR", "PNG", "TGA"])
+def test_a_damaged_file_is_a_value_error_naming_it(tmp_path, fmt):
+    path = str(tmp_path / ("a" + FORMATS[fmt].ext))
+    image_files.write_image(path, pixels((6, 6)), dtype=FORMATS[fmt].dtype,
+                            attributes=attrs(fmt))
+    with open(path, "rb") as f:
+        data = f.read()
+    with open(path, "wb") as f:
+        f.write(data[:40])  # into the header or the pixels
+    with pytest.raises(ValueError, match="a" + FORMATS[fmt].ext):
+        image_files.read_image(path)

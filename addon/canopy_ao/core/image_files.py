@@ -129,7 +129,9 @@ def _damaged(read):
     def checked(path, *args, **kwargs):
         try:
             return read(path, *args, **kwargs)
-        except (struct.error, IndexError, KeyError, StopIteration, zlib.error) as exc:
+        except (struct.error, IndexError, KeyError, StopIteration, zlib.error, ValueError) as exc:
+            if isinstance(exc, ValueError) and f"'{path}'" in str(exc):
+                raise
             raise ValueError(f"'{path}' is damaged or not an image this reader knows "
                              f"({type(exc).__name__}: {exc})") from exc
     return checked
