@@ -20,11 +20,32 @@ command -v patchelf >/dev/null || { echo "build_portable.sh: patchelf is missing
 tag=cp${pyver/./}
 build=${CANOPY_AO_PORTABLE_BUILD_DIR:-build-portable-$tag}
 
+# pybind11 2.12 or newer: older ones read NumPy 2's arrays wrongly (its dtype structure changed;
+# Blender's newer series bundle NumPy 2) and predate Python 3.13. Debian 12 has 2.10: the headers
+# (pybind11 is headers and CMake files only) of the trixie chroot's pybind11-dev are copied into
+# the build folder, or those of CANOPY_AO_PYBIND11_ROOT/usr.
+pybind11=()
+have=$(dpkg-query -W -f='${Version}' pybind11-dev 2>/dev/null | cut -d- -f1 || true)
+if [[ $(printf '%s\n' "${have:-0}" 2.12 | sort -V | head -n1) != 2.12 ]]; then
+  root=${CANOPY_AO_PYBIND11_ROOT:-$(scripts/chroot.sh trixie path)}
+  [[ -f $root/usr/lib/cmake/pybind11/pybind11Config.cmake && -d $root/usr/include/pybind11 ]] || {
+    echo "build_portable.sh: this system's pybind11 (${have:-none}) is older than 2.12 and $root has" \
+      "no pybind11-dev: run 'scripts/chroot.sh trixie setup' (as root) or set" \
+      "CANOPY_AO_PYBIND11_ROOT to a root holding usr/include/pybind11" >&2
+    exit 1
+  }
+  rm -rf "$build/pybind11"
+  mkdir -p "$build/pybind11/lib/cmake" "$build/pybind11/include"
+  cp -r "$root/usr/lib/cmake/pybind11" "$build/pybind11/lib/cmake/"
+  cp -r "$root/usr/include/pybind11" "$build/pybind11/include/"
+  pybind11=(-Dpybind11_DIR="$(cd "$build/pybind11/lib/cmake/pybind11" && pwd)")
+fi
+
 # The normal build's flags, but no OpenImageIO, no tests, and the module stays in the build
 # folder (addon/canopy_ao/ keeps the system build's module).
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DCANOPY_AO_WITH_OIIO=OFF \
   -DCANOPY_AO_COPY_TO_ADDON=OFF -DCANOPY_AO_TESTS=OFF -DCANOPY_AO_BENCH=OFF \
-  -DCANOPY_AO_PYTHON_VERSION="$pyver" -DPython_EXECUTABLE="$python" >/dev/null
+  -DCANOPY_AO_PYTHON_VERSION="$pyver" -DPython_EXECUTABLE="$python" "${pybind11[@]}" >/dev/null
 cmake --build "$build" -j"$(nproc)" --target _core >/dev/null
 suffix=$("$python" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
 built=$build/_core$suffix

@@ -3,7 +3,7 @@ one JSON line of the results' SHA-256 digests: ray-traced AO, proxy (fitted elli
 texel image (rasterised, splatted, margin dilated). Run by tests/portable/test_portable.sh in a
 bare root with the portable zip's module and on the host with the Debian build's: the digests
 must be equal (bit-identical AO).
-    python3 bake_probe.py PACKAGE_DIR    (the folder holding _core*.so)"""
+    python3 bake_probe.py PACKAGE_DIR [NPZ]   (the folder holding _core*.so; NPZ: the arrays too)"""
 import hashlib
 import json
 import sys
@@ -14,8 +14,13 @@ sys.path.insert(0, sys.argv[1])
 import _core  # noqa: E402  (the module alone, as the bare root has no bpy)
 
 
-def digest(a):
+arrays = {}
+
+
+def digest(a, name=None):
     a = np.ascontiguousarray(a)
+    if name:
+        arrays[name] = a
     return f"{a.dtype}{a.shape}:" + hashlib.sha256(a.tobytes()).hexdigest()
 
 
@@ -35,10 +40,10 @@ p = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
 p = np.ascontiguousarray(np.c_[p, np.zeros(len(p), np.float32)], np.float32)
 n = np.ascontiguousarray(np.tile(np.float32([0, 0, 1]), (len(p), 1)))
 
-out = {"module": _core.__file__.rsplit("/", 1)[-1]}
-out["raytraced"] = digest(_core.RayTracer(v, t).ao(p, n, samples=64, distance=6.0, seed=3))
+out = {"module": _core.__file__.rsplit("/", 1)[-1], "inputs": digest(np.concatenate([v.ravel(), p.ravel()]))}
+out["raytraced"] = digest(_core.RayTracer(v, t).ao(p, n, samples=64, distance=6.0, seed=3), "raytraced")
 ell = _core.fit_ellipsoid(np.ascontiguousarray(leaves, np.float32))
-out["proxy"] = digest(_core.ao_canopy_ellipsoid(p, n, ell, 1.0))
+out["proxy"] = digest(_core.ao_canopy_ellipsoid(p, n, ell, 1.0), "proxy")
 
 # The ground quad's texels: one receiver per covered texel, AO, splatted with a margin.
 uv = np.float32([[0, 0], [1, 0], [1, 1], [0, 0], [1, 1], [0, 1]])
@@ -49,5 +54,7 @@ ao = _core.RayTracer(v, t).ao(np.ascontiguousarray(ts.positions), np.ascontiguou
                               samples=32, distance=6.0)
 img = _core.splat_texels(np.ascontiguousarray(ts.pixels, np.int32),
                          np.ascontiguousarray(ao, np.float32), (32, 32), margin=2)
-out["texel"] = digest(img)
+out["texel"] = digest(img, "texel")
+if len(sys.argv) > 2:
+    np.savez(sys.argv[2], **arrays)
 print("PROBE " + json.dumps(out, sort_keys=True))
