@@ -18,6 +18,7 @@ python=${2:-/usr/bin/python3}
 pyver=$("$python" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
 command -v patchelf >/dev/null || { echo "build_portable.sh: patchelf is missing (apt-get install patchelf)" >&2; exit 1; }
 tag=cp${pyver/./}
+suffix_of_carried=-canopyao  # libX.so.N is carried as libX-canopyao.so.N
 build=${CANOPY_AO_PORTABLE_BUILD_DIR:-build-portable-$tag}
 
 # pybind11 2.12 or newer: older ones read NumPy 2's arrays wrongly (its dtype structure changed;
@@ -45,7 +46,8 @@ fi
 # folder (addon/canopy_ao/ keeps the system build's module).
 cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DCANOPY_AO_WITH_OIIO=OFF \
   -DCANOPY_AO_COPY_TO_ADDON=OFF -DCANOPY_AO_TESTS=OFF -DCANOPY_AO_BENCH=OFF \
-  -DCANOPY_AO_PYTHON_VERSION="$pyver" -DPython_EXECUTABLE="$python" "${pybind11[@]}" >/dev/null
+  -DCANOPY_AO_PYTHON_VERSION="$pyver" -DPython_EXECUTABLE="$python" "${pybind11[@]}" \
+  -DCANOPY_AO_EMBREE_SHIM="libembree3$suffix_of_carried.so.3" >/dev/null
 cmake --build "$build" -j"$(nproc)" --target _core >/dev/null
 suffix=$("$python" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
 built=$build/_core$suffix
@@ -64,29 +66,35 @@ module=$pkg/_core$suffix
 # (libX.so.N -> libX-canopyao.so.N); anything else it needs is an error.
 runtime='^(libc|libm|libstdc\+\+|libgcc_s|libpthread|libdl|libmvec|ld-linux-x86-64)\.so'
 declare -A renamed
-bundle() {  # bundle FILE: copy FILE's non-runtime dependencies beside it, renamed, recursively
-  local f=$1 lib path new
+carry() {  # carry SONAME: copy the system's library beside the module, renamed, with its own needs
+  local lib=$1 path new
+  [[ -z ${renamed[$lib]:-} ]] || return 0
+  path=$(/sbin/ldconfig -p | awk -v l="$lib" '$1 == l && /x86-64/ {print $NF; exit}')
+  [[ -f $path ]] || { echo "build_portable.sh: $lib not found on this system" >&2; exit 1; }
+  new=$(echo "$lib" | sed -E "s/^(lib[^.]+)\\.so/\\1$suffix_of_carried.so/")
+  renamed[$lib]=$new
+  cp -L "$path" "$pkg/$new"
+  chmod 644 "$pkg/$new"
+  patchelf --set-soname "$new" "$pkg/$new"
+  bundle "$pkg/$new"
+}
+bundle() {  # bundle FILE: FILE's non-runtime needs carried and renamed; RUNPATH $ORIGIN
+  local f=$1 lib
   for lib in $(readelf -d "$f" | sed -n 's/.*(NEEDED).*\[\(.*\)\]/\1/p'); do
     [[ $lib =~ $runtime ]] && continue
     case $lib in libembree*|libtbb*) ;; *)
       echo "build_portable.sh: $(basename "$f") needs $lib, which the portable zip cannot carry" >&2
       exit 1 ;;
     esac
-    if [[ -z ${renamed[$lib]:-} ]]; then
-      path=$(ldd "$built" | awk -v l="$lib" '$1 == l {print $3}')
-      [[ -f $path ]] || { echo "build_portable.sh: $lib not found on this system" >&2; exit 1; }
-      new=$(echo "$lib" | sed -E 's/^(lib[^.]+)\.so/\1-canopyao.so/')
-      renamed[$lib]=$new
-      cp -L "$path" "$pkg/$new"
-      chmod 644 "$pkg/$new"
-      patchelf --set-soname "$new" "$pkg/$new"
-      bundle "$pkg/$new"
-    fi
+    carry "$lib"
     patchelf --replace-needed "$lib" "${renamed[$lib]}" "$f"
   done
   patchelf --set-rpath '$ORIGIN' "$f"
 }
 bundle "$module"
+# Embree is not a DT_NEEDED of the module: embree_shim.cpp loads it (dlopen, by the renamed
+# name, found through the module's RUNPATH).
+carry libembree3.so.3
 
 version=$(sed -n 's/^version = "\(.*\)"/\1/p' addon/canopy_ao/blender_manifest.toml)
 mkdir -p "$out"
