@@ -9,7 +9,11 @@
 #     ray-traced, proxy and texel AO (tests/portable/bake_probe.py), bit-identical to what the
 #     Debian build's module (addon/canopy_ao/) gives on this machine, whatever the Python; the
 #     Debian build's module itself must fail to load there (no Embree, TBB or OpenImageIO);
-#  4. where the zip's Python is this Debian's Blender's, in that Blender the zip's package (module without OpenImageIO: images written by
+#  4. the module calls no Embree function by name (embree_shim.cpp): none can bind to the Embree 4
+#     a Blender has loaded; and where SUITE's build chroot (scripts/chroot.sh) is ready, its
+#     Blender installs the zip and bakes with it if it has extensions and the zip's Python
+#     (tests/portable/chroot_bake.sh);
+#  5. where the zip's Python is this Debian's Blender's, in that Blender the zip's package (module without OpenImageIO: images written by
 #     core/image_files.py) bakes texel images in EXR, PNG and TGA holding the same pixels as the
 #     repository's add-on (OpenImageIO) writes, and re-bakes over those files without Overwrite
 #     (it reads their ownership records).
@@ -57,6 +61,9 @@ for f in "$tmp/pkg"/_core*.so "$tmp/pkg"/lib*-canopyao.so.*; do
     fail "$name needs GLIBCXX_$cxx, newer than the 3.4.29 baseline"
 done
 
+rtc=$(nm -D --undefined-only "$tmp/pkg"/_core*.so | awk '$2 ~ /^rtc/ {print $2}' | head -n3)
+[[ -z $rtc ]] || fail "the module calls Embree by name ($rtc ...): a Blender's own Embree would take the call"
+
 echo "== portable zip: bake in a bare $suite root (python3 + numpy only)"
 cp tests/portable/bake_probe.py "$tmp/"
 mkdir "$tmp/debian"
@@ -81,6 +88,19 @@ diff = [k for k in host if bare.get(k) != host[k]]
 assert not diff, f"the portable module's {', '.join(diff)} AO differs from the Debian build's"
 print(f"bare root bake bit-identical to the Debian build's: {', '.join(sorted(host))}")
 PY
+chroot_dir=$(scripts/chroot.sh "$suite" path)
+if [[ -e $chroot_dir/.ready ]]; then
+  echo "== portable zip: installed into the $suite chroot's Blender"
+  # The chroot sees the repository at /canopy-ao: the zip and the script go to a build folder.
+  under=build-portable-test-$suite
+  rm -rf "$under" && mkdir -p "$under"
+  cp "$zip" "$under/"
+  sed "s|@ZIP@|/canopy-ao/$under/$(basename "$zip")|" tests/portable/chroot_bake.sh >"$under/run.sh"
+  "${as_root[@]}" scripts/chroot.sh "$suite" run bash "/canopy-ao/$under/run.sh" ||
+    fail "the zip does not install and bake in the $suite chroot's Blender"
+  rm -rf "$under"
+fi
+
 blender_py=$(blender -b --factory-startup --python-expr \
   'import sys; print("CANOPY_AO_PY=cp%d%d" % sys.version_info[:2])' 2>/dev/null | sed -n 's/^CANOPY_AO_PY=//p')
 if [[ $zip != *-$blender_py.zip ]]; then
