@@ -35,10 +35,14 @@ if [[ $(printf '%s\n' "${have:-0}" 2.12 | sort -V | head -n1) != 2.12 ]]; then
       "CANOPY_AO_PYBIND11_ROOT to a root holding usr/include/pybind11" >&2
     exit 1
   }
-  rm -rf "$build/pybind11"
-  mkdir -p "$build/pybind11/lib/cmake" "$build/pybind11/include"
-  cp -r "$root/usr/lib/cmake/pybind11" "$build/pybind11/lib/cmake/"
-  cp -r "$root/usr/include/pybind11" "$build/pybind11/include/"
+  # Copied again only when they changed (a copy's new times would rebuild every binding).
+  if ! diff -rq "$root/usr/include/pybind11" "$build/pybind11/include/pybind11" >/dev/null 2>&1 ||
+     ! diff -rq "$root/usr/lib/cmake/pybind11" "$build/pybind11/lib/cmake/pybind11" >/dev/null 2>&1; then
+    rm -rf "$build/pybind11"
+    mkdir -p "$build/pybind11/lib/cmake" "$build/pybind11/include"
+    cp -r "$root/usr/lib/cmake/pybind11" "$build/pybind11/lib/cmake/"
+    cp -r "$root/usr/include/pybind11" "$build/pybind11/include/"
+  fi
   pybind11=(-Dpybind11_DIR="$(cd "$build/pybind11/lib/cmake/pybind11" && pwd)")
 fi
 
