@@ -143,3 +143,16 @@ def test_a_damaged_file_is_a_value_error_naming_it(tmp_path, fmt):
         f.write(data[:40])  # into the header or the pixels
     with pytest.raises(ValueError, match="a" + FORMATS[fmt].ext):
         image_files.read_image(path)
+
+
+def test_a_module_without_openimageio_is_complete_and_files_come_from_here():
+    """The portable module lacks only the image-file functions: the add-on loads it (not
+    'rebuild') and takes this module's instead."""
+    from canopy_ao.core import native
+    names = ("write_image", "read_image", "read_image_attributes")
+    portable = type("Portable", (), {k: getattr(_core, k) for k in dir(_core)
+                                     if not k.startswith("__") and k not in names})
+    assert native.missing_functions(portable) == []
+    assert image_files.functions(portable) == tuple(getattr(image_files, k) for k in names)
+    if hasattr(_core, "write_image"):
+        assert image_files.functions(_core) == tuple(getattr(_core, k) for k in names)
