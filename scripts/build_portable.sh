@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The portable extension zip (docs/PORTABILITY.md): the native module built without
-# OpenImageIO for one Python, with the Embree and TBB it links carried beside it under names of
+# OpenImageIO for one Python, with Debian 12's Embree and TBB carried beside it under names of
 # their own (libembree3-canopyao.so.3, libtbb-canopyao.so.12: SONAME and DT_NEEDED patched, found
-# through an $ORIGIN RUNPATH), so it loads where the system has neither and never binds to the
-# copies Blender itself loaded. Called by scripts/build_extension.sh --portable.
+# through an $ORIGIN RUNPATH), so it loads where the system has neither and never takes the
+# copies a Blender loaded; its Embree calls go through native/portable/embree_shim.cpp.
+# Called by scripts/build_extension.sh --portable.
 #   scripts/build_portable.sh OUT_DIR [PYTHON]
 # PYTHON: a version 3.N (/usr/bin/python3.N, headers from the distribution's python3.N-dev) or
 # the path of an interpreter with its headers (e.g. a pyenv 3.13 on Debian 12); default: this
