@@ -2,22 +2,33 @@
 # Builds the Blender 4.2+ extension zip of Canopy AO, carrying the native module built for the
 # Python and platform of the Blender installed here, and validates its manifest.
 #   scripts/build_extension.sh [--out DIR]      (default DIR: out/)
+#   scripts/build_extension.sh --portable [--python 3.N|INTERPRETER] [--out DIR]
+#     the portable zip (docs/PORTABILITY.md, scripts/build_portable.sh) for Python 3.N or that
+#     interpreter (default: this system's python3): out/canopy_ao-<version>-linux_x64-cp3N.zip,
+#     needing no Embree, TBB or OpenImageIO on the system
 # Prints the zip's path on its last line. Install it with
 #   blender --command extension install-file -r user_default -e ZIP
 # or in Blender: Edit > Preferences > Get Extensions > Install from Disk.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=out
+out=out portable=0 pyver=
 while (($#)); do
   case "$1" in
     --out) out=$2; shift 2 ;;
-    *) echo "build_extension.sh: unknown argument '$1' (use --out DIR)" >&2; exit 2 ;;
+    --portable) portable=1; shift ;;
+    --python) pyver=$2; shift 2 ;;
+    *) echo "build_extension.sh: unknown argument '$1' (use --out DIR, --portable, --python 3.N|INTERPRETER)" >&2
+       exit 2 ;;
   esac
 done
+[[ -z $pyver || $portable == 1 ]] || { echo "build_extension.sh: --python needs --portable" >&2; exit 2; }
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 
 scripts/install_deps.sh
+if ((portable)); then
+  exec scripts/build_portable.sh "$out" $pyver
+fi
 version=$(scripts/blender_version.sh)
 if [[ $(printf '%s\n' "$version" 4.2 | sort -V | head -n1) != 4.2 ]]; then
   echo "build_extension.sh: extensions need Blender 4.2 or later (this Blender: $version);" \

@@ -6,6 +6,7 @@
 # Usage: scripts/chroot.sh SUITE setup          create (once) and bring up to date
 #        scripts/chroot.sh SUITE run CMD [ARG..] run CMD inside, the repository at /canopy-ao
 #        scripts/chroot.sh SUITE path           print the chroot's directory
+#        scripts/chroot.sh SUITE archive-url    print the Debian archive the host's apt uses
 #
 # The chroot lives in $CANOPY_AO_CHROOTS (default /var/cache/canopy-ao/chroots)/SUITE and is
 # reused between runs; SUITE/.ready is touched once debootstrap and scripts/install_deps.sh have
@@ -142,5 +143,6 @@ case $action in
     enter "$@"
     ;;
   path) echo "$dir" ;;
-  *) die "unknown action '$action' (setup, run, path)" ;;
+  archive-url) archive_url ;;
+  *) die "unknown action '$action' (setup, run, path, archive-url)" ;;
 esac

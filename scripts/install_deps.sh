@@ -14,6 +14,7 @@ pkgs=(
   python3-cattr python3-requests
   # readelf, objdump, ldd: the module's load-time dependencies are checked in the tests.
   binutils libc-bin
+  patchelf  # the portable zip carries Embree and TBB renamed (scripts/build_portable.sh)
   slurmctld slurmd slurm-client munge parallel nodejs  # batch back ends; Flamenco's JS
 )
 if [[ "${1:-}" == "--with-bench" ]]; then

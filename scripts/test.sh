@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test on every supported Debian stack: the legs of the test matrix.
-#   host    this machine (Debian 12: Blender 3.4, Embree 3, OIIO 2.4, Python 3.11)
+#   host    this machine (Debian 12: Blender 3.4, Embree 3, OIIO 2.4, Python 3.11), and the
+#           portable zip in a bare Debian 12 root (tests/portable/test_portable.sh)
 #   trixie  a cached Debian 13 chroot (Blender 4.3, Embree 4, OIIO 2.5, Python 3.13)
 #   sid     a cached Debian unstable chroot (Blender 5.x, Embree 4, OIIO 3.1, Python 3.14)
 # Each leg builds and runs the whole suite (scripts/test_suite.sh) in its own build folder.
@@ -18,15 +19,41 @@ done
 as_root=()
 [[ $(id -u) -eq 0 ]] || as_root=(sudo --preserve-env=CANOPY_AO_BUILD_DIR,CI)
 
+# A chroot's set-up result, waited for once (the host leg's portable test may need trixie's).
+declare -A setup_rc
+setup_done() {
+  local leg=$1
+  if [[ -z ${setup_rc[$leg]:-} ]]; then
+    local ok=0
+    wait "${setup_pid[$leg]}" || ok=$?
+    setup_rc[$leg]=$ok
+    cat "$setup_logs/$leg"
+  fi
+  return "${setup_rc[$leg]}"
+}
+
 run_leg() {
   local leg=$1
   if [[ $leg == host ]]; then
-    CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh
-  else
     local ok=0
-    wait "${setup_pid[$leg]}" || ok=$?
-    cat "$setup_logs/$leg"
-    ((ok == 0)) || { echo "test.sh: the $leg chroot could not be set up" >&2; return 1; }
+    CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh || ok=$?
+    # The portable zip in a bare root of this Debian (cached beside the chroots); it builds with
+    # the trixie chroot's pybind11 (scripts/build_portable.sh). CANOPY_AO_PORTABLE_PY313: a
+    # Python 3.13 interpreter with headers, to build and prove the cp313 zip in a bare trixie too.
+    [[ -z ${setup_pid[trixie]:-} ]] || setup_done trixie || true
+    if [[ ! -e $(scripts/chroot.sh trixie path)/.ready ]]; then
+      echo "== Portable zip test skipped: it builds with the trixie chroot's pybind11, which is" \
+           "not set up (run the trixie leg, or scripts/chroot.sh trixie setup)"
+      return "$ok"
+    fi
+    echo "== Portable zip test (tests/portable/test_portable.sh)"
+    tests/portable/test_portable.sh || ok=1
+    if [[ -n ${CANOPY_AO_PORTABLE_PY313:-} ]]; then
+      tests/portable/test_portable.sh trixie "$CANOPY_AO_PORTABLE_PY313" || ok=1
+    fi
+    return "$ok"
+  else
+    setup_done "$leg" || { echo "test.sh: the $leg chroot could not be set up" >&2; return 1; }
     CANOPY_AO_BUILD_DIR="build-$leg" "${as_root[@]}" \
         scripts/chroot.sh "$leg" run /canopy-ao/scripts/test_suite.sh
   fi

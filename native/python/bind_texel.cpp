@@ -380,6 +380,7 @@ void bind_texel(py::module_& m) {
       "place, ring by ring; new texels take the mean of their filled 8-neighbours and get mask 2. "
       "Covered texels never change.");
 
+#ifndef CANOPY_AO_NO_IMAGE_IO  // the portable build has no OpenImageIO (docs/PORTABILITY.md)
   m.def(
       "write_image",
       [](const py::object& path, const py::array& pixels, const std::string& dtype,
@@ -486,6 +487,7 @@ a NUL in one, is a ValueError). Releases the GIL.
       "{name: value} of every string attribute in the image's header (what write_image's "
       "attributes stored, and any other program's); reads the header only. Raises "
       "CanopyAOError naming the path if it cannot be read.");
+#endif
 }
 
 }  // namespace canopy_ao::py_bind

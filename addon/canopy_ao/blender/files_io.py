@@ -13,9 +13,14 @@ import bpy
 import numpy as np
 
 from ..core.fingerprint import fingerprint, name_digest
+from ..core import image_files
 from ..core.image_formats import FORMATS, quantised, stored
 from ..core.native import CanopyAOError, _core
 from .atomic_io import keep_file, remove_file, replace_file  # noqa: F401 (re-exported)
+
+# OpenImageIO's image files where the module has it, else core/image_files.py's (the portable
+# module): the same codes either way (docs/PORTABILITY.md, 'Images').
+write_image, read_image, read_image_attributes = image_files.functions(_core)
 
 # The header attribute of every EXR and PNG file Canopy AO writes: JSON {"owner": the object's
 # (or atlas's) exact name, "map": the map's suffix, "tile": the UDIM number or null, "atlas",
@@ -135,7 +140,7 @@ def write_file(path, img, output=None, fmt="EXR"):
                       else {"ImageDescription": _digest(rec)})
 
     def write(tmp):
-        _core.write_image(tmp, img, dtype=f.dtype, bottom_up=True, attributes=attributes)
+        write_image(tmp, img, dtype=f.dtype, bottom_up=True, attributes=attributes)
     try:
         replace_file(path, write)
     except (OSError, RuntimeError) as exc:
@@ -170,7 +175,7 @@ def _read_record(path):
     if fmt is None:
         return None
     try:
-        attrs = _core.read_image_attributes(path)
+        attrs = read_image_attributes(path)
         if FORMATS[fmt].record == "digest":  # TGA: the digest; check_file compares it
             text = attrs.get("ImageDescription", "")
             if not text.startswith("canopy_ao:"):
@@ -183,7 +188,7 @@ def _read_record(path):
             rec.setdefault("format", "EXR")  # records from before formats: float EXR
             if rec["format"] not in FORMATS or FORMATS[rec["format"]].ext != FORMATS[fmt].ext:
                 return None
-        px = _core.read_image(path, bottom_up=True)
+        px = read_image(path, bottom_up=True)
     except (ValueError, RuntimeError, OSError, TypeError):  # not an image, unreadable, no record
         return None
     # (H, W, C) as read holds the codes of the (H, W) or (H, W, C) array written.

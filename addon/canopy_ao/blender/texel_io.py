@@ -4,7 +4,7 @@
     evaluated mesh ──foreach_get──► per-corner UV / world position / world normal (float32)
     ──_core.rasterize_uv──► one point per covered texel, N × N with anti-aliasing (TexelReceivers)
     ──the bake's evaluation──► AO per texel (their mean) ──_core.splat_texels──► image + margin
-    ──_core.write_image──► EXR file ──► Blender image, wired
+    ──files_io.write_image (OpenImageIO, or core/image_files.py)──► image file ──► Blender image
 
 Image conventions (texel_raster.h, Blender): texel (i, j) has its centre at
 uv = ((i + 0.5) / W, (j + 0.5) / H); row 0 is the bottom (v = 0).

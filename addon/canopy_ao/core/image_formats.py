@@ -32,18 +32,22 @@ FORMATS = {
 }
 
 _CODES = {"float": np.float32, "half": np.float16, "uint16": np.uint16, "uint8": np.uint8}
-_SCALE = {"uint16": 65535.0, "uint8": 255.0}
+SCALE = {"uint16": 65535.0, "uint8": 255.0}
+
+
+def codes(pixels, dtype):
+    """The codes a file of pixel type dtype ("float", "half", "uint16", "uint8") holds for
+    float pixels: float32 as given, float16 rounded to nearest, or
+    round(clip(v, 0, 1) · (2^bits − 1)) as unsigned integers (values outside [0, 1] clamped)."""
+    px = np.asarray(pixels, np.float32)
+    if dtype in SCALE:
+        return np.rint(np.clip(px, 0.0, 1.0) * SCALE[dtype]).astype(_CODES[dtype])
+    return px.astype(_CODES[dtype])
 
 
 def stored(pixels, fmt):
-    """The codes a file of format fmt (a FORMATS key) holds for float pixels: float32 as
-    given, float16 rounded to nearest, or round(clip(v, 0, 1) · (2^bits − 1)) as unsigned
-    integers (values outside [0, 1] clamped)."""
-    dtype = FORMATS[fmt].dtype
-    px = np.asarray(pixels, np.float32)
-    if dtype in _SCALE:
-        return np.rint(np.clip(px, 0.0, 1.0) * _SCALE[dtype]).astype(_CODES[dtype])
-    return px.astype(_CODES[dtype])
+    """The codes a file of format fmt (a FORMATS key) holds for float pixels (codes)."""
+    return codes(pixels, FORMATS[fmt].dtype)
 
 
 def quantised(pixels, fmt):
@@ -52,4 +56,4 @@ def quantised(pixels, fmt):
     codes = stored(pixels, fmt)
     dtype = FORMATS[fmt].dtype
     out = codes.astype(np.float32)
-    return out / np.float32(_SCALE[dtype]) if dtype in _SCALE else out
+    return out / np.float32(SCALE[dtype]) if dtype in SCALE else out

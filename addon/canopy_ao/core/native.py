@@ -47,7 +47,7 @@ LIMITS = {"coordinate": 1e9, "min_length": 1e-9, "max_length": 1e10, "tau": 1e4,
 _REQUIRED = ("Ellipsoid", "fit_sphere", "fit_ellipsoid", "fit_shells", "ao_occluders",
              "ao_canopy_sphere", "ao_canopy_ellipsoid", "ao_canopy_shells", "ao_medium_shells",
              "ao_reeves_blau", "ao_grass", "RayTracer", "DensityGrid", "OccluderField",
-             "rasterize_uv", "splat_texels", "write_image", "ao_near_far", "OcclusionFeatures",
+             "rasterize_uv", "splat_texels", "ao_near_far", "OcclusionFeatures",
              "expand_features", "predict_features",
              "to_world", "gray_rgba", "ScenePlan", "ForestOccluders", "GrassCover")
 

@@ -1,0 +1,151 @@
+#!/usr/bin/env bash
+# The portable extension zip proves itself (docs/PORTABILITY.md):
+#  1. it is built (scripts/build_extension.sh --portable) for this system's Python or PYTHON;
+#  2. readelf/objdump: the module and the libraries it carries need nothing but the C/C++
+#     runtime and each other, and no glibc symbol newer than 2.34 nor libstdc++ one newer than
+#     3.4.29;
+#  3. in a bare root of this Debian (debootstrap minbase + python3 + python3-numpy, cached by
+#     scripts/bare_root.sh), with an empty environment, the zip's module imports and bakes
+#     ray-traced, proxy and texel AO (tests/portable/bake_probe.py), bit-identical to what the
+#     Debian build's module (addon/canopy_ao/) gives on this machine, whatever the Python; the
+#     Debian build's module itself must fail to load there (no Embree, TBB or OpenImageIO);
+#  4. the module calls no Embree function by name (embree_shim.cpp): none can bind to the Embree 4
+#     a Blender has loaded; and where SUITE's build chroot (scripts/chroot.sh) is ready, its
+#     Blender installs the zip and bakes with it if it has extensions and the zip's Python
+#     (tests/portable/chroot_bake.sh);
+#  5. where the zip's Python is this Debian's Blender's, in that Blender the zip's package (module without OpenImageIO: images written by
+#     core/image_files.py) bakes texel images in EXR, PNG and TGA holding the same pixels as the
+#     repository's add-on (OpenImageIO) writes, and re-bakes over those files without Overwrite
+#     (it reads their ownership records).
+# Run by scripts/test.sh on the host leg. Needs root for the bare root (sudo otherwise).
+#   tests/portable/test_portable.sh [SUITE [PYTHON]]
+# SUITE: the bare root's Debian (default: this machine's); PYTHON: 3.N or an interpreter's path,
+# as build_extension.sh --python takes (default: this system's python3). The bare root's python3
+# must be that Python (bookworm: 3.11, trixie: 3.13), e.g.
+#   tests/portable/test_portable.sh trixie ~/.pyenv/versions/3.13.0/bin/python3.13
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+suite=${1:-$(. /etc/os-release && echo "$VERSION_CODENAME")}
+python=${2:-}
+as_root=()
+[[ $(id -u) -eq 0 ]] || as_root=(sudo --preserve-env=CANOPY_AO_CHROOTS)
+fail() { echo "test_portable.sh: FAILED: $*" >&2; exit 1; }
+
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+chmod 755 "$tmp"
+"${as_root[@]}" scripts/bare_root.sh "$suite" setup
+echo "== portable zip: build"
+zip=$(scripts/build_extension.sh --portable ${python:+--python "$python"} --out "$tmp/dist" | tail -n1)
+echo "built $(basename "$zip")"
+/usr/bin/python3 -m zipfile -e "$zip" "$tmp/pkg"
+ls "$tmp/pkg"/_core*.so >/dev/null || fail "the zip holds no _core*.so"
+
+echo "== portable zip: load-time needs (readelf, objdump)"
+runtime='^(libc|libm|libstdc\+\+|libgcc_s|libpthread|libdl|libmvec|ld-linux-x86-64)\.so'
+carried=$(cd "$tmp/pkg" && ls lib*-canopyao.so.* 2>/dev/null || true)
+[[ -n $carried ]] || fail "the zip carries no libraries (Embree, TBB)"
+for f in "$tmp/pkg"/_core*.so "$tmp/pkg"/lib*-canopyao.so.*; do
+  name=$(basename "$f")
+  for lib in $(readelf -d "$f" | sed -n 's/.*(NEEDED).*\[\(.*\)\]/\1/p'); do
+    [[ $lib =~ $runtime ]] && continue
+    grep -qxF "$lib" <<<"$carried" || fail "$name needs $lib, which is neither the runtime nor carried"
+  done
+  readelf -d "$f" | grep -q 'RUNPATH.*\[\$ORIGIN\]' || fail "$name has no \$ORIGIN RUNPATH"
+  glibc=$(objdump -T "$f" | grep -oE '\bGLIBC_[0-9.]+' | sed 's/GLIBC_//' | sort -uV | tail -n1)
+  cxx=$(objdump -T "$f" | grep -oE '\bGLIBCXX_[0-9.]+' | sed 's/GLIBCXX_//' | sort -uV | tail -n1)
+  echo "$name: newest GLIBC_$glibc GLIBCXX_${cxx:-none}"
+  [[ $(printf '%s\n' "$glibc" 2.34 | sort -V | tail -n1) == 2.34 ]] ||
+    fail "$name needs GLIBC_$glibc, newer than the 2.34 baseline"
+  [[ -z $cxx || $(printf '%s\n' "$cxx" 3.4.29 | sort -V | tail -n1) == 3.4.29 ]] ||
+    fail "$name needs GLIBCXX_$cxx, newer than the 3.4.29 baseline"
+done
+
+rtc=$(nm -D --undefined-only "$tmp/pkg"/_core*.so | awk '$2 ~ /^rtc/ {print $2}' | head -n3)
+[[ -z $rtc ]] || fail "the module calls Embree by name ($rtc ...): a Blender's own Embree would take the call"
+
+echo "== portable zip: bake in a bare $suite root (python3 + numpy only)"
+cp tests/portable/bake_probe.py "$tmp/"
+mkdir "$tmp/debian"
+cp addon/canopy_ao/_core*.so "$tmp/debian/"
+chmod -R a+rX "$tmp"
+if "${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 -c \
+    "import sys; sys.path.insert(0, '/pkg/debian'); import _core" >"$tmp/debian.log" 2>&1; then
+  fail "the Debian build's module loaded in the bare root: the root is not bare"
+fi
+grep -q 'cannot open shared object file' "$tmp/debian.log" ||
+  { cat "$tmp/debian.log" >&2; fail "the Debian build's module failed in the bare root for another reason"; }
+echo "the Debian build's module does not load there: $(grep -o 'lib[^:]*: cannot open shared object file' "$tmp/debian.log" | head -n1)"
+"${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 /pkg/bake_probe.py /pkg/pkg \
+  >"$tmp/bare.log" 2>&1 || { cat "$tmp/bare.log" >&2; fail "the portable module does not bake in the bare root"; }
+/usr/bin/python3 tests/portable/bake_probe.py addon/canopy_ao >"$tmp/host.log" ||
+  fail "the Debian build's module does not bake on this machine"
+/usr/bin/python3 - "$tmp/bare.log" "$tmp/host.log" <<'PY'
+import json, sys
+bare, host = (json.loads(open(p).read().split("PROBE ", 1)[1]) for p in sys.argv[1:])
+bare.pop("module"), host.pop("module")  # the Pythons may differ; the AO may not
+diff = [k for k in host if bare.get(k) != host[k]]
+assert not diff, f"the portable module's {', '.join(diff)} AO differs from the Debian build's"
+print(f"bare root bake bit-identical to the Debian build's: {', '.join(sorted(host))}")
+PY
+chroot_dir=$(scripts/chroot.sh "$suite" path)
+if [[ -e $chroot_dir/.ready ]]; then
+  echo "== portable zip: installed into the $suite chroot's Blender"
+  # The chroot sees the repository at /canopy-ao: the zip and the script go to a build folder.
+  under=build-portable-test-$suite
+  rm -rf "$under" && mkdir -p "$under"
+  cp "$zip" "$under/"
+  sed "s|@ZIP@|/canopy-ao/$under/$(basename "$zip")|" tests/portable/chroot_bake.sh >"$under/run.sh"
+  "${as_root[@]}" scripts/chroot.sh "$suite" run bash "/canopy-ao/$under/run.sh" ||
+    fail "the zip does not install and bake in the $suite chroot's Blender"
+  rm -rf "$under"
+fi
+
+blender_py=$(blender -b --factory-startup --python-expr \
+  'import sys; print("CANOPY_AO_PY=cp%d%d" % sys.version_info[:2])' 2>/dev/null | sed -n 's/^CANOPY_AO_PY=//p')
+if [[ $zip != *-$blender_py.zip ]]; then
+  echo "== portable zip: no Blender bake here (this Blender runs ${blender_py:-no Python})"
+  echo "portable zip OK: $(basename "$zip")"
+  exit 0
+fi
+echo "== portable zip: texel images in this Debian's Blender, without OpenImageIO"
+blender -b --factory-startup --python examples/make_scene.py -- \
+  --scene round_tree --quick --out "$tmp/scene.blend" >"$tmp/scene.log" 2>&1 ||
+  { cat "$tmp/scene.log" >&2; fail "could not make the example scene"; }
+mkdir -p "$tmp/us-repo/addons" "$tmp/us-zip/addons"
+ln -s "$PWD/addon/canopy_ao" "$tmp/us-repo/addons/canopy_ao"
+ln -s "$tmp/pkg" "$tmp/us-zip/addons/canopy_ao"
+bake() {  # bake WHICH(repo|zip) FORMAT DIR: a texel bake with that package's CLI
+  local check="assert hasattr(m, 'write_image') == ('$1' == 'repo'), m.__file__"
+  BLENDER_USER_SCRIPTS="$tmp/us-$1" blender -b "$tmp/scene.blend" --factory-startup \
+    --addons canopy_ao --python-exit-code 1 --python-expr \
+    "import canopy_ao._core as m, canopy_ao.cli as c; $check; c.main()" -- \
+    --all --method sphere --mode texel --resolution 48 --image-format "$2" --image-dir "$3" \
+    >"$tmp/bake.log" 2>&1 || { cat "$tmp/bake.log" >&2; fail "the $1 package's $2 bake into $3 failed"; }
+}
+for fmt in exr png tga; do
+  bake repo "$fmt" "$tmp/img-repo-$fmt"
+  bake zip "$fmt" "$tmp/img-zip-$fmt"
+  cp -r "$tmp/img-repo-$fmt" "$tmp/img-over-$fmt"
+  bake zip "$fmt" "$tmp/img-over-$fmt"  # over OpenImageIO's files, no Overwrite: its own
+  bake zip "$fmt" "$tmp/img-zip-$fmt"   # over its own files, no Overwrite
+done
+/usr/bin/python3 - "$tmp" <<'PY'
+import glob, os, sys
+import numpy as np
+sys.path.insert(0, "addon")
+from canopy_ao import _core  # the Debian build's: OpenImageIO reads every file
+tmp, n = sys.argv[1], 0
+for fmt in ("exr", "png", "tga"):
+    ref = sorted(glob.glob(f"{tmp}/img-repo-{fmt}/*"))
+    for got in (sorted(glob.glob(f"{tmp}/img-zip-{fmt}/*")), sorted(glob.glob(f"{tmp}/img-over-{fmt}/*"))):
+      assert ref and [os.path.basename(p) for p in ref] == [os.path.basename(p) for p in got], (ref, got)
+      for a, b in zip(ref, got):
+        pa, pb = _core.read_image(a), _core.read_image(b)
+        assert pa.shape == pb.shape and np.array_equal(pa, pb), f"{b} differs from {a}"
+        assert pa.min() < pa.max(), f"{a} is flat"
+        assert open(a, "rb").read() != open(b, "rb").read() or "over" in b, "same writer?"
+        n += 1
+print(f"{n} texel images written without OpenImageIO hold the same pixels")
+PY
+echo "portable zip OK: $(basename "$zip")"
