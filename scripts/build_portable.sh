@@ -74,7 +74,7 @@ declare -A renamed
 carry() {  # carry SONAME: copy the system's library beside the module, renamed, with its own needs
   local lib=$1 path new
   [[ -z ${renamed[$lib]:-} ]] || return 0
-  path=$(/sbin/ldconfig -p | awk -v l="$lib" '$1 == l && /x86-64/ {print $NF; exit}')
+  path=$(/sbin/ldconfig -p | awk -v l="$lib" '$1 == l && /x86-64/ && !found {print $NF; found = 1}')  # reads all: no SIGPIPE
   [[ -f $path ]] || { echo "build_portable.sh: $lib not found on this system" >&2; exit 1; }
   new=$(echo "$lib" | sed -E "s/^(lib[^.]+)\\.so/\\1$suffix_of_carried.so/")
   renamed[$lib]=$new

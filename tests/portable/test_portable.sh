@@ -61,7 +61,7 @@ for f in "$tmp/pkg"/_core*.so "$tmp/pkg"/lib*-canopyao.so.*; do
     fail "$name needs GLIBCXX_$cxx, newer than the 3.4.29 baseline"
 done
 
-rtc=$(nm -D --undefined-only "$tmp/pkg"/_core*.so | awk '$2 ~ /^rtc/ {print $2}' | head -n3)
+rtc=$(nm -D --undefined-only "$tmp/pkg"/_core*.so | awk '$2 ~ /^rtc/ && n++ < 3 {print $2}')
 [[ -z $rtc ]] || fail "the module calls Embree by name ($rtc ...): a Blender's own Embree would take the call"
 
 echo "== portable zip: bake in a bare $suite root (python3 + numpy only)"
@@ -75,7 +75,7 @@ if "${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 -c \
 fi
 grep -q 'cannot open shared object file' "$tmp/debian.log" ||
   { cat "$tmp/debian.log" >&2; fail "the Debian build's module failed in the bare root for another reason"; }
-echo "the Debian build's module does not load there: $(grep -o 'lib[^:]*: cannot open shared object file' "$tmp/debian.log" | head -n1)"
+echo "the Debian build's module does not load there: $(grep -o -m1 'lib[^:]*: cannot open shared object file' "$tmp/debian.log")"
 "${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 /pkg/bake_probe.py /pkg/pkg \
   >"$tmp/bare.log" 2>&1 || { cat "$tmp/bare.log" >&2; fail "the portable module does not bake in the bare root"; }
 /usr/bin/python3 tests/portable/bake_probe.py addon/canopy_ao >"$tmp/host.log" ||
