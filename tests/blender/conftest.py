@@ -58,6 +58,22 @@ def _clear_scene():
     return scene
 
 
+def add_wind_key(ob, amplitude, last_frame):
+    """A keyed shape key 'Wind' that bends ob along x by amplitude × (z − 1.4)², 0 at frame 1
+    and 1 at last_frame: the swaying crown of the live tests."""
+    ob.shape_key_add(name="Basis")
+    wind = ob.shape_key_add(name="Wind")
+    co = np.empty(len(ob.data.vertices) * 3, np.float32)
+    wind.data.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[:, 0] += amplitude * (co[:, 2] - 1.4) ** 2
+    wind.data.foreach_set("co", co.ravel())
+    for frame, value in ((1, 0.0), (last_frame, 1.0)):
+        wind.value = value
+        wind.keyframe_insert("value", frame=frame)
+    return wind
+
+
 def add_mesh(name, positions, triangles, collection=None):
     me = bpy.data.meshes.new(name)
     me.vertices.add(len(positions))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import tree_scene
-from conftest import _clear_scene, add_mesh
+from conftest import _clear_scene, add_mesh, add_wind_key
 from canopy_ao.blender import frames, live, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 from canopy_ao.core.native import CanopyAOError
@@ -30,16 +30,7 @@ def _animated_tree():
         ob.canopy_ao.role = ROLES[name]
         ob.canopy_ao.tree = "Oak" if name in ("Trunk", "Leaves") else ""
     leaves = scene.objects["Leaves"]
-    leaves.shape_key_add(name="Basis")
-    wind = leaves.shape_key_add(name="Wind")
-    co = np.empty(len(leaves.data.vertices) * 3, np.float32)
-    wind.data.foreach_get("co", co)
-    co = co.reshape(-1, 3)
-    co[:, 0] += 0.15 * (co[:, 2] - 1.4) ** 2
-    wind.data.foreach_set("co", co.ravel())
-    for frame, value in ((1, 0.0), (9, 1.0)):
-        wind.value = value
-        wind.keyframe_insert("value", frame=frame)
+    add_wind_key(leaves, 0.15, 9)
     scene.frame_start, scene.frame_end = 1, 9
     scene.frame_set(1)
     for ob in scene.objects:
