@@ -24,7 +24,8 @@ def as_argv(command, blend):
     command = command.replace('"out/$scene.blend"', "scene.blend")
     command = command.replace('"$method"', "sphere").replace("$scene", "x")
     argv = shlex.split(command)
-    argv = [blend if a == "scene.blend" else a for a in argv]
+    # The .blend a documented command opens (scene.blend, out/round_tree.blend, ...): this one.
+    argv = [blend if a.endswith(".blend") and not a.startswith("-") else a for a in argv]
     argv[0] = bpy.app.binary_path
     if "--factory-startup" not in argv:
         argv.insert(2, "--factory-startup")  # never the user's own preferences
