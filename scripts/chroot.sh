@@ -55,6 +55,13 @@ enter() {
   mkdir -p "$dir/canopy-ao"
   # What crosses into the chroot's clean environment: CI and this project's own settings.
   local pass=(CI="${CI:-}")
+  # ... and the host's trusted certificates, for the clients that fetch over TLS (npm): a
+  # network whose proxy the host trusts through its own CA bundle is the chroot's network too.
+  if [[ -s /etc/ssl/certs/ca-certificates.crt ]]; then
+    mkdir -p "$dir/etc/ssl/certs"
+    cp -L /etc/ssl/certs/ca-certificates.crt "$dir/etc/ssl/certs/canopy-ao-host-ca.crt"
+    pass+=(NODE_EXTRA_CA_CERTS=/etc/ssl/certs/canopy-ao-host-ca.crt)
+  fi
   local v
   for v in $(compgen -e | grep '^CANOPY_AO_' || true); do pass+=("$v=${!v}"); done
   unshare --mount --propagation private -- /bin/bash -euo pipefail -c '
@@ -95,9 +102,10 @@ setup() {
   exec 9>"$root_dir/.$suite.lock"
   flock 9
 
-  # Ready and made from today's dependency list: nothing to do (no network needed).
+  # Ready and made from today's dependency list and by today's way of entering the chroot
+  # (what it passes in, such as the host's certificates): nothing to do (no network needed).
   local want
-  want=$(sha256sum "$repo/scripts/install_deps.sh" | cut -d' ' -f1)
+  want=$(cat "$repo/scripts/install_deps.sh" "$repo/scripts/chroot.sh" | sha256sum | cut -d' ' -f1)
   if [[ -e $dir/.ready && $(cat "$dir/.ready") == "$want" ]]; then
     echo "canopy-ao chroot: $suite ready (cached at $dir)"
     return 0
