@@ -155,3 +155,91 @@ def test_assign_trees_degenerate_input():
                 assert len(g.labels) == len(p) and g.labels.max() < len(g.trees)
             else:
                 assert name not in got
+
+
+# === Walls and rock faces an ivy climbs (issue #38 item 5) =================================
+
+def ivy_on_wall(rng, thick=0.0, n_leaves=600, n_branches=12):
+    """A 3 m × 2 m wall standing at y = 0 (a quad, or a slab of the given thickness), ivy leaves
+    (small quads) scattered on and just in front of it, thin branch tubes climbing it, and a
+    ground plane: the shapes of IvyGen's ivy on a wall."""
+    if thick > 0:
+        from real_shapes import cubes
+        v, t = cubes([[0, 0, 0]], 1.0)
+        wall = (v * np.float32([1.5, thick / 2, 1.0]) + np.float32([0, 0, 1.0]), t)
+    else:
+        wall = (np.float32([[-1.5, 0, 0], [1.5, 0, 0], [1.5, 0, 2], [-1.5, 0, 2]]),
+                np.int32([[0, 1, 2], [0, 2, 3]]))
+    # Leaves: small quads a few cm in front of the wall's face, turned at random.
+    c = np.c_[rng.uniform(-1.4, 1.4, n_leaves), -thick / 2 - rng.uniform(0.01, 0.1, n_leaves),
+              rng.uniform(0.05, 1.95, n_leaves)]
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float) * 0.06
+    rot = np.linalg.qr(rng.normal(size=(n_leaves, 3, 3)))[0]
+    lv = (c[:, None, :] + np.einsum("nij,kj->nki", rot, quad)).reshape(-1, 3).astype(np.float32)
+    lt = (np.arange(n_leaves)[:, None, None] * 4 + np.array([[0, 1, 2], [0, 2, 3]])[None])
+    leaves_ = (lv, lt.reshape(-1, 3).astype(np.int32))
+    # Branches: thin open tubes climbing the wall's face, bent sideways.
+    bv, bt, off = [], [], 0
+    sides, rings = 6, 16
+    ang = 2 * np.pi * np.arange(sides) / sides
+    for _ in range(n_branches):
+        x0, sway = rng.uniform(-1.3, 1.3), rng.uniform(-0.4, 0.4)
+        s = np.linspace(0, 1, rings)
+        centre = np.c_[x0 + sway * np.sin(np.pi * s), np.full(rings, -thick / 2 - 0.015),
+                       1.9 * s]
+        ring = np.stack([0.01 * np.cos(ang), 0.01 * np.sin(ang), np.zeros(sides)], 1)
+        bv.append((centre[:, None, :] + ring[None]).reshape(-1, 3))
+        i, j = np.meshgrid(np.arange(rings - 1), np.arange(sides), indexing="ij")
+        a, b = i * sides + j, i * sides + (j + 1) % sides
+        bt.append(off + np.concatenate([np.stack([a, b, b + sides], -1).reshape(-1, 3),
+                                        np.stack([a, b + sides, a + sides], -1).reshape(-1, 3)]))
+        off += rings * sides
+    branches = (np.concatenate(bv).astype(np.float32), np.concatenate(bt).astype(np.int32))
+    ground = (np.float32([[-4, -4, 0], [4, -4, 0], [4, 4, 0], [-4, 4, 0]]),
+              np.int32([[0, 1, 2], [0, 2, 3]]))
+    return {"Wall": wall, "IvyLeaves": leaves_, "IvyBranches": branches, "Ground": ground}
+
+
+def test_a_wall_under_ivy_is_a_surface_not_a_trunk():
+    """A wall (a quad or a 10 cm slab, 3 m × 2 m) is guessed GROUND — a surface that receives
+    and occludes like the ground — where it used to be '1 solid piece', a TRUNK and a tree of
+    its own; the ivy's leaves are CANOPY, its branches TRUNK. The rule is scale-free (the same
+    answers at 1/100 and 100 times the size) and does not care how the wall is turned."""
+    rng = np.random.default_rng(5)
+    want = {"Wall": "GROUND", "IvyLeaves": "CANOPY", "IvyBranches": "TRUNK", "Ground": "GROUND"}
+    for thick in (0.0, 0.1):
+        scene = ivy_on_wall(rng, thick=thick)
+        for scale in (0.01, 1.0, 100.0):
+            for name, (p, t) in scene.items():
+                role, why = roles.guess_role(p * np.float32(scale), t)
+                assert role == want[name], (thick, scale, name, why)
+        # A rock face leaning 35° from vertical, turned 60° about z: still a surface.
+        c, s = np.cos(np.radians(35)), np.sin(np.radians(35))
+        tilt = np.array([[1, 0, 0], [0, c, -s], [0, s, c]]) @ np.array(
+            [[0.5, -0.866, 0], [0.866, 0.5, 0], [0, 0, 1]])
+        p, t = scene["Wall"]
+        assert roles.guess_role((p @ tilt.T).astype(np.float32), t)[0] == "GROUND"
+
+
+def test_rough_rock_face_is_a_surface_and_thick_solids_stay_trunks():
+    """A rock face (a 3 × 2 m grid in bumps of ±20 cm over ~1 m and ±2 cm of noise at its
+    10 cm spacing) is a surface; a tube (a bole),
+    a cube and a thick block (3 × 2 × 1.5 m) stay TRUNK: only a sheet or a slab whose
+    normals agree is a surface."""
+    rng = np.random.default_rng(6)
+    n = 30
+    x, z = np.meshgrid(np.linspace(-1.5, 1.5, n), np.linspace(0, 2, n), indexing="ij")
+    y = (0.2 * np.sin(5 * x + 1) * np.cos(4 * z) + 0.1 * np.sin(9 * x * z)
+         + rng.uniform(-0.02, 0.02, x.shape))
+    p = np.stack([x, y, z], -1).reshape(-1, 3).astype(np.float32)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    t = np.concatenate([np.stack([a, a + n, a + n + 1], 1), np.stack([a, a + n + 1, a + 1], 1)])
+    role, why = roles.guess_role(p, t.astype(np.int32))
+    assert role == "GROUND", why
+    pytest.importorskip("canopy_scenes")
+    from real_shapes import cubes
+    assert roles.guess_role(*stem((0, 0)))[0] == "TRUNK"
+    v, ct = cubes([[0, 0, 0]], 1.0)
+    assert roles.guess_role(v, ct)[0] == "TRUNK"
+    assert roles.guess_role(v * np.float32([1.5, 0.75, 1.0]), ct)[0] == "TRUNK"

@@ -3,7 +3,8 @@
 Roles (docs/DESIGN.md, 'How each role is lit'):
 - ``CANOPY``: leaves; its points fit the proxies, and it receives.
 - ``TRUNK``: receives, and occludes the ground as a solid.
-- ``GROUND``: a flat, wide surface; receives only.
+- ``GROUND``: a surface things stand on or climb: a flat ground, a slope, a wall or a rock face
+  (a sheet or a plate in any orientation); receives, and is traced as an occluder by rays.
 - ``GRASS``: many small disconnected blades standing on one plane; receives (its field's blade
   layer, grass_layer.py).
 - ``IGNORE``: takes no part.
@@ -23,6 +24,14 @@ ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS", "IGNORE")
 MANY_COMPONENTS = 24
 # Flat: the thinnest extent is below this fraction of the widest.
 FLAT_RATIO = 0.05
+# A surface (a wall, a rock face, a slope: few pieces, any orientation): the area-weighted
+# normals share one direction — λmax of Σ a n nᵀ / Σ a (piece_shape's plate) at least this.
+# A sheet or a thin slab is near 1 (a 3 × 2 × 0.5 box 0.71), a tube ≤ 0.5 however it bends or
+# forks, a cube or a ball 1/3: scale-free, and blind to how the surface is turned.
+SURFACE_PLATE = 0.7
+# ... or it is an open sheet, bumps and all (a rough rock face, a terrain): its area-weighted
+# mean normal (piece_shape's openness) at least this; a tube, open at its ends, is near 0.
+SURFACE_OPEN = 0.5
 
 
 def _hook(parent, hi, lo):
@@ -208,6 +217,8 @@ def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
     """Guess a role for a mesh. Returns (role, reason) where reason is a short human sentence.
 
     - flat and wide (z extent < 5 % of the xy extent, few pieces) → GROUND;
+    - few pieces whose normals share one direction, or an open sheet (a wall, a rock face, a
+      slope: a sheet or a slab in any orientation; SURFACE_PLATE, SURFACE_OPEN) → GROUND;
     - many small pieces whose lowest points lie near one plane, taller than wide, the whole
       object low and wide → GRASS;
     - many small pieces, most of their area in closed tubes (unwelded branches: Sapling's
@@ -235,6 +246,10 @@ def guess_role(positions: np.ndarray, triangles: np.ndarray) -> tuple[str, str]:
         return "CANOPY", f"{s.n_components} small pieces in a blob"
     if flat:
         return "GROUND", "flat"
+    area, opened, plate = piece_shape(positions, triangles, np.zeros(s.n_vertices, np.int64), 1)
+    if area[0] > 0 and (plate[0] >= SURFACE_PLATE or opened[0] >= SURFACE_OPEN):
+        return "GROUND", (f"a surface in any orientation (a wall, a rock face, a slope: normals "
+                          f"agree {plate[0]:.2f}, mean normal {opened[0]:.2f}), not a tube")
     return "TRUNK", f"{s.n_components} solid piece(s)"
 
 
