@@ -77,3 +77,43 @@ def cubes(centres, half):
     v = c[:, None, :] + half * corner[None]
     t = (np.arange(len(c))[:, None, None] * 8 + faces[None]).reshape(-1, 3)
     return v.reshape(-1, 3).astype(np.float32), t.astype(np.int32)
+
+
+def ivy_on_wall(rng, thick=0.0, n_leaves=600, n_branches=12):
+    """A 3 m × 2 m wall standing at y = 0 (a quad, or a slab of the given thickness), ivy leaves
+    (small quads) scattered on and just in front of it, thin branch tubes climbing it, and a
+    ground plane: the shapes of IvyGen's ivy on a wall."""
+    if thick > 0:
+        v, t = cubes([[0, 0, 0]], 1.0)
+        wall = (v * np.float32([1.5, thick / 2, 1.0]) + np.float32([0, 0, 1.0]), t)
+    else:
+        wall = (np.float32([[-1.5, 0, 0], [1.5, 0, 0], [1.5, 0, 2], [-1.5, 0, 2]]),
+                np.int32([[0, 1, 2], [0, 2, 3]]))
+    # Leaves: small quads a few cm in front of the wall's face, turned at random.
+    c = np.c_[rng.uniform(-1.4, 1.4, n_leaves), -thick / 2 - rng.uniform(0.01, 0.1, n_leaves),
+              rng.uniform(0.05, 1.95, n_leaves)]
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float) * 0.06
+    rot = np.linalg.qr(rng.normal(size=(n_leaves, 3, 3)))[0]
+    lv = (c[:, None, :] + np.einsum("nij,kj->nki", rot, quad)).reshape(-1, 3).astype(np.float32)
+    lt = (np.arange(n_leaves)[:, None, None] * 4 + np.array([[0, 1, 2], [0, 2, 3]])[None])
+    leaves_ = (lv, lt.reshape(-1, 3).astype(np.int32))
+    # Branches: thin open tubes climbing the wall's face, bent sideways.
+    bv, bt, off = [], [], 0
+    sides, rings = 6, 16
+    ang = 2 * np.pi * np.arange(sides) / sides
+    for _ in range(n_branches):
+        x0, sway = rng.uniform(-1.3, 1.3), rng.uniform(-0.4, 0.4)
+        s = np.linspace(0, 1, rings)
+        centre = np.c_[x0 + sway * np.sin(np.pi * s), np.full(rings, -thick / 2 - 0.015),
+                       1.9 * s]
+        ring = np.stack([0.01 * np.cos(ang), 0.01 * np.sin(ang), np.zeros(sides)], 1)
+        bv.append((centre[:, None, :] + ring[None]).reshape(-1, 3))
+        i, j = np.meshgrid(np.arange(rings - 1), np.arange(sides), indexing="ij")
+        a, b = i * sides + j, i * sides + (j + 1) % sides
+        bt.append(off + np.concatenate([np.stack([a, b, b + sides], -1).reshape(-1, 3),
+                                        np.stack([a, b + sides, a + sides], -1).reshape(-1, 3)]))
+        off += rings * sides
+    branches = (np.concatenate(bv).astype(np.float32), np.concatenate(bt).astype(np.int32))
+    ground = (np.float32([[-4, -4, 0], [4, -4, 0], [4, 4, 0], [-4, 4, 0]]),
+              np.int32([[0, 1, 2], [0, 2, 3]]))
+    return {"Wall": wall, "IvyLeaves": leaves_, "IvyBranches": branches, "Ground": ground}
