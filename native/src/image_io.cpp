@@ -109,6 +109,9 @@ void write_image(const std::string& path, const float* pixels, int width, int he
     default: spec.channelnames = {"R", "G", "B", "A"}; spec.alpha_channel = 3; break;
   }
   if (ext == ".exr") spec.attribute("compression", "zip");
+  // The pixels are data, stored linearly: say so. OpenImageIO 3 otherwise tags an integer PNG
+  // as sRGB (sRGB, gAMA 0.45455 and cHRM chunks), which viewers and engines would decode.
+  if (ext == ".png") spec.attribute("oiio:ColorSpace", "Linear");
   for (const auto& [name, value] : options.attributes) {
     const bool plain = !name.empty() && std::all_of(name.begin(), name.end(), [](unsigned char c) {
       return std::isalnum(c) || c == '_';

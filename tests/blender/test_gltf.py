@@ -115,6 +115,8 @@ def _export(path, **kw):
     props = bpy.ops.export_scene.gltf.get_rna_type().properties.keys()
     if "export_vertex_color" in props:
         kw["export_vertex_color"] = 'ACTIVE'
+    if "export_all_vertex_colors" in props:  # 5.x: on, its COLOR_0 is another attribute
+        kw["export_all_vertex_colors"] = False
     else:
         kw["export_colors"] = True
     r = bpy.ops.export_scene.gltf(filepath=path, export_format='GLB', export_yup=False,

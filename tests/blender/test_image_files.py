@@ -37,10 +37,11 @@ def _bytes(path):
 
 
 def _png_chunks(path):
-    data, out = _bytes(path)[8:], []
+    """{chunk type: its data} of a PNG file."""
+    data, out = _bytes(path)[8:], {}
     while data:
         n, kind = struct.unpack(">I4s", data[:8])
-        out.append(kind.decode())
+        out[kind.decode()] = data[8:8 + n]
         data = data[12 + n:]
     return out
 
@@ -64,7 +65,11 @@ def test_each_format_holds_the_baked_values_as_non_color_data(tree, fmt):
     img.pixels.foreach_get(px)
     assert np.abs(px[0::img.channels].reshape(h, w) - got).max() <= 1e-6
     if fmt.startswith("PNG"):  # linear values, and no chunk claiming sRGB or a gamma
-        assert not {"sRGB", "gAMA", "iCCP", "cHRM"} & set(_png_chunks(path))
+        # Nothing claims an sRGB encoding: no sRGB or ICC chunk, and a gamma, where there is
+        # one (OpenImageIO 3 writes it), of 1.0 (gAMA stores 100,000 × the file's gamma).
+        chunks = _png_chunks(path)
+        assert not {"sRGB", "iCCP"} & set(chunks), sorted(chunks)
+        assert struct.unpack(">I", chunks.get("gAMA", b"\x00\x01\x86\xa0"))[0] == 100000
     # The file is the bake's own: a re-bake replaces it without Overwrite.
     run_bake(bpy.context, ["Ground"], _texel(tree, image_format=fmt, tau=3.0))
     assert sorted(os.listdir(tree["image_dir"])) == [os.path.basename(path)]

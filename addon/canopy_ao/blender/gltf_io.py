@@ -11,7 +11,8 @@ Occlusion input is linked. Our nodes carry materials.TAG, so materials.unwire re
 
 Per vertex: every one of those exporters writes the mesh's render color attribute as COLOR_0
 (3.4 with Colors on, its default; 4.2 on with Use Vertex Color: Active, export_vertex_color=
-'ACTIVE'), so we make the AO attribute the render color attribute.
+'ACTIVE', and on 5.x Export All Vertex Colors off), so we make the AO attribute the render
+color attribute.
 """
 import bpy
 

@@ -6,6 +6,7 @@ the stage changes (gathering, preparing, evaluating, writing) and otherwise at m
 left (receivers of one bake cost about the same), so it is given once some are done.
 """
 
+import os
 import shutil
 import signal
 import sys
@@ -112,9 +113,13 @@ class Interrupt:
             signal.signal(signal.SIGINT, signal.SIG_DFL)
             raise KeyboardInterrupt
         self.requested = True
-        sys.stderr.write("\ncanopy_ao: stopping after the current step (Ctrl-C again to "
-                         "quit at once)\n")
-        sys.stderr.flush()
+        # os.write, not sys.stderr: the signal may arrive while the main thread is inside
+        # sys.stderr's own write (a progress line), and its buffered writer is not reentrant.
+        try:
+            os.write(2, b"\ncanopy_ao: stopping after the current step (Ctrl-C again to quit "
+                        b"at once)\n")
+        except OSError:
+            pass
 
     def check(self):
         if self.requested:
