@@ -32,6 +32,7 @@ def test_an_extension_for_another_python_names_both_pythons_and_the_zip(tmp_path
     msg = native.load_failure("ImportError: No module named 'canopy_ao._core'", pkg, (3, 14))
     assert "this Blender runs Python 3.14" in msg and "built for Python 3.13" in msg, msg
     assert "canopy_ao-1.2.3-cp314.zip" in msg and "cmake" not in msg.lower(), msg
+    assert "canopy_ao-1.2.3-linux_x64-cp314.zip" in msg, msg  # the portable zip's name
 
 
 def test_a_windows_module_is_read_by_its_tag_too(tmp_path):

@@ -99,10 +99,12 @@ def load_failure(error: str, package: str, python: tuple = sys.version_info[:2])
         fix = ("run 'cmake -S . -B build-addon && cmake --build build-addon -j2' in the Canopy AO "
                "source tree (it copies _core*.so into addon/canopy_ao/), then restart Blender")
     else:
-        fix = (f"install the Canopy AO extension built for Python {here}, "
-               f"{_zip_name(package, python)} (Edit > Preferences > Get Extensions > Install "
-               "from Disk; or from the source tree: scripts/build_extension.sh), then restart "
-               "Blender")
+        zip_name = _zip_name(package, python)
+        fix = (f"install the Canopy AO extension built for Python {here}, {zip_name} (for a "
+               "blender.org build on Linux, the self-contained "
+               f"{zip_name.replace('-cp', '-linux_x64-cp')}; Edit > Preferences > Get "
+               "Extensions > Install from Disk; or from the source tree: "
+               "scripts/build_extension.sh [--portable]), then restart Blender")
     if built and here not in built:
         why = (f"this Blender runs Python {here}, and this copy of Canopy AO carries a module "
                f"built for Python {', '.join(built)} ({', '.join(names)}), which it cannot load")
