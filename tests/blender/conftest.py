@@ -58,6 +58,16 @@ def _clear_scene():
     return scene
 
 
+def add_oak_scene(roles):
+    """tests/python/tree_scene's tree (trunk, leaves, ground, grass) as objects with their roles
+    (name -> role) set, trunk and leaves in the tree 'Oak'."""
+    import tree_scene
+    for name, (p, t) in tree_scene.scene(True).items():
+        ob = add_mesh(name, p, t)
+        ob.canopy_ao.role = roles[name]
+        ob.canopy_ao.tree = "Oak" if name in ("Trunk", "Leaves") else ""
+
+
 def add_wind_key(ob, amplitude, last_frame):
     """A keyed shape key 'Wind' that bends ob along x by amplitude × (z − 1.4)², 0 at frame 1
     and 1 at last_frame: the swaying crown of the live tests."""

@@ -9,8 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-import tree_scene
-from conftest import _clear_scene, add_mesh, add_wind_key
+from conftest import _clear_scene, add_oak_scene, add_wind_key
 from canopy_ao.blender import frames, live, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 from canopy_ao.core.native import CanopyAOError
@@ -25,10 +24,7 @@ def _animated_tree():
     exactly), keyed 0 at frame 1 and 1 at frame 9."""
     _clear_scene()
     scene = bpy.context.scene
-    for name, (p, t) in tree_scene.scene(True).items():
-        ob = add_mesh(name, p, t)
-        ob.canopy_ao.role = ROLES[name]
-        ob.canopy_ao.tree = "Oak" if name in ("Trunk", "Leaves") else ""
+    add_oak_scene(ROLES)
     leaves = scene.objects["Leaves"]
     add_wind_key(leaves, 0.15, 9)
     scene.frame_start, scene.frame_end = 1, 9

@@ -9,8 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-import tree_scene
-from conftest import _clear_scene, add_mesh, add_wind_key
+from conftest import _clear_scene, add_oak_scene, add_wind_key
 from canopy_ao.blender import live, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 
@@ -26,10 +25,7 @@ def _deforming_tree(how, persistent=False):
     32-pixel Cycles render at 1 sample with a transparent film (the alpha is the silhouette)."""
     _clear_scene()
     scene = bpy.context.scene
-    for name, (p, t) in tree_scene.scene(True).items():
-        ob = add_mesh(name, p, t)
-        ob.canopy_ao.role = ROLES[name]
-        ob.canopy_ao.tree = "Oak" if name in ("Trunk", "Leaves") else ""
+    add_oak_scene(ROLES)
     leaves = scene.objects["Leaves"]
     if how == "shape_key":
         add_wind_key(leaves, 0.6, 3)

@@ -54,3 +54,15 @@ def run_in_window(script, user_scripts, timeout=300):
                         "--factory-startup", "--enable-event-simulate", "--python", script],
                        env=env, capture_output=True, text=True, timeout=timeout)
     assert r.returncode == 0 and "UI-OK" in r.stdout, (r.stdout[-1500:], r.stderr[-1500:])
+
+
+def build_tree_scene():
+    """Every object removed, then tests/python/tree_scene's tree as plain meshes (no roles)."""
+    import bpy
+    import tree_scene
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob)
+    for name, (p, t) in tree_scene.scene(True).items():
+        me = bpy.data.meshes.new(name)
+        me.from_pydata(p.tolist(), [], t.tolist())
+        bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, me))

@@ -12,8 +12,7 @@ import bpy
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tree_scene  # noqa: E402
-from ui_harness import check, run_steps, window_ctx  # noqa: E402
+from ui_harness import build_tree_scene, check, run_steps, window_ctx  # noqa: E402
 
 
 def ground():
@@ -24,12 +23,7 @@ def steps():
     import addon_utils
     from canopy_ao.blender import mesh_io
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob)
-    for name, (p, t) in tree_scene.scene(True).items():
-        me = bpy.data.meshes.new(name)
-        me.from_pydata(p.tolist(), [], t.tolist())
-        bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, me))
+    build_tree_scene()
     with bpy.context.temp_override(**window_ctx()):
         bpy.ops.ed.undo_push(message="scene built")
         r = bpy.ops.canopy_ao.bake('INVOKE_DEFAULT', objects="Ground,Leaves", method="ellipsoid",

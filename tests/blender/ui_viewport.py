@@ -14,8 +14,7 @@ import bpy
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import tree_scene  # noqa: E402
-from ui_harness import check, run_steps, window_ctx  # noqa: E402
+from ui_harness import build_tree_scene, check, run_steps, window_ctx  # noqa: E402
 
 
 def views():
@@ -27,12 +26,7 @@ def steps():
     import addon_utils
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
     from canopy_ao.blender import job as job_mod, operators, viewport
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob)
-    for name, (p, t) in tree_scene.scene(True).items():
-        me = bpy.data.meshes.new(name)
-        me.from_pydata(p.tolist(), [], t.tolist())
-        bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, me))
+    build_tree_scene()
     ground = bpy.data.objects["Ground"].data
     # A colour attribute of the user's, active: the bake's must take its place in the view.
     ground.color_attributes.new("UserPaint", 'BYTE_COLOR', 'POINT')
