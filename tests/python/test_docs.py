@@ -10,7 +10,8 @@ import pytest
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 README = "README.md"
-DOCS = [README, "docs/guide.md", "docs/DESIGN.md", "docs/PORTABILITY.md",
+DOCS = [README, "docs/guide.md", "docs/DESIGN.md", "docs/PORTABILITY.md", "addon/README.md",
+        "native/python/README.md",
         *sorted(glob.glob("docs/studies/*.md", root_dir=REPO))]
 NARRATIVE = [README, "docs/guide.md", *sorted(glob.glob("docs/studies/*.md", root_dir=REPO))]
 
@@ -65,14 +66,31 @@ def test_the_narrative_check_can_fail():
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 
+def anchors(file):
+    """GitHub's heading anchors of a Markdown file: lower case, punctuation dropped, spaces
+    to hyphens."""
+    with open(file, encoding="utf-8") as f:
+        text = re.sub(r"^(    |```).*$", "", f.read(), flags=re.M)
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-")
+            for h in re.findall(r"^#+ (.*)$", text, re.M)}
+
+
 @pytest.mark.parametrize("path", DOCS)
 def test_relative_links_and_pictures_exist(path):
     base = os.path.dirname(os.path.join(REPO, path))
     missing = []
     for target in LINK.findall(read(path)):
-        if re.match(r"[a-z]+:", target) or target.startswith("#"):
+        if re.match(r"[a-z]+:", target):
             continue
-        file = target.split("#")[0]
-        if not os.path.exists(os.path.normpath(os.path.join(base, file))):
+        file, _, anchor = target.partition("#")
+        file = os.path.normpath(os.path.join(base, file)) if file else os.path.join(REPO, path)
+        if not os.path.exists(file):
+            missing.append(target)
+        elif anchor and file.endswith(".md") and anchor not in anchors(file):
             missing.append(target)
     assert not missing, f"{path}: links to nothing: {missing}"
+
+
+def test_anchors_are_githubs():
+    assert "rays-against-cycles-samples" in anchors(os.path.join(REPO, "docs", "DESIGN.md"))
+    assert "the-nearfar-hybrid" in anchors(os.path.join(REPO, "docs", "DESIGN.md"))
