@@ -41,12 +41,12 @@ def show_our_tab(win, area, drawn):
     drawn: Blender 3.4 has no API to choose a sidebar tab. Yields the seconds to wait."""
     region = next(r for r in area.regions if r.type == 'UI')
     x = region.x + region.width - max(4, region.width // 40)
-    for y in range(region.y + region.height - 8, region.y, -12):
+    for y in range(region.y + region.height - 10, region.y, -20):
         win.event_simulate(type='MOUSEMOVE', value='NOTHING', x=x, y=y)
         win.event_simulate(type='LEFTMOUSE', value='PRESS', x=x, y=y)
         win.event_simulate(type='LEFTMOUSE', value='RELEASE', x=x, y=y)
         drawn.clear()
-        yield 0.15
+        yield 0.1
         if drawn:
             return
     fail("the Canopy AO tab never showed in the sidebar")
@@ -102,7 +102,7 @@ def steps():
         yield 0.05
     check("CanopyAO" in ground.attributes, "the bake did not finish in 30 s")
     check(space.shading.color_type == 'VERTEX', "the bake did not show the AO")
-    yield 1.0  # let the window draw the baked colours and the panel's report
+    yield 0.5  # let the window draw the baked colours and the panel's report
 
     shots = {"panel.png": None, "viewport_ao.png": area}
     for name, shot_area in shots.items():
