@@ -94,3 +94,25 @@ def test_relative_links_and_pictures_exist(path):
 def test_anchors_are_githubs():
     assert "rays-against-cycles-samples" in anchors(os.path.join(REPO, "docs", "DESIGN.md"))
     assert "the-nearfar-hybrid" in anchors(os.path.join(REPO, "docs", "DESIGN.md"))
+
+
+STUDIES = sorted(glob.glob("docs/studies/*.md", root_dir=REPO))
+
+
+def test_the_studies_exist_and_the_readme_lists_each():
+    assert len(STUDIES) >= 4, STUDIES
+    readme = read(README)
+    assert all(p in readme for p in STUDIES), [p for p in STUDIES if p not in readme]
+
+
+@pytest.mark.parametrize("path", STUDIES)
+def test_each_study_gives_the_commands_that_print_its_figures(path):
+    """Every section with a figure (a decimal number) shows a command that runs something
+    under bench/, build/ or scripts/ (indented, or inline in backquotes)."""
+    text = read(path)
+    sections = re.split(r"\n## ", text)
+    command = re.compile(r"(^    |`)(\S+ )*\S*(bench/|build/canopy_ao_bench|scripts/bench\.sh|"
+                         r"\.ci/run|examples/)", re.M)
+    bare = [s.splitlines()[0] for s in sections
+            if re.search(r"\b\d+\.\d+\b", s) and not command.search(s)]
+    assert not bare, f"{path}: sections with figures and no command: {bare}"
