@@ -1,7 +1,8 @@
 """The command line as documented, run as a pipeline would: when the add-on is not installed
 the failure must reach the exit code (Blender exits 0 when a --python-expr fails unless it is
-given --python-exit-code). The commands are read from README.md, addon/README.md,
-scripts/run_example.sh and docs/DESIGN.md, so the test checks what the documents say."""
+given --python-exit-code). The commands are read from README.md, docs/guide.md,
+addon/README.md, scripts/run_example.sh and docs/DESIGN.md, so the test checks what the
+documents say."""
 import os
 import re
 import shlex
@@ -34,7 +35,8 @@ def as_argv(command, blend):
     return argv
 
 
-SOURCES = ["README.md", "addon/README.md", "scripts/run_example.sh", "docs/DESIGN.md"]
+SOURCES = ["README.md", "docs/guide.md", "addon/README.md", "scripts/run_example.sh",
+           "docs/DESIGN.md"]
 
 
 @pytest.mark.parametrize("source", SOURCES)

@@ -1,6 +1,6 @@
-"""A short seeded run of the CLI fuzz (bench/fuzz_cli.py; the long run is in the README's
-reliability section): random argument lists through canopy_ao.cli.main, batched in worker
-Blenders with a time limit per run."""
+"""A short seeded run of the CLI fuzz (bench/fuzz_cli.py; the long run is in
+docs/studies/robustness.md, "The fuzz runs"): random argument lists through canopy_ao.cli.main,
+batched in worker Blenders with a time limit per run."""
 import os
 import sys
 

@@ -10,6 +10,7 @@ import pytest
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DOCS = ["README.md", "addon/README.md", "bench/README.md", *glob.glob("docs/*.md", root_dir=REPO),
+        *glob.glob("docs/studies/*.md", root_dir=REPO),
         *glob.glob("scripts/*.sh", root_dir=REPO), *glob.glob("examples/*.py", root_dir=REPO)]
 RUNS_ADDON = re.compile(r"\bimport canopy_ao|\bfrom canopy_ao|canopy_ao\.(cli|blender|batch)")
 

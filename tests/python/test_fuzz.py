@@ -1,6 +1,7 @@
-"""A short seeded run of the module fuzz (bench/fuzz.py; the long run is in the README's
-reliability section): every public function of canopy_ao._core, each call in a worker child
-with a time limit. And the harness itself: a hang and a crash are caught and attributed."""
+"""A short seeded run of the module fuzz (bench/fuzz.py; the long run is in
+docs/studies/robustness.md, "The fuzz runs"): every public function of canopy_ao._core, each
+call in a worker child with a time limit. And the harness itself: a hang and a crash are caught
+and attributed."""
 import os
 import sys
 
