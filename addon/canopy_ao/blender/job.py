@@ -8,7 +8,7 @@ import time
 
 import bpy
 
-from . import bent_io, checks, gather, instances, live, materials, mesh_io
+from . import bent_io, checks, gather, instances, live_session, materials, mesh_io
 from .commit import Transaction
 from .loop import KINDS, Loop
 from .. import core
@@ -166,7 +166,7 @@ class BakeJob:
         report("writing", "", 0, 0)
         o = self.opts
         if o["live"]:
-            live.check_job(self)  # what auto chose, a frame cache: refused unwritten
+            live_session.check_job(self)  # what auto chose, a frame cache: refused unwritten
         t0 = time.perf_counter()
         txn = Transaction()
         # Only vertex attributes, no instances, AOV or Cycles check: the report can be made
@@ -209,7 +209,7 @@ class BakeJob:
             mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
         self._lap("proxies", t0)
         if o["live"]:
-            live.begin(self)  # every frame change from now on re-evaluates (live.py)
+            live_session.begin(self)  # every frame change from now on re-evaluates (live.py)
         rep["stage_seconds"] = dict(self.timings)
         self.report_dict = rep
         return rep
