@@ -1,11 +1,11 @@
 """A bake's refusals that need no geometry, made before any work (BakeJob, before it reads a
 mesh): the native module, live, the AOV's, thickness's and bent normals' names. What needs the
 geometry is refused where it is read (mesh_io.evaluated_arrays: non-finite positions;
-targets.py: an object with nothing to bake), still before the first write."""
+vertex_target.py: an object with nothing to bake), still before the first write."""
 
 from .. import core
 from ..core.native import CanopyAOError
-from . import bent_io, live, materials
+from . import bent_io, live_session, materials
 
 
 def check_request(opts):
@@ -14,7 +14,7 @@ def check_request(opts):
     if not ok:
         raise CanopyAOError(msg)
     if opts["live"]:
-        live.check_request(opts)  # texels or a non-live rung: refused before any work
+        live_session.check_request(opts)  # texels or a non-live rung: refused before any work
     if opts["wire_material"] or opts["add_aov"]:
         try:
             materials.check_aov_name(opts["aov_name"])

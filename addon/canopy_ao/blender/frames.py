@@ -1,34 +1,22 @@
 """Frame-range bakes: the AO of every frame of a range cached on the mesh, read back by a
-geometry-nodes modifier (docs/DESIGN.md, 'Live and per-frame AO').
+geometry-nodes modifier (frame_cache.py; docs/DESIGN.md, 'Live and per-frame AO').
 
-The cache: one POINT-domain FLOAT attribute per frame, ``<attribute>_<frame>`` (CanopyAO_1,
-CanopyAO_2, ...), each owned by Canopy AO under mesh_io's rules; 4 bytes per vertex per frame.
-The read-back: a modifier "Canopy AO Frames" at the end of the stack whose node group takes
-the scene frame, clamped to the baked range, spells the attribute's name with Replace String
-("<attribute>_#", # = the frame), reads it with Named Attribute and stores it as the FLOAT_COLOR
-attribute ``<attribute>`` that the material and the AOV read, so the file renders its per-frame
-AO in any Blender, with or without the add-on (Replace String, not Join Strings: a multi-input
-socket's order is not the order its links were made in).
-
-Each frame is a live update (live.Session: the first frame's rung and τ, the proxies refitted),
-so a range bake gives what live playback shows. Nothing is written until every frame is
-evaluated: Esc or an error leaves the file as it was (the current frame comes back too).
+Each frame is the bake loop of a live update (live_session.Session: the first frame's rung and
+τ, the proxies refitted), so a range bake gives what live playback shows. Nothing is written
+until every frame is evaluated: Esc or an error leaves the file as it was (the current frame
+comes back too).
 """
 
 import time
 
 import bpy
 
-from . import live, mesh_io
+from . import live_session, mesh_io
 from .commit import Transaction
+from .frame_cache import GROUP_TAG, MODIFIER, attach, cache_name, clear, node_group
+from .job import BakeJob
+from .modal import start_modal
 from ..core.native import CanopyAOError
-
-MODIFIER = "Canopy AO Frames"
-GROUP_TAG = "canopy_ao_frames"  # the node group's custom property: the attribute it reads
-
-
-def cache_name(attribute, frame):
-    return f"{attribute}_{int(frame)}"
 
 
 class FrameBake:
@@ -38,7 +26,7 @@ class FrameBake:
         start, end = int(start), int(end)
         if end < start:
             raise CanopyAOError(f"the frame range {start}-{end} is empty (end before start)")
-        live.check_request(opts)
+        live_session.check_request(opts)
         if opts.get("gltf") or opts.get("packing", "NONE") != "NONE":
             raise CanopyAOError("a frame-range bake caches grey AO per frame, read back by a "
                                 "modifier; For glTF and Packing are for single bakes: turn "
@@ -64,18 +52,17 @@ class FrameBake:
         """Evaluate the next frame; False once every frame is done."""
         if len(self.results) == len(self.frames):
             return False
-        from .job import BakeJob
         f = self.frames[len(self.results)]
-        live.suspend(True)
+        live_session.suspend(True)
         try:
             self.scene.frame_set(f)
         finally:
-            live.suspend(False)
+            live_session.suspend(False)
         dg = self.context.evaluated_depsgraph_get()
         if self.session is None:  # the first frame: gather, fit, calibrate (as a bake does)
             job = BakeJob(self.context, self.names, self.opts)
             job.prepare()
-            self.session = live.Session(job)
+            self.session = live_session.Session(job)
             self._check_names()
         aos, tm = self.session.evaluate(self.scene, dg)
         self.results[f] = aos
@@ -114,7 +101,7 @@ class FrameBake:
                     txn.attribute(obj, cache_name(attribute, f))
                     mesh_io.write_float_attribute(obj, cache_name(attribute, f),
                                                   self.results[f][name], o["overwrite"])
-                _attach(obj, group, txn)
+                attach(obj, group, txn)
         except BaseException:
             txn.rollback()
             self._restore_frame()
@@ -153,78 +140,6 @@ class FrameBake:
         rep = self.commit()
         rep["seconds"] = time.perf_counter() - t0
         return rep
-
-
-def _sockets(sockets, name):
-    """The enabled sockets called ``name`` (3.x lists one per data type, 4.x one)."""
-    return [s for s in sockets if s.name == name and s.enabled]
-
-
-def node_group(attribute, start, end, txn):
-    """The node group reading ``<attribute>_<frame>`` for the scene frame clamped to
-    [start, end] into the FLOAT_COLOR attribute ``<attribute>``; new, removed on rollback."""
-    ng = bpy.data.node_groups.new(f"{MODIFIER} {attribute} {start}-{end}", 'GeometryNodeTree')
-    txn.add(lambda: bpy.data.node_groups.remove(ng))
-    ng[GROUP_TAG] = attribute
-    for io in ('INPUT', 'OUTPUT'):
-        if hasattr(ng, "interface"):  # 4.0+
-            ng.interface.new_socket(name="Geometry", in_out=io, socket_type='NodeSocketGeometry')
-        else:
-            (ng.inputs if io == 'INPUT' else ng.outputs).new('NodeSocketGeometry', "Geometry")
-    nodes, link = ng.nodes, ng.links.new
-    gin, gout = nodes.new('NodeGroupInput'), nodes.new('NodeGroupOutput')
-    time_node = nodes.new('GeometryNodeInputSceneTime')
-    clamp = nodes.new('ShaderNodeClamp')
-    clamp.inputs["Min"].default_value, clamp.inputs["Max"].default_value = start, end
-    text = nodes.new('FunctionNodeValueToString')  # 0 decimals: the frame rounded
-    spell = nodes.new('FunctionNodeReplaceString')
-    spell.inputs["String"].default_value = f"{attribute}_#"
-    spell.inputs["Find"].default_value = "#"
-    read = nodes.new('GeometryNodeInputNamedAttribute')
-    read.data_type = 'FLOAT'
-    store = nodes.new('GeometryNodeStoreNamedAttribute')
-    store.data_type, store.domain = 'FLOAT_COLOR', 'POINT'
-    store.inputs["Name"].default_value = attribute
-    link(time_node.outputs["Frame"], clamp.inputs["Value"])
-    link(clamp.outputs[0], text.inputs["Value"])
-    link(text.outputs[0], spell.inputs["Replace"])
-    link(spell.outputs[0], read.inputs["Name"])
-    link(_sockets(read.outputs, "Attribute")[0], _sockets(store.inputs, "Value")[0])
-    link(gin.outputs[0], store.inputs[0])
-    link(store.outputs[0], gout.inputs[0])
-    return ng
-
-
-def _attach(obj, group, txn):
-    """Point obj's "Canopy AO Frames" modifier (added last if missing) at ``group``."""
-    mod = obj.modifiers.get(MODIFIER)
-    if mod is None:
-        mod = obj.modifiers.new(MODIFIER, 'NODES')
-        txn.add(lambda: obj.modifiers.remove(obj.modifiers[MODIFIER]))
-    else:
-        old = mod.node_group
-        txn.add(lambda: setattr(obj.modifiers[MODIFIER], "node_group", old))
-    mod.node_group = group
-
-
-def clear(obj):
-    """Remove obj's frame cache: its modifier and every ``<attribute>_<frame>`` attribute
-    Canopy AO made for the attribute the modifier reads. Returns the attributes removed."""
-    mod = obj.modifiers.get(MODIFIER)
-    if mod is None:
-        return 0
-    group = mod.node_group
-    attribute = group.get(GROUP_TAG) if group is not None else None
-    obj.modifiers.remove(mod)
-    removed = 0
-    if isinstance(attribute, str):
-        prefix = attribute + "_"
-        for name in mesh_io.owned_attributes(obj):
-            if name.startswith(prefix) and name[len(prefix):].lstrip("-").isdigit():
-                removed += mesh_io.remove_owned_attribute(obj, name)
-    if group is not None and group.users == 0:
-        bpy.data.node_groups.remove(group)
-    return removed
 
 
 # === Operators ==============================================================================
@@ -277,7 +192,6 @@ class CANOPY_AO_OT_bake_frames(bpy.types.Operator):
         except CanopyAOError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
-        from .operators import start_modal
         return start_modal(self, context, self._bake.steps,
                            "Canopy AO: baking frames… (Esc to cancel)")
 

@@ -1,19 +1,18 @@
 """One bake in Blender, shared by the operator (modal or not) and the command line: gather and
-check (nothing changed on failure), prepare, evaluate receivers in chunks (one per step, so
-progress and Esc cover vertices and texels alike), commit everything or nothing."""
+check (nothing changed on failure), prepare, evaluate receivers in chunks (the bake loop,
+loop.py: one per step, so progress and Esc cover vertices and texels alike), commit everything
+or nothing. The targets' kind (per vertex, per texel) is the Output's; the job only calls the
+targets' interface (targets.Target)."""
 
 import time
 
 import bpy
-import numpy as np
 
-from . import (bent_io, checks, cycles_check, gather, instances, live, materials, mesh_io,
-               tiles_io)
+from . import bent_io, checks, gather, instances, live_session, materials, mesh_io
 from .commit import Transaction
-from .targets import TexelTarget, VertexTarget, check_outputs, chunks, chunks_done, \
-    split_vertex_chunks
+from .loop import KINDS, Loop
 from .. import core
-from ..core import maps, metrics, packing, settings
+from ..core import maps, packing, settings
 from ..core.native import CanopyAOError
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
@@ -57,22 +56,19 @@ class BakeJob:
             context, depsgraph, targets, opts, self.timings, notes=self.gather_notes)
         # Every target's receivers, read now: vertices, or texels rasterised from its UVs.
         t0 = time.perf_counter()
-        self.targets = [VertexTarget(it, self.objects[it.name], opts, depsgraph)
-                        if opts["mode"] == 'VERTEX'
-                        else TexelTarget(it, self.objects[it.name], opts, depsgraph)
+        self.kind = KINDS[opts["mode"]]
+        self.targets = [self.kind(it, self.objects[it.name], opts, depsgraph)
                         for it in self.items if it.name in target_names]
         if not self.targets:
             raise CanopyAOError("every object to bake has the role Ignore")
-        check_outputs(self.targets, opts)  # image files: none collide, none is the user's
-        # (target, first, last receiver) per step; an empty target still gets its one step.
+        self.kind.check_outputs(self.targets, opts)  # image files: none collide, none the user's
         self.blocking = blocking
-        self._chunks = chunks(self.targets, CHUNK * (BLOCKING_CHUNKS if blocking else 1))
-        self._next = 0
+        self.loop = Loop(self.targets, CHUNK * (BLOCKING_CHUNKS if blocking else 1))
         self._lap("receivers", t0)
         t0 = time.perf_counter()
         # Instanced trees (particles, collection instances, geometry nodes): each prototype is
         # baked once (its instances share its mesh) and every instance occludes (instances.py).
-        self.prototypes = instances.Prototypes(depsgraph, vertex_mode=opts["mode"] == 'VERTEX')
+        self.prototypes = instances.Prototypes(depsgraph, vertex_mode=self.kind.per_vertex)
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
@@ -94,11 +90,11 @@ class BakeJob:
     @property
     def steps(self):
         """Steps of the whole bake: prepare, then one per chunk of receivers."""
-        return len(self._chunks) + 1
+        return len(self.loop.chunks) + 1
 
     @property
     def steps_done(self):
-        return self._next + (self.plan is not None)
+        return self.loop.next + (self.plan is not None)
 
     def prepare(self):
         t0 = time.perf_counter()
@@ -121,44 +117,22 @@ class BakeJob:
         if self.opts["bent_normals"] != "OFF":  # rays, whichever rung lit the AO
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)
+        self.loop.start(self.plan, self.opts["bent_normals"], bool(self.opts["thickness"]),
+                        self.prototypes.means)
         if self.blocking and self.plan.method in RAY_METHODS:  # steps of a few seconds
-            self._chunks[self._next:] = split_vertex_chunks(self._chunks[self._next:], max(
-                4096, CHUNK * BLOCKING_CHUNKS * 16 // max(self.settings.samples, 16)))
+            self.loop.split(max(4096, CHUNK * BLOCKING_CHUNKS * 16
+                                // max(self.settings.samples, 16)))
 
     def step(self):
         """Evaluate the next chunk of receivers. Returns the line to report when it completes
         a target, "" when it does not, None when every chunk is done."""
-        if self._next >= len(self._chunks):
+        out = self.loop.step()
+        if out is None:
             return None
-        t, a, b = self._chunks[self._next]
-        self._next += 1
-        t0 = time.perf_counter()
-        bent = self.opts["bent_normals"] != "OFF"
-        try:
-            if t.item.name in self.prototypes.means and t.kind == "vertex":
-                # A grass blade instanced over a field: what its instances see, not the lone
-                # prototype (instances.Prototypes.bake_realized).
-                t.ao[a:b] = self.prototypes.means[t.item.name][a:b]
-            elif bent and maps.rung_is_the_trace(self.plan, t.item):  # one trace gives both
-                t.ao[a:b] = self._bent_step(t, a, b)
-            else:
-                t.ao[a:b] = core.evaluate_receivers(
-                    self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
-                    vertices=slice(a, b) if t.kind == "vertex" else None,
-                    triangles=t.triangles[a:b] if t.triangles is not None else None)
-                if bent:
-                    self._bent_step(t, a, b)
-        except CanopyAOError as exc:
-            raise CanopyAOError(f"{t.item.name}: {exc}") from exc
-        if self.opts["thickness"]:
-            if t.thickness is None:
-                t.thickness = np.zeros(t.count, np.float32)
-            t.thickness[a:b] = maps.thickness(self.plan, t.item, t.positions[a:b],
-                                              slice(a, b) if t.kind == "vertex" else None)
-        t.seconds += self._lap("evaluate", t0) - t0
-        if b < t.count:
+        t, seconds, complete = out
+        self.timings["evaluate"] = self.timings.get("evaluate", 0.0) + seconds
+        if not complete:
             return ""
-        t.finish()
         it = t.item
         r = core.ItemResult(it.name, it.role, it.tree, self.plan.method, t.ao, t.seconds,
                             it.tree_source, it.tree_why)
@@ -167,25 +141,11 @@ class BakeJob:
                 f"{r.method}, {t.count} {t.kind}{'s' if t.count != 1 else ''}, "
                 f"{r.seconds:.3f} s")
 
-    def _bent_step(self, t, a, b):
-        """Bent normals of receivers a..b of target t, in the space asked for. Returns the
-        AO of the same trace (maps.bent_normals)."""
-        if t.bent is None:
-            t.bent = np.zeros((t.count, 3), np.float32)
-        ao, world = maps.bent_normals(self.plan, t.item, t.positions[a:b], t.normals[a:b],
-                                      vertices=slice(a, b) if t.kind == "vertex" else None,
-                                      triangles=t.triangles[a:b] if t.triangles is not None
-                                      else None, with_ao=True)
-        frames = (t.frames[0][a:b], t.frames[1][a:b]) if t.frames is not None else None
-        t.bent[a:b] = bent_io.in_space(world, t.normals[a:b], self.opts["bent_normals"],
-                                       frames)
-        return ao
-
     def progress(self):
         """(stage, object, receivers done, receivers in all) for a progress report."""
         if self.plan is None:
             return "preparing", "", 0, 0
-        return ("evaluating", *chunks_done(self.targets, self._chunks, self._next))
+        return ("evaluating", *self.loop.progress())
 
     def run(self, progress=None):
         """prepare() and every step(), blocking. progress(stage, name, done, total) is called
@@ -206,27 +166,19 @@ class BakeJob:
         report("writing", "", 0, 0)
         o = self.opts
         if o["live"]:
-            live.check_job(self)  # what auto chose, a frame cache: refused unwritten
+            live_session.check_job(self)  # what auto chose, a frame cache: refused unwritten
         t0 = time.perf_counter()
         txn = Transaction()
         # Only vertex attributes, no instances, AOV or Cycles check: the report can be made
         # first (it reads no write), and then nothing that can fail follows the last target's
         # write, which therefore copies no old values to undo it (commit.Transaction).
-        vertex_only = (all(t.kind == "vertex" for t in self.targets) and not self.prototypes
-                       and not o["add_aov"] and not o["check_cycles"])
+        attributes_only = (self.kind.per_vertex and not self.prototypes
+                           and not o["add_aov"] and not o["check_cycles"])
         try:
-            rep = self._report() if vertex_only else None
-            texts = self._result_texts(rep) if vertex_only else None
-            if o["atlas"] and o["mode"] == 'TEXEL':  # one image for every object
-                rep_atlas = tiles_io.write_atlas(self.targets, txn, o)
-            else:
-                rep_atlas = None
-                for i, t in enumerate(self.targets):
-                    if t.kind != "vertex":
-                        t.write(txn, o)
-                    else:  # a modal bake yields to the UI: the user may have painted since
-                        t.write(txn, o, last=vertex_only and i == len(self.targets) - 1,
-                                checked=self.blocking)
+            rep = self._report() if attributes_only else None
+            texts = self._result_texts(rep) if attributes_only else None
+            extra = self.kind.write_all(self.targets, txn, o, last=attributes_only,
+                                        checked=self.blocking)
             self.prototypes.commit(txn, o, skip={t.item.name for t in self.targets})
             if o["add_aov"]:
                 if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
@@ -236,9 +188,7 @@ class BakeJob:
             t0 = self._lap("write", t0)
             if rep is None:
                 rep = self._report()
-            if rep_atlas is not None:
-                rep["atlas"] = {"name": o["atlas"], "paths": rep_atlas["paths"],
-                                "shared_texels": rep_atlas["shared_texels"]}
+            rep.update(extra)
             if o["check_cycles"]:
                 report("checking with Cycles", "", 0, 0)
                 self._check_cycles(context, rep)
@@ -259,7 +209,7 @@ class BakeJob:
             mesh_io.show_proxies(self.scene, {})  # stale proxies of an earlier bake go
         self._lap("proxies", t0)
         if o["live"]:
-            live.begin(self)  # every frame change from now on re-evaluates (live.py)
+            live_session.begin(self)  # every frame change from now on re-evaluates (live.py)
         rep["stage_seconds"] = dict(self.timings)
         self.report_dict = rep
         return rep
@@ -279,7 +229,7 @@ class BakeJob:
     def _report(self):
         o = self.opts
         rep = core.report(self.plan, self.results)
-        rep["attribute"] = o["attribute"] if o["mode"] == 'VERTEX' else None
+        rep["attribute"] = self.kind.attribute(o)
         rep["mode"] = o["mode"].lower()
         rep["channel"] = o["channel"]
         if o["channel"] != "RGBA" and o["wire_material"]:
@@ -294,36 +244,15 @@ class BakeJob:
                 e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
             if t.bent is not None:
                 e["bent_normals"] = bent_io.summary(t, o["bent_normals"])
-            if t.kind == "texel":
-                e["texel"] = t.report()
-                rep["notes"].extend(t.stats.get("warnings", []))
+            t.report_into(e, rep["notes"])
         return rep
 
     def _check_cycles(self, context, rep):
         """Cycles' AO bake of the same objects, compared receiver by receiver: per vertex (one
         Cycles bake for every vertex target), or per texel of the image just written."""
         d = gather.cycles_distance(context.evaluated_depsgraph_get(), self.opts["distance"])
-        samples = self.opts["cycles_samples"]
-        vertex = [t for t in self.targets if t.kind == "vertex"]
         try:
-            ref = (cycles_check.bake_cycles_vertex_ao(context, [t.obj for t in vertex], d,
-                                                      samples) if vertex else {})
-            for t in vertex:
-                name = t.item.name
-                if name in ref and np.shape(ref[name]) != t.ao.shape:
-                    rep["notes"].append(f"{name}: Cycles check skipped (its modifiers change "
-                                        "the vertex count)")
-                elif name in ref:
-                    rep["objects"][name]["cycles"] = {
-                        k: float(v) for k, v in metrics.compare(t.ao, ref[name]).items()}
-            for t in self.targets:
-                if t.kind == "texel" and "image_tiles" in t.stats:  # UDIM or atlas
-                    rep["objects"][t.item.name]["cycles"] = tiles_io.check_tiles(
-                        context, t, d, samples)
-                elif t.kind == "texel":
-                    m = cycles_check.check_texel(context, t.obj, t.stats["image"], t.rx.uv_map,
-                                                 d, samples, ours_mask=t.stats["mask"] == 1)
-                    rep["objects"][t.item.name]["cycles"] = {k: float(v) for k, v in m.items()}
+            self.kind.check_cycles(context, self.targets, d, self.opts["cycles_samples"], rep)
         except CanopyAOError:
             raise
         except ValueError as exc:  # the check's refusals (an empty material slot, ...)

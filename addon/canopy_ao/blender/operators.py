@@ -9,6 +9,7 @@ from bpy.props import StringProperty
 
 from . import mesh_io, viewport
 from .job import BakeJob
+from .modal import start_modal
 from .properties import option_properties, raw_values, resolve
 from ..core import roles
 from ..core.settings import OPTIONS
@@ -17,17 +18,6 @@ from ..core.native import CanopyAOError, core_status
 
 # Seconds of work per modal tick: short enough for Esc and the progress bar to answer at once.
 TICK = 0.05
-
-
-def start_modal(op, context, steps, status):
-    """A modal operator's start: progress bar, timer (op._timer), handler, status text."""
-    wm = context.window_manager
-    wm.progress_begin(0, steps)
-    op._timer = wm.event_timer_add(0.01, window=context.window)
-    wm.modal_handler_add(op)
-    context.workspace.status_text_set(status)
-    viewport.set_status(context, "Baking: starting", 'TIME')
-    return {'RUNNING_MODAL'}
 
 
 def bake_status(job):

@@ -119,9 +119,26 @@ class TexelReceivers:
     sub: tuple | None = None  # k·aa² ..): positions, normals, triangles; None when aa is 1
 
 
+def split_tiles(uvs):
+    """[(udim number, corner rows, (du, dv))] for corner UVs float32 (3M, 2): each triangle in
+    the tile of its UV centroid, and the offset that moves that tile onto 0–1; plus the count
+    of triangles outside UDIM's range 1001–1999 (u in [0, 10), v in [0, 100))."""
+    tile = np.floor(uvs.reshape(-1, 3, 2).astype(np.float64).mean(axis=1))
+    ok = np.all(np.isfinite(tile), axis=1)
+    tile[~ok] = -1
+    ok &= (tile[:, 0] >= 0) & (tile[:, 0] < 10) & (tile[:, 1] >= 0) & (tile[:, 1] < 100)
+    number = np.where(ok, 1001 + tile[:, 0] + 10 * tile[:, 1], 0).astype(np.int64)
+    out = []
+    for n in np.unique(number[ok]):
+        tris = np.flatnonzero(number == n)
+        rows = (tris[:, None] * 3 + np.arange(3)).ravel()
+        out.append((int(n), rows, ((n - 1001) % 10, (n - 1001) // 10)))
+    return out, int(np.count_nonzero(~ok))
+
+
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False, aa=1):
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
-    UVs use, tile by tile, tiles_io.split_tiles), with aa × aa sub-samples each when aa > 1
+    UVs use, tile by tile, split_tiles), with aa × aa sub-samples each when aa > 1
     (texel_points.subsamples). Raises CanopyAOError before reading anything when obj is not a mesh, has no
     (such) UV map, or the sizes are wrong, before rasterising when the bake would not fit in
     the available memory (texel_budget.check_memory), and after reading when no texel centre
@@ -141,7 +158,6 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         raise CanopyAOError(f"Anti-aliasing must be 1 to 8 (sub-samples per texel side), not "
                             f"{aa}")
     uvs, pos, nrm = gather_corner_triangles(obj, depsgraph, uv_map)
-    from .tiles_io import split_tiles
     parts, outside = split_tiles(uvs) if udim else ([(1001, slice(None), (0, 0))], 0)
     if not parts:
         raise CanopyAOError(f"Object '{obj.name}': no triangle of UV map '{uv_map}' lies in a "

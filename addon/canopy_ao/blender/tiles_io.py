@@ -19,23 +19,6 @@ from ..core.native import CanopyAOError
 ATLAS_KEY = "canopy_ao_atlas"  # on an atlas image: the atlas's name
 
 
-def split_tiles(uvs):
-    """[(udim number, corner rows, (du, dv))] for corner UVs float32 (3M, 2): each triangle in
-    the tile of its UV centroid, and the offset that moves that tile onto 0–1; plus the count
-    of triangles outside UDIM's range 1001–1999 (u in [0, 10), v in [0, 100))."""
-    tile = np.floor(uvs.reshape(-1, 3, 2).astype(np.float64).mean(axis=1))
-    ok = np.all(np.isfinite(tile), axis=1)
-    tile[~ok] = -1
-    ok &= (tile[:, 0] >= 0) & (tile[:, 0] < 10) & (tile[:, 1] >= 0) & (tile[:, 1] < 100)
-    number = np.where(ok, 1001 + tile[:, 0] + 10 * tile[:, 1], 0).astype(np.int64)
-    out = []
-    for n in np.unique(number[ok]):
-        tris = np.flatnonzero(number == n)
-        rows = (tris[:, None] * 3 + np.arange(3)).ravel()
-        out.append((int(n), rows, ((n - 1001) % 10, (n - 1001) // 10)))
-    return out, int(np.count_nonzero(~ok))
-
-
 def write_tiled(owner, parts, image_dir, txn, suffix="CanopyAO", tiled=False, atlas=False,
                 background=1.0, overwrite=False, fmt="EXR"):
     """Splat every part's values per tile, write one file per tile (format fmt) and load them
