@@ -127,6 +127,20 @@ if grep 'binding file [^ ]*libstdc++[^ ]* .*to /pkg/pkg/libcxxcompat' "$tmp/bind
   fail "libstdc++'s own calls bind to libcxxcompat-canopyao"
 fi
 echo "the carried libraries' calls bound to libcxxcompat-canopyao there: $compat_bound"
+# Exceptions thrown in TBB tasks cross the carried TBB (the system's libstdc++, the compat
+# library) into code with the module's own static libstdc++ (tests/portable/tbb_exceptions.cpp,
+# linked with the module's flags, CMakeLists.txt).
+g++ -O2 -fPIC -shared -fvisibility=hidden -static-libstdc++ -Wl,--exclude-libs,ALL \
+  -Wl,--gc-sections -o "$tmp/pkg/libtbb_exceptions.so" tests/portable/tbb_exceptions.cpp \
+  "$tmp/pkg/libtbb-canopyao.so.12" -Wl,-rpath,'$ORIGIN'
+chmod a+r "$tmp/pkg/libtbb_exceptions.so"
+"${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 -c '
+import ctypes
+n = ctypes.CDLL("/pkg/pkg/libtbb_exceptions.so").run()
+assert n == 50, f"{n} of 50 exceptions thrown in TBB tasks reached the caller"
+print("50 of 50 exceptions thrown in TBB tasks reached the caller")' ||
+  fail "exceptions thrown in TBB tasks do not cross the carried TBB"
+rm "$tmp/pkg/libtbb_exceptions.so"
 /usr/bin/python3 tests/portable/bake_probe.py addon/canopy_ao >"$tmp/host.log" ||
   fail "the Debian build's module does not bake on this machine"
 /usr/bin/python3 - "$tmp/bare.log" "$tmp/host.log" <<'PY'
