@@ -82,6 +82,16 @@ fi
 # functions against libstdc++'s own (tests/portable/cxx_compat_check.cpp).
 g++ -O1 -o "$tmp/cxx_compat_check" tests/portable/cxx_compat_check.cpp -ldl
 "$tmp/cxx_compat_check" "$tmp/pkg"/libcxxcompat-canopyao.so.* || fail "libcxxcompat-canopyao does not do what libstdc++ does"
+# ... and a newer import the compat library lacks stops the build: Debian's own TBB against a
+# "compat library" defining nothing of libstdc++'s (the carried TBB itself).
+cp -L "$(/sbin/ldconfig -p | awk '$1 == "libtbb.so.12" && /x86-64/ && !f {print $NF; f = 1}')" "$tmp/tbb-copy.so"
+if /usr/bin/python3 scripts/portable_cxx.py "$tmp/tbb-copy.so" "$tmp/pkg/libtbb-canopyao.so.12" \
+    GLIBCXX_3.4.28 CXXABI_1.3.12 >"$tmp/refused.log" 2>&1 ||
+   ! grep -q '_M_addrefEv@CXXABI_1.3.13' "$tmp/refused.log"; then
+  cat "$tmp/refused.log" >&2
+  fail "portable_cxx.py let a newer libstdc++ import through without a definition"
+fi
+rm "$tmp/tbb-copy.so"
 
 rtc=$(nm -D --undefined-only "$tmp/pkg"/_core*.so | awk '$2 ~ /^rtc/ && n++ < 3 {print $2}')
 [[ -z $rtc ]] || fail "the module calls Embree by name ($rtc ...): a Blender's own Embree would take the call"
