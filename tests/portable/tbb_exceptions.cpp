@@ -3,8 +3,8 @@
 // the module is (libstdc++ static and private) against the zip's libtbb-canopyao, whose
 // exception_ptr calls bind to the compat library or the system's libstdc++. Built and loaded
 // (ctypes, as Python loads the module) in the bare root by tests/portable/test_portable.sh:
-//   g++ -shared -fPIC -static-libstdc++ -Wl,--exclude-libs,ALL -Wl,--gc-sections ... \
-//       tbb_exceptions.cpp PKG/libtbb-canopyao.so.12
+//   g++ -shared -fPIC -static-libstdc++ -Wl,--exclude-libs,ALL -Wl,--gc-sections (a version \
+//       script exporting run alone) ... tbb_exceptions.cpp PKG/libtbb-canopyao.so.12
 // run() returns how many of 50 parallel loops, each with one throwing iteration (at a
 // different place, on whichever thread runs it), delivered that exception intact to the caller.
 #include <tbb/parallel_for.h>

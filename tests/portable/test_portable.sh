@@ -74,10 +74,13 @@ for f in "$tmp/pkg"/_core*.so "$tmp/pkg"/lib*-canopyao.so.*; do
   at_most GLIBCXX "$cxx" 3.4.28
   at_most CXXABI "$cxxabi" 1.3.12
 done
-# The module carries its own libstdc++ (none of its calls can land in a Blender's).
+# The module carries its own libstdc++ and exports nothing but its init function (none of its
+# calls can land in a Blender's libstdc++).
 if readelf -d "$tmp/pkg"/_core*.so | grep 'NEEDED.*libstdc++' >/dev/null; then
   fail "the module needs libstdc++.so: it should link it statically"
 fi
+exported=$(nm -D --defined-only "$tmp/pkg"/_core*.so | awk '$3 != "PyInit__core" {print $3}')
+[[ -z $exported ]] || fail "the module exports $(wc -l <<<"$exported") symbols besides PyInit__core: $(head -n3 <<<"$exported" | tr '\n' ' ')"
 # What the carried libraries need beyond that baseline is native/portable/cxx_compat.cpp's: its
 # functions against libstdc++'s own (tests/portable/cxx_compat_check.cpp).
 g++ -O1 -o "$tmp/cxx_compat_check" tests/portable/cxx_compat_check.cpp -ldl
@@ -140,8 +143,10 @@ echo "the carried libraries' calls bound to libcxxcompat-canopyao there: $compat
 # Exceptions thrown in TBB tasks cross the carried TBB (the system's libstdc++, the compat
 # library) into code with the module's own static libstdc++ (tests/portable/tbb_exceptions.cpp,
 # linked with the module's flags, CMakeLists.txt).
+echo '{ global: run; local: *; };' >"$tmp/tbb_exceptions.map"  # as native/portable/module.map
 g++ -O2 -fPIC -shared -fvisibility=hidden -static-libstdc++ -Wl,--exclude-libs,ALL \
-  -Wl,--gc-sections -o "$tmp/pkg/libtbb_exceptions.so" tests/portable/tbb_exceptions.cpp \
+  -Wl,--gc-sections -Wl,--version-script="$tmp/tbb_exceptions.map" \
+  -o "$tmp/pkg/libtbb_exceptions.so" tests/portable/tbb_exceptions.cpp \
   "$tmp/pkg/libtbb-canopyao.so.12" -Wl,-rpath,'$ORIGIN'
 chmod a+r "$tmp/pkg/libtbb_exceptions.so"
 "${as_root[@]}" scripts/bare_root.sh "$suite" run "$tmp" python3 -c '
