@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # The portable extension zip proves itself (docs/PORTABILITY.md):
 #  1. it is built (scripts/build_extension.sh --portable) for the bare root's Python or PYTHON;
-#  2. readelf/objdump: the module and the libraries it carries need nothing but the C/C++
+#  2. readelf/objdump/nm: the module and the libraries it carries need nothing but the C/C++
 #     runtime and each other, no glibc version newer than 2.34, no libstdc++ one newer than GCC
-#     10's (GLIBCXX_3.4.28, CXXABI_1.3.12; the module links its own libstdc++), and the compat
-#     library standing in for the newer ones behaves as libstdc++ (cxx_compat_check.cpp);
+#     10's (GLIBCXX_3.4.28, CXXABI_1.3.12; the module links its own libstdc++ and exports
+#     PyInit__core alone), the compat library standing in for the newer ones behaves as
+#     libstdc++ (cxx_compat_check.cpp), portable_cxx.py refuses an import it lacks, and
+#     exceptions thrown in TBB tasks reach the caller in the bare root (tbb_exceptions.cpp);
 #  3. in a bare root of SUITE (debootstrap minbase + python3 + python3-numpy, cached by
 #     scripts/bare_root.sh), with an empty environment, the zip's module imports and bakes
 #     ray-traced, proxy and texel AO (tests/portable/bake_probe.py), bit-identical to what the
