@@ -3,7 +3,8 @@
 # Python and platform of the Blender installed here, and validates its manifest.
 #   scripts/build_extension.sh [--out DIR]      (default DIR: out/)
 #   scripts/build_extension.sh --portable [--python 3.N|INTERPRETER] [--out DIR]
-#     the portable zip (docs/PORTABILITY.md, scripts/build_portable.sh) for Python 3.N or that
+#     the portable zip (docs/PORTABILITY.md, scripts/build_portable.sh) for Python 3.N (where
+#     this system has no python3.N: the headers of a build chroot, e.g. trixie's 3.13) or that
 #     interpreter (default: this system's python3): out/canopy_ao-<version>-linux_x64-cp3N.zip,
 #     needing no Embree, TBB or OpenImageIO on the system
 #   ... --repo DIR   also copies the zip into DIR and makes DIR an extension repository

@@ -1,13 +1,17 @@
 #!/usr/bin/env bash
 # Runs every test on every supported Debian stack: the legs of the test matrix.
 #   host    this machine (Debian 12: Blender 3.4, Embree 3, OIIO 2.4, Python 3.11), and the
-#           portable zip in a bare Debian 12 root (tests/portable/test_portable.sh)
+#           portable zips, cp311 in a bare Debian 12 root and cp313 in a bare Debian 13 root and
+#           the trixie chroot's Blender (tests/portable/test_portable.sh)
 #   trixie  a cached Debian 13 chroot (Blender 4.3, Embree 4, OIIO 2.5, Python 3.13)
 #   sid     a cached Debian unstable chroot (Blender 5.x, Embree 4, OIIO 3.1, Python 3.14)
 # Each leg builds and runs the whole suite (scripts/test_suite.sh) in its own build folder.
 # Chroots are made once by scripts/chroot.sh (needs root and the Debian archive this machine's
 # apt uses) and reused; a leg that cannot be set up fails.
 #   CANOPY_AO_LEGS="host trixie"   run only these legs (default: all of them)
+#   CANOPY_AO_PORTABLE_SUITES="bookworm trixie sid"   the bare roots the host leg proves a
+#       portable zip in, each for its own Python (default: this Debian's and trixie: cp311, cp313;
+#       sid adds cp314, about five more minutes)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -37,20 +41,22 @@ run_leg() {
   if [[ $leg == host ]]; then
     local ok=0
     CANOPY_AO_BUILD_DIR=build scripts/test_suite.sh || ok=$?
-    # The portable zip in a bare root of this Debian (cached beside the chroots); it builds with
-    # the trixie chroot's pybind11 (scripts/build_portable.sh). CANOPY_AO_PORTABLE_PY313: a
-    # Python 3.13 interpreter with headers, to build and prove the cp313 zip in a bare trixie too.
+    # The portable zips, each in a bare root of its suite (cached beside the chroots) and that
+    # suite's Blender: cp311 in this Debian's, cp313 in trixie's (built here with the trixie
+    # chroot's pybind11 and Python 3.13 headers, scripts/build_portable.sh).
     [[ -z ${setup_pid[trixie]:-} ]] || setup_done trixie || true
     if [[ ! -e $(scripts/chroot.sh trixie path)/.ready ]]; then
       echo "== Portable zip test skipped: it builds with the trixie chroot's pybind11, which is" \
            "not set up (run the trixie leg, or scripts/chroot.sh trixie setup)"
       return "$ok"
     fi
-    echo "== Portable zip test (tests/portable/test_portable.sh)"
-    tests/portable/test_portable.sh || ok=1
-    if [[ -n ${CANOPY_AO_PORTABLE_PY313:-} ]]; then
-      tests/portable/test_portable.sh trixie "$CANOPY_AO_PORTABLE_PY313" || ok=1
-    fi
+    local suite here
+    here=$(. /etc/os-release && echo "$VERSION_CODENAME")
+    for suite in ${CANOPY_AO_PORTABLE_SUITES:-$here trixie}; do
+      [[ $suite == "$here" ]] || [[ -z ${setup_pid[$suite]:-} ]] || setup_done "$suite" || true
+      echo "== Portable zip test in $suite (tests/portable/test_portable.sh $suite)"
+      tests/portable/test_portable.sh "$suite" || ok=1
+    done
     return "$ok"
   else
     setup_done "$leg" || { echo "test.sh: the $leg chroot could not be set up" >&2; return 1; }
