@@ -1,0 +1,9 @@
+"""The ladder: every rung in order, cheapest first (auto's candidates climb in this order, the
+settings offer them in it). Adding a rung: its file beside this one, and one line here."""
+from . import (auto, ellipsoid, grid, hybrid, medium, raytrace, reeves_blau, regression,
+               shells, sphere)
+from .base import register
+
+for _module in (auto, sphere, ellipsoid, shells, medium, reeves_blau, grid, regression,
+                hybrid, raytrace):
+    register(_module.RUNG)
