@@ -18,8 +18,6 @@ attached to it (Lights): one call per set of receivers; this module only chooses
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from . import ray_budget, texel_budget
@@ -227,9 +225,8 @@ def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra
 def _grid_ao(plan, p, n):
     if plan.grid is None:  # no leaves or branches to voxelise (a grass field): nothing above
         return np.ones(len(p), np.float32)
-    far = ray_length(plan.settings.distance)
-    kw = {"distance": far} if far < math.inf else {}
-    return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
+    return np.asarray(plan.grid.ao(p, n, distance=ray_length(plan.settings.distance)),
+                      dtype=np.float32)
 
 
 # The hybrid's near distance in voxels of the density grid: the grid resolves occlusion beyond
