@@ -1,6 +1,6 @@
 """A rung is asked, never named: outside core/rungs/ no add-on code compares a method with a
 rung's name (``method == "hybrid"``, ``method in ("raytrace", "grid")``), so adding a rung is
-its file and its registry line (docs/DESIGN.md, 'Adding a rung'). Static, from the AST."""
+its file and its registry line (docs/DESIGN.md, 'Architecture'). Static, from the AST."""
 import ast
 import os
 import sys

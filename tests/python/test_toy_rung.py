@@ -1,4 +1,4 @@
-"""Adding a rung is one file and one registry line (docs/DESIGN.md, 'Adding a rung'): a toy
+"""Adding a rung is one file and one registry line (docs/DESIGN.md, 'Architecture'): a toy
 rung — constant AO, written as a file of its own in a temporary package — registered with one
 call is bakeable through the core's bake path, offered by the settings and the command line,
 weighed by auto with a cost prediction, and refused by auto's registration without one."""

@@ -1,4 +1,4 @@
-"""The rungs of the method ladder as objects (docs/DESIGN.md, 'Adding a rung').
+"""The rungs of the method ladder as objects (docs/DESIGN.md, 'Architecture').
 
 base.py holds the Rung type (what a rung is: its label, help and capabilities, how it lights
 receivers and the work its cost model counts) and the lookup by name; each rung is one file

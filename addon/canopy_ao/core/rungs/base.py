@@ -1,4 +1,4 @@
-"""The Rung type and the ladder's lookup by name (docs/DESIGN.md, 'Adding a rung').
+"""The Rung type and the ladder's lookup by name (docs/DESIGN.md, 'Architecture').
 
 A rung file builds one Rung and registry.py registers it here, in the ladder's order; modules
 below the rungs (lighting, cost) look a rung up by name with get() and ask it. Imports nothing
