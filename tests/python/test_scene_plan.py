@@ -398,6 +398,11 @@ def test_plan_methods_are_the_tau_rungs():
     if hasattr(_core, "PlanMethod"):
         assert [rungs.plan_method(r) for r in plan_rungs] == [_core.PlanMethod(r.name)
                                                               for r in plan_rungs]
+        empty = _core.ScenePlan([], [])
+        assert empty.max_candidates(_core.PlanMethod.shells) == empty.max_candidates("shells")
+        for bad in ("grid", 3, None):  # not a scene-plan rung: a ValueError naming the choices
+            with pytest.raises(ValueError, match="method must be a PlanMethod"):
+                empty.max_candidates(bad)
 
 
 def test_one_tree_under_a_forest_gets_the_instances_on_its_own_leaves():
