@@ -10,8 +10,10 @@ triangles, four anti-aliasing sub-samples a texel). Also saves what each plan ch
     /usr/bin/python3.11 bench/probes/rung_outputs.py save /tmp/rungs_before.npz
     /usr/bin/python3.11 bench/probes/rung_outputs.py compare /tmp/rungs_before.npz
 
-compare bakes again and prints, per array, 'same' or the largest difference; exit 1 if any
-differs.
+compare bakes again and prints each array that differs (its largest difference) and a count;
+exit 1 if any differs. --addon DIR bakes with the add-on in DIR (another checkout's addon/, for
+a baseline made from it: PYTHONDONTWRITEBYTECODE=1 keeps that checkout unwritten). The
+example scenes (examples/canopy_scenes.py, small sizes) are baked with every rung too.
 """
 import json
 import os
@@ -21,9 +23,13 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..", "..")
-sys.path.insert(0, os.path.join(ROOT, "addon"))
+ADDON = (sys.argv[sys.argv.index("--addon") + 1] if "--addon" in sys.argv
+         else os.path.join(ROOT, "addon"))
+sys.path.insert(0, os.path.abspath(ADDON))
 sys.path.insert(0, os.path.join(ROOT, "tests", "python"))
+sys.path.insert(0, os.path.join(ROOT, "examples"))
 
+import canopy_scenes as cs  # noqa: E402
 import tree_scene as ts  # noqa: E402
 from canopy_ao import core  # noqa: E402
 from canopy_ao.core import native  # noqa: E402
@@ -69,9 +75,41 @@ def texel_points(item, count, seed):
             tri.astype(np.int32))
 
 
+# Example scenes, small: (scene, its arguments).
+EXAMPLES = (("round_tree", dict(leaves=2000)), ("grove", dict(n_trees=3, leaves=1500)),
+            ("grass_field", dict(blades=1500)), ("conifer", dict(leaves=3000)))
+
+
+def example_items(name, kw):
+    return [core.SceneItem(p.name, p.role.upper(), p.tree or "", p.vertices,
+                           cs.vertex_normals(p.vertices, p.triangles), p.triangles)
+            for p in cs.make_scene(name, seed=0, **kw)]
+
+
+def run_examples(methods, out, meta):
+    for scene, kw in EXAMPLES:
+        for m in methods:
+            its = example_items(scene, kw)
+            s = core.BakeSettings(method=m, samples=16, calibration_points=96,
+                                  calibration_samples=32, seed=5)
+            key = f"example-{scene}/{m}"
+            try:
+                plan = core.prepare(its, s)
+            except core.CanopyAOError as exc:
+                meta[key] = {"error": str(exc)}
+                continue
+            for it in its:
+                out[f"{key}/vertex/{it.name}"] = core.evaluate_item(plan, it).ao
+            cal = plan.calibration or {}
+            meta[key] = {"method": plan.method, "tau": plan.tau, "chosen": cal.get("chosen"),
+                         "notes": plan.notes,
+                         "buried": {k: int(v) for k, v in plan.buried_count.items()}}
+
+
 def run():
     out, meta = {}, {}
     methods = list(core.METHODS)
+    run_examples(methods, out, meta)
     cases = [("calibrated", dict(tau=None), False),
              ("tau2", dict(tau=2.0), False),
              ("forest", dict(tau=None), True),
@@ -119,11 +157,12 @@ def run():
 
 
 def main():
-    mode, path = sys.argv[1], sys.argv[2]
+    mode, path = [a for a in sys.argv[1:] if a != "--addon" and a != ADDON][:2]
     out, meta = run()
     if mode == "save":
         np.savez(path, __meta__=json.dumps(meta, sort_keys=True, default=str), **out)
-        print(f"{len(out)} arrays, {len(meta)} plans -> {path}")
+        print(f"{len(out)} arrays, {len(meta)} plans from {os.path.dirname(core.__file__)} -> "
+              f"{path}")
         return 0
     old = np.load(path)
     bad = 0
