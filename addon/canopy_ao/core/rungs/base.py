@@ -72,6 +72,7 @@ def always(plan) -> bool:
 
 
 _LADDER: list = []  # the ladder's rungs, cheapest first (registry.py fills it)
+_BY_NAME: dict = {}  # the same, by name (get() runs on every evaluate call)
 
 
 def register(rung: Rung, before: str | None = None) -> Rung:
@@ -88,12 +89,14 @@ def register(rung: Rung, before: str | None = None) -> Rung:
                          "(work)")
     at = len(_LADDER) if before is None else [r.name for r in _LADDER].index(before)
     _LADDER.insert(at, rung)
+    _BY_NAME[rung.name] = rung
     return rung
 
 
 def unregister(name: str) -> None:
     """Take the rung named ``name`` off the ladder (a test's toy rung)."""
     _LADDER[:] = [r for r in _LADDER if r.name != name]
+    _BY_NAME.pop(name, None)
 
 
 def ladder() -> tuple:
@@ -108,11 +111,9 @@ def names() -> tuple:
 
 def get(name) -> Rung:
     """The rung named ``name`` (a Rung is returned as it is). CanopyAOError when none is."""
-    if isinstance(name, Rung):
-        return name
-    for r in _LADDER:
-        if r.name == name:
-            return r
+    rung = _BY_NAME.get(name) if isinstance(name, str) else name
+    if isinstance(rung, Rung):
+        return rung
     raise CanopyAOError(f"unknown method {name!r} (one of {', '.join(names())})")
 
 
