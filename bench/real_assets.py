@@ -50,7 +50,7 @@ import numpy as np  # noqa: E402
 
 import real_scenes as rs  # noqa: E402
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import buried, ladder  # noqa: E402
+from canopy_ao.core import buried  # noqa: E402
 from canopy_ao.core.metrics import compare  # noqa: E402
 
 DESIGN = ("sap_callistemon", "sap_white_birch", "sap_small_maple")

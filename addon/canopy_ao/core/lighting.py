@@ -22,7 +22,7 @@ import numpy as np
 
 from . import ray_budget, texel_budget
 from .forest import tracer_instances
-from .meshes import scene_triangles
+from .meshes import bake_shading, scene_triangles
 from .native import CanopyAOError, _core
 from .rungs.base import get as rung_of, plan_method
 from .scene import Plan, ray_length, scaled_tau, tau_of
