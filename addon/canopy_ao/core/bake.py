@@ -154,7 +154,7 @@ def _wants_regression(plan: Plan, items, settings) -> bool:
     if settings.ray_free:
         return True
     receivers = cost.receiver_count(plan, items)
-    exact = next(r for r in rungs.ladder() if r.exact)
+    exact = rungs.exact()
     return (settings.time_budget > 0
             and cost.predict(plan, exact, receivers)["seconds"] > settings.time_budget)
 

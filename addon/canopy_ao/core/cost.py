@@ -31,7 +31,7 @@ import math
 from . import ray_budget, texel_budget
 from .buried import BURIED_RECEIVER_RAYS, BURIED_ROLES
 from .native import _core
-from .rungs.base import Proxy, get as rung_of, ladder as ladder_rungs
+from .rungs.base import Proxy, exact as exact_rung, get as rung_of
 from .scene import RECEIVER_ROLES, receiver_items
 
 # Seconds per unit of work on one core. Ratios measured with
@@ -203,7 +203,7 @@ def affordable_samples(plan, receivers: int) -> int:
     k = int(s.samples)
     if s.time_budget <= 0:
         return k
-    exact = next(r for r in ladder_rungs() if r.exact)
+    exact = exact_rung()
     while predict(plan, exact, receivers, samples=k)["seconds"] > s.time_budget:
         if k // 2 < AUTO_MIN_RAYS:
             return int(s.samples)

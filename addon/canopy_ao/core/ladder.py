@@ -115,7 +115,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     batches = _batches(groups)
 
     n_receivers = cost.receiver_count(plan, items)
-    exact = next(r.name for r in rungs.ladder() if r.exact)
+    exact = rungs.exact().name
     rays = cost.affordable_samples(plan, n_receivers) if exact in candidates else s.samples
 
     def err(method, tau, scale=None, where=None):
@@ -271,7 +271,7 @@ def choose(plan: Plan, items, proxyless_auto: bool) -> None:
         if proxyless_auto and plan.tracer is not None and not settings.ray_free:
             # The grass law (Hegeman Eq. 9) and the instances' shells against the exact rung
             # (whose tracer holds the instances), on the same sample.
-            exact = next(r.name for r in rungs.ladder() if r.exact)
+            exact = rungs.exact().name
             plan.method, plan.tau, plan.calibration = calibrate(
                 plan, items, [auto.FALLBACK, exact], DEFAULT_TAU)
     _bake_samples(plan)

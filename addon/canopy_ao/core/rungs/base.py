@@ -109,6 +109,12 @@ def names() -> tuple:
     return tuple(r.name for r in _LADDER)
 
 
+def exact() -> Rung:
+    """The ladder's exact rung: the reference auto is scored against, whose samples it may
+    halve to fit the time budget (Rung.exact)."""
+    return next(r for r in _LADDER if r.exact)
+
+
 def get(name) -> Rung:
     """The rung named ``name`` (a Rung is returned as it is). CanopyAOError when none is."""
     rung = _BY_NAME.get(name) if isinstance(name, str) else name
