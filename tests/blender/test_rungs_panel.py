@@ -39,3 +39,29 @@ def test_samples_under_every_rung_that_uses_them():
         if "samples" in drawn:
             with_samples.add(rung.name)
     assert {"auto", "hybrid", "raytrace"} <= with_samples
+
+
+def test_a_rung_registered_at_run_time_is_in_the_menu_after_registration():
+    """A rung registered (rungs.base.register) is in the panel's menu once the add-on
+    registers its properties again, under its own saved number; taken off, the menu is the
+    ladder again."""
+    import addon_utils
+    import numpy as np
+    toy = rungs.Rung("constant", "Constant", "AO 0.5 everywhere",
+                     evaluate=lambda rung, plan, role, tree, key, p, *a: np.full(
+                         len(p), 0.5, np.float32))
+    addon_utils.disable("canopy_ao", default_set=True)
+    rungs.register(toy, before="raytrace")
+    try:
+        addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
+        items = bpy.context.scene.canopy_ao.bl_rna.properties["method"].enum_items
+        assert [i.identifier for i in items] == list(rungs.names())
+        by_name = {i.identifier: i.value for i in items}
+        assert by_name["constant"] == rungs.get("constant").number == 10
+        assert by_name["raytrace"] == 9  # a saved ray-traced choice keeps its meaning
+    finally:
+        addon_utils.disable("canopy_ao", default_set=True)
+        rungs.unregister("constant")
+        addon_utils.enable("canopy_ao", default_set=True, handle_error=None)
+    items = bpy.context.scene.canopy_ao.bl_rna.properties["method"].enum_items
+    assert [i.identifier for i in items] == list(rungs.names())

@@ -63,7 +63,7 @@ def _items():
 def test_the_toy_rung_is_offered(toy):
     assert "constant" in core.available_methods()
     option = next(o for o in settings.OPTIONS if o.name == "method")
-    assert ("constant", "Constant", "AO 0.5 everywhere") in list(option.items)
+    assert ("constant", "Constant", "AO 0.5 everywhere") in [i[:3] for i in option.items]
     assert option.parse("constant") == "constant"
     settings.validate(core.BakeSettings(method="constant"))
     args = cli.build_parser().parse_args(["--method", "constant"])
@@ -107,3 +107,17 @@ def test_a_climbing_rung_without_a_cost_model_is_refused():
     with pytest.raises(ValueError, match="already"):
         rungs.register(rungs.get("sphere"))
     assert ladder.METHODS == rungs.names()  # the registry, in order, untouched
+
+
+def test_a_rung_keeps_its_saved_number_wherever_it_sits(toy):
+    """Blender saves the method menu's choice as a number: the toy, placed before the exact
+    rung, takes the next free one, and every rung keeps the number it had (a .blend saved with
+    ray-traced still opens with ray-traced)."""
+    numbers = {r.name: r.number for r in rungs.ladder()}
+    assert numbers["auto"] == 0 and numbers["raytrace"] == 9
+    assert numbers["constant"] == 10 == max(numbers.values())
+    assert len(set(numbers.values())) == len(numbers)
+    option = next(o for o in settings.OPTIONS if o.name == "method")
+    assert [i[3] for i in option.items] == [numbers[i[0]] for i in option.items]
+    with pytest.raises(ValueError, match="number 9 is another rung's"):
+        rungs.register(rungs.Rung("twin", "Twin", "", evaluate=toy.evaluate, number=9))

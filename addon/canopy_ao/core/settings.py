@@ -36,7 +36,7 @@ class Option:
     min_exclusive: bool = False
     max_exclusive: bool = False
     soft_max: float | None = None  # the UI slider's end; values up to max stay valid
-    items: tuple = ()  # enum: ((id, label, help), ...)
+    items: tuple = ()  # enum: ((id, label, help[, number]), ...); number: see blender/properties
     none_prop: str = ""  # optional number: the switch that stands for None ...
     none_label: str = ""  # ... its label ...
     none_help: str = ""  # ... and help
@@ -129,11 +129,12 @@ def _enum(pairs):
 
 
 class RungChoices(Sequence):
-    """The method option's (id, label, help) items: the ladder's rungs as registered now
-    (rungs/registry.py), so a rung registered later is offered too."""
+    """The method option's (id, label, help, number) items: the ladder's rungs as registered
+    now (rungs/registry.py), so a rung registered later is offered too; number: Rung.number,
+    what a saved .blend stores for it."""
 
     def _items(self):
-        return [(r.name, r.label, r.help) for r in rungs.ladder()]
+        return [(r.name, r.label, r.help, r.number) for r in rungs.ladder()]
 
     def __getitem__(self, i):
         return self._items()[i]

@@ -5,6 +5,7 @@ RUNG = Rung(
     "auto", "Auto", "Calibrate tau and climb sphere / ellipsoid / shells / medium / grid / rays "
     "against a few hundred ray-traced points: the cheapest rung that is good enough within "
     "the time budget",
-    chooses=True, takes_tau=True, proxy=Proxy.SHELLS, needs_triangles=True, uses_samples=True)
+    chooses=True, takes_tau=True, proxy=Proxy.SHELLS, needs_triangles=True, uses_samples=True,
+    number=0)
 # The rung auto bakes with where it cannot calibrate (no ray tracer) or has nothing to climb.
 FALLBACK = "ellipsoid"

@@ -7,6 +7,7 @@ of the add-on but the native module, so any module may import it.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass
 from typing import Callable
@@ -55,6 +56,10 @@ class Rung:
     exact: bool = False              # the reference rung: auto may halve its samples
     climbs: Callable | None = None   # climbs(plan): auto weighs it as a candidate on this plan
     chooses: bool = False            # picks another rung (auto); never a plan's method
+    # The number a saved .blend stores for the rung's menu entry (Blender keeps an enum as its
+    # number): fixed once a rung has one, whatever its place on the ladder; None = the next
+    # free one when it is registered.
+    number: int | None = None
 
     def own_shells(self, plan, tree) -> list:
         """The shells of ``tree`` (plan.fits) this rung lights with and that occlude for it."""
@@ -82,6 +87,11 @@ def register(rung: Rung, before: str | None = None) -> Rung:
         raise TypeError(f"not a Rung: {rung!r}")
     if any(r.name == rung.name for r in _LADDER):
         raise ValueError(f"rung {rung.name!r} is registered already")
+    if rung.number is None:
+        free = max((r.number for r in _LADDER), default=-1) + 1
+        rung = dataclasses.replace(rung, number=free)
+    elif any(r.number == rung.number for r in _LADDER):
+        raise ValueError(f"rung {rung.name!r}: number {rung.number} is another rung's")
     if not rung.chooses and rung.evaluate is None:
         raise ValueError(f"rung {rung.name!r}: no evaluate")
     if rung.climbs is not None and rung.work is None:

@@ -13,4 +13,4 @@ def _work(rung, plan, receivers, names=None, samples=None):
 
 RUNG = Rung("grid", "Density grid", "Leaf density voxelised, rays marched through it",
             evaluate=_evaluate, work=_work, needs_triangles=True, needs_grid=True,
-            climbs=lambda plan: plan.grid is not None)
+            climbs=lambda plan: plan.grid is not None, number=6)

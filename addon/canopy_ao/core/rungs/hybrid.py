@@ -32,4 +32,4 @@ RUNG = Rung("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels,
             needs_grid=True, finds_buried=True, uses_samples=True,
             # Its far field is the density grid of the scene's own triangles, so instanced
             # trees stay its analytic occluders (near rays must not see them twice).
-            tracer_holds_instances=False)
+            tracer_holds_instances=False, number=8)

@@ -9,4 +9,5 @@ RUNG = Rung("medium", "Leaf medium", "The shells filled with randomly oriented l
             "expected AO of a uniform medium (tabulated)",
             evaluate=lighting.scene_plan_ao,
             work=functools.partial(cost.analytic_work, unit="medium"), takes_tau=True,
-            scene_plan=True, native="medium", proxy=Proxy.SHELLS, live=True, climbs=always)
+            scene_plan=True, native="medium", proxy=Proxy.SHELLS, live=True, climbs=always,
+            number=4)

@@ -16,4 +16,5 @@ RUNG = Rung("raytrace", "Ray-traced", "Exact: Embree rays against every triangle
             rays_see_instances=True, finds_buried=True, uses_samples=True, exact=True,
             # The exact rung tops the ladder: on small or sparse scenes a few rays per vertex
             # beat every proxy within the time budget; on big ones the budget rules it out.
-            climbs=lambda plan: plan.tracer is not None and not plan.settings.ray_free)
+            climbs=lambda plan: plan.tracer is not None and not plan.settings.ray_free,
+            number=9)
