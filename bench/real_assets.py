@@ -50,7 +50,7 @@ import numpy as np  # noqa: E402
 
 import real_scenes as rs  # noqa: E402
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import ladder  # noqa: E402
+from canopy_ao.core import buried  # noqa: E402
 from canopy_ao.core.metrics import compare  # noqa: E402
 
 DESIGN = ("sap_callistemon", "sap_white_birch", "sap_small_maple")
@@ -162,7 +162,7 @@ def run_scene(name, quick, writer):
         if m == "regression" and "buried" in seen:
             found = seen["buried"]
             extra = found & keep
-            print(f"  its buried test (bake._zero_buried, {ladder.BURIED_RECEIVER_RAYS} rays per "
+            print(f"  its buried test (bake._zero_buried, {buried.BURIED_RECEIVER_RAYS} rays per "
                   f"leaf or branch vertex, {seen['seconds']:.3f} s"
                   + (f" = {seen['seconds'] / t64:.3f}x rays 64" if t64 else "")
                   + f"): {(found & bur).sum()} of the {bur.sum()} buried, and {extra.sum()} "

@@ -71,9 +71,10 @@ def python_composition():
     """lighting._evaluate_scene_points with its analytic branch as the old Python code."""
     native = lighting._evaluate_scene_points
 
-    def old(plan, role, tree, grass_key, p, n, method, tau, own=None):
-        if method not in ladder.TAU_METHODS:
-            return native(plan, role, tree, grass_key, p, n, method, tau, own)
+    def old(plan, role, tree, grass_key, p, n, rung, tau, own=None, group=1):
+        method = rung.name
+        if not rung.scene_plan:
+            return native(plan, role, tree, grass_key, p, n, rung, tau, own, group)
         if not isinstance(tree, tuple):
             return lighting_reference.evaluate(plan, role, tree, grass_key, p, n, method, tau)
         # A tree per point (calibration's batches): one call per tree, as the old code made

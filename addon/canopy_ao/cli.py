@@ -175,6 +175,7 @@ def run(args):
         if not hasattr(bpy.types.Scene, "canopy_ao"):
             raise BakeFailed("the canopy_ao add-on could not be enabled (see the messages "
                              "above)")
+    from . import core
     from .blender import gather, job
     from .core.native import CanopyAOError, core_status, require
 
@@ -213,8 +214,9 @@ def run(args):
             line += (f", vs Cycles MAE {c.get('mae', float('nan')):.4f} "
                      f"RMSE {c.get('rmse', float('nan')):.4f}")
         print(line, flush=True)
-    # τ means nothing to the exact rung or the density grid (physical density).
-    tau = "" if rep["method"] in ("raytrace", "grid") else f" tau {rep['tau']:.4g}"
+    # τ means nothing to a rung that takes none (the exact rung, the density grid's physical
+    # density, the ray-free fit, the hybrid).
+    tau = "" if not core.rung(rep["method"]).takes_tau else f" tau {rep['tau']:.4g}"
     print(f"canopy_ao: {rep['method']}{tau}, {len(bake_job.results)} object(s), "
           f"{rep['seconds']:.2f} s", flush=True)
     for note in rep["notes"]:

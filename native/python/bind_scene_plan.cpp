@@ -19,14 +19,24 @@ namespace canopy_ao::py_bind {
 
 namespace {
 
-PlanMethod plan_method_arg(const std::string& s) {
+// A method argument: a PlanMethod (the rungs name its values: core/rungs/*.py) or its name,
+// read by the one map from names, which PlanMethod(name) uses too; anything else is a
+// ValueError that names the choices.
+PlanMethod plan_method_name(const std::string& s) {
   if (s == "sphere") return PlanMethod::Sphere;
   if (s == "ellipsoid") return PlanMethod::Ellipsoid;
   if (s == "reeves_blau") return PlanMethod::ReevesBlau;
   if (s == "shells") return PlanMethod::Shells;
   if (s == "medium") return PlanMethod::Medium;
-  throw py::value_error("method must be one of \"sphere\", \"ellipsoid\", \"reeves_blau\", "
-                        "\"shells\", \"medium\", got \"" + s + "\"");
+  throw py::value_error("method must be a PlanMethod or one of \"sphere\", \"ellipsoid\", "
+                        "\"reeves_blau\", \"shells\", \"medium\", got \"" + s + "\"");
+}
+
+PlanMethod plan_method_arg(const py::object& o) {
+  if (py::isinstance<PlanMethod>(o)) return o.cast<PlanMethod>();
+  if (py::isinstance<py::str>(o)) return plan_method_name(o.cast<std::string>());
+  throw py::value_error("method must be a PlanMethod or its name, got " +
+                        std::string(py::repr(o)));
 }
 
 ReceiverRole role_arg(const std::string& s) {
@@ -227,6 +237,15 @@ void bind_parts(py::module_& m) {
 }  // namespace
 
 void bind_scene_plan(py::module_& m) {
+  py::enum_<PlanMethod>(m, "PlanMethod",
+                        "The rungs the scene plan lights; ScenePlan's methods take one, or its "
+                        "name (PlanMethod(name)).")
+      .value("sphere", PlanMethod::Sphere)
+      .value("ellipsoid", PlanMethod::Ellipsoid)
+      .value("reeves_blau", PlanMethod::ReevesBlau)
+      .value("shells", PlanMethod::Shells)
+      .value("medium", PlanMethod::Medium)
+      .def(py::init(&plan_method_name), py::arg("name"));
   bind_parts(m);
   py::class_<ScenePlan>(
       m, "ScenePlan",
@@ -258,7 +277,7 @@ void bind_scene_plan(py::module_& m) {
       .def(
           "evaluate",
           [](const ScenePlan& plan, const py::array& positions, const py::array& normals,
-             const std::string& role, const py::object& tree, const std::string& method,
+             const std::string& role, const py::object& tree, const py::object& method,
              const py::object& tau, const py::object& grass) {
             const Receivers r = receivers_arg(positions, normals);
             PlanReceivers who;
@@ -311,8 +330,9 @@ void bind_scene_plan(py::module_& m) {
           "evaluate(positions, normals, role, tree, method, tau, grass=None) -> float32 (N,)\n\n"
           "AO in [0, 1] of receivers (float32 (N, 3) each) of one role (\"CANOPY\", "
           "\"TRUNK\", \"GROUND\", \"GRASS\"). tree: the receivers' tree index (-1 = none) or "
-          "an int32 (N,) array of them. method: \"sphere\", \"ellipsoid\", \"reeves_blau\", "
-          "\"shells\" or \"medium\". tau: one number or one per tree. grass: (ground_height, "
+          "an int32 (N,) array of them. method: a PlanMethod or its name (\"sphere\", "
+          "\"ellipsoid\", \"reeves_blau\", \"shells\" or \"medium\"). tau: one number or one "
+          "per tree. grass: (ground_height, "
           "blade_height) or (ground_height, blade_height, layer) with the field's blade layer "
           "(ao_grass), for role GRASS only. GROUND receivers are multiplied by the grass "
           "covers, every receiver by the attached forest.")
@@ -346,7 +366,7 @@ void bind_scene_plan(py::module_& m) {
           "The attached ForestOccluders, or None.")
       .def(
           "shells",
-          [](const ScenePlan& plan, const py::object& tree, const std::string& method) {
+          [](const ScenePlan& plan, const py::object& tree, const py::object& method) {
             const long long t = int_arg(tree, "tree", 0, static_cast<long long>(plan.trees()) - 1);
             return plan.shells(static_cast<std::size_t>(t), plan_method_arg(method));
           },
@@ -354,7 +374,7 @@ void bind_scene_plan(py::module_& m) {
           "The shells `method` lights tree `tree` with (and that occlude for it).")
       .def(
           "max_candidates",
-          [](const ScenePlan& plan, const std::string& method) {
+          [](const ScenePlan& plan, const py::object& method) {
             return plan.max_candidates(plan_method_arg(method));
           },
           py::arg("method"), "Largest number of occluders one receiver tests for `method`.");

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from canopy_ao import core
-from canopy_ao.core import cost, ladder, live
+from canopy_ao.core import buried as buried_test, cost, ladder, live
 from real_shapes import cubes
 
 cs = pytest.importorskip("canopy_scenes")
@@ -60,7 +60,7 @@ def test_an_open_crevice_is_not_buried():
     items, buried = _scene()
     plan = core.prepare(items, core.BakeSettings(method="raytrace"))
     it = items[0]
-    got = ladder.buried(plan, it, it.positions, it.normals)
+    got = buried_test.buried(plan, it, it.positions, it.normals)
     assert got[buried].all()
     ref = np.asarray(plan.tracer.ao(it.positions, it.normals, samples=256, seed=3))
     extra = got & ~buried
@@ -106,7 +106,7 @@ def test_the_cost_model_counts_the_buried_test():
     unit, with_test = cost.work(plan, "sphere", n)
     _u, without = cost._work(plan, "sphere", n)
     depth = np.log2(plan.tracer.triangle_count)
-    rays = n * ladder.BURIED_RECEIVER_RAYS  # both items are leaves or branches
+    rays = n * buried_test.BURIED_RECEIVER_RAYS  # both items are leaves or branches
     expect = rays * depth * cost.SECONDS_PER_UNIT["bvh_step"] / cost.SECONDS_PER_UNIT[unit]
     assert with_test - without == pytest.approx(expect, rel=1e-9)
     assert cost.work(plan, "raytrace", n) == cost._work(plan, "raytrace", n)

@@ -432,16 +432,16 @@ def test_bake_point_shading_is_checked():
 
 def test_engine_tracer_carries_normals_and_faces():
     """The add-on's tracer is built with every item's normals and faces, numbered apart per item
-    (lighting.bake_shading), and a SceneItem refuses face ids that do not match its triangles."""
+    (meshes.bake_shading), and a SceneItem refuses face ids that do not match its triangles."""
     from canopy_ao import core as engine
-    from canopy_ao.core import lighting
+    from canopy_ao.core import lighting, meshes
 
     v = np.float32([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
     t = np.int32([[0, 1, 2], [0, 2, 3]])
     up = np.tile(np.float32([0, 0, 1]), (4, 1))
     a = engine.SceneItem("A", "GROUND", "", v, up, t, polygons=np.int32([0, 0]))
     b = engine.SceneItem("B", "GROUND", "", v + 2, up, t)
-    sh = lighting.bake_shading([a, b])
+    sh = meshes.bake_shading([a, b])
     assert sh["normals"].shape == (8, 3) and list(sh["polygons"]) == [0, 0, 1, 2]
     assert lighting.build_tracer([a, b]).has_vertex_normals
     with pytest.raises(engine.CanopyAOError, match="polygon ids"):

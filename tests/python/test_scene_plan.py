@@ -391,7 +391,18 @@ def test_forest_and_cover_bad_input_is_a_value_error():
 
 def test_plan_methods_are_the_tau_rungs():
     from canopy_ao.core import ladder
-    assert set(lighting.PLAN_METHODS) == set(ladder.TAU_METHODS)
+    from canopy_ao.core.rungs import base as rungs
+    plan_rungs = [r for r in rungs.ladder() if r.scene_plan]
+    assert {r.name for r in plan_rungs} == set(ladder.TAU_METHODS)
+    # Each names its own native PlanMethod, and the module reads a name as the same method.
+    if hasattr(_core, "PlanMethod"):
+        assert [rungs.plan_method(r) for r in plan_rungs] == [_core.PlanMethod(r.name)
+                                                              for r in plan_rungs]
+        empty = _core.ScenePlan([], [])
+        assert empty.max_candidates(_core.PlanMethod.shells) == empty.max_candidates("shells")
+        for bad in ("grid", 3, None):  # not a scene-plan rung: a ValueError naming the choices
+            with pytest.raises(ValueError, match="method must be a PlanMethod"):
+                empty.max_candidates(bad)
 
 
 def test_one_tree_under_a_forest_gets_the_instances_on_its_own_leaves():

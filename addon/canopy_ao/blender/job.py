@@ -21,9 +21,9 @@ CHUNK = 1 << 16
 # this many chunks per step: fewer calls, each one's fixed cost paid less often; the progress
 # bar still moves every 2^18 receivers.
 BLOCKING_CHUNKS = 4
-# Rungs whose receivers cast rays, samples each: a blocking bake's vertex steps shrink as the
-# samples grow (2^14 vertices at 256), so progress and Ctrl-C answer every few seconds.
-RAY_METHODS = ("raytrace", "hybrid")
+# Rungs whose receivers cast rays, samples each (Rung.uses_samples): a blocking bake's vertex
+# steps shrink as the samples grow (2^14 vertices at 256), so progress and Ctrl-C answer every
+# few seconds.
 
 
 class BakeJob:
@@ -119,7 +119,7 @@ class BakeJob:
             self._lap("tracer (bent normals)", t0)
         self.loop.start(self.plan, self.opts["bent_normals"], bool(self.opts["thickness"]),
                         self.prototypes.means)
-        if self.blocking and self.plan.method in RAY_METHODS:  # steps of a few seconds
+        if self.blocking and core.rung(self.plan.method).uses_samples:  # steps of a few seconds
             self.loop.split(max(4096, CHUNK * BLOCKING_CHUNKS * 16
                                 // max(self.settings.samples, 16)))
 

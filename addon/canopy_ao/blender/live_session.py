@@ -14,6 +14,7 @@ from .frame_cache import MODIFIER
 from .live_render import is_render
 from .loop import Loop
 from .vertex_target import VertexTarget
+from .. import core
 from ..core import live as core_live
 from ..core.native import CanopyAOError
 
@@ -29,14 +30,14 @@ def check_request(opts):
         raise CanopyAOError("live AO and frame-range bakes write per-vertex attributes only "
                             "(a texel bake per frame would rasterise and write an image each "
                             "frame): set Output to Per Vertex")
-    if opts["method"] != "auto":
+    if not core.rung(opts["method"]).chooses:
         core_live.check_method(opts["method"])
 
 
 def check_job(job):
     """Refuse, before its commit, a prepared live bake that cannot run live: what auto chose
     may be the grid or rays, and a frame cache's read-back would hide the live attribute."""
-    core_live.check_method(job.plan.method, job.settings.method == "auto")
+    core_live.check_method(job.plan.method, core.rung(job.settings.method).chooses)
     cached = [t.obj.name for t in job.targets if t.obj.modifiers.get(MODIFIER) is not None]
     if cached:
         raise CanopyAOError(f"{', '.join(cached)}: a frame cache ('{MODIFIER}' modifier) would "
@@ -47,7 +48,7 @@ class Session:
     """What one scene's live AO keeps between frames; built from a prepared BakeJob."""
 
     def __init__(self, job):
-        core_live.check_method(job.plan.method, job.settings.method == "auto")
+        core_live.check_method(job.plan.method, core.rung(job.settings.method).chooses)
         self.scene_name = job.scene.name
         self.plan = job.plan
         self.template = core_live.template_items(job.items)

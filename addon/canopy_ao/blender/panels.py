@@ -4,6 +4,7 @@ import bpy
 
 from . import viewport
 from .gather import world_ao_distance
+from .. import core
 from ..core.native import core_status
 from ..core.settings import OPTIONS
 
@@ -53,9 +54,10 @@ class CANOPY_AO_PT_main(_Sidebar, bpy.types.Panel):
                             f"No World: Cycles' {d:g}" if d > 0 else
                             "World AO distance 0: Cycles sees no AO"),
                       icon='NONE' if d > 0 else 'ERROR')
-        if s.method in {"raytrace", "hybrid", "auto"}:  # auto: the most rays it may cast
+        rung = core.rung(s.method)
+        if rung.uses_samples:  # auto: the most rays it may cast
             col.prop(s, "samples")
-        if s.method == "auto":
+        if rung.chooses:
             col.prop(s, "time_budget", text=SHORT["time_budget"])
             col.prop(s, "target_rmse")
         col.separator()

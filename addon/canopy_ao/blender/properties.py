@@ -33,8 +33,10 @@ def _property(o):
         return BoolProperty(default=o.default, **kw)
     if o.kind == "str":
         return StringProperty(default=o.default, subtype=o.subtype, **kw)
-    # Fixed numbers, so a saved choice keeps its meaning when items are added.
-    items = [(i, label, text, n) for n, (i, label, text) in enumerate(o.items)]
+    # Fixed numbers, so a saved choice keeps its meaning when items are added: an item's own
+    # (a rung's Rung.number, wherever it sits on the ladder), else its place in the list.
+    items = [(i, label, text, num[0] if num else n)
+             for n, (i, label, text, *num) in enumerate(o.items)]
     return EnumProperty(items=items, default=o.default, **kw)
 
 
@@ -102,6 +104,9 @@ classes = (CanopyAOSceneSettings, CanopyAOObjectSettings)
 
 
 def register():
+    # The options as they are now: a rung registered after this module was imported
+    # (core/rungs/base.register) is in the method menu too.
+    CanopyAOSceneSettings.__annotations__.update(option_properties())
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.canopy_ao = PointerProperty(type=CanopyAOSceneSettings)

@@ -14,11 +14,13 @@ import time
 
 import numpy as np
 
+from . import buried as _buried
 from . import cost, forest_tau, ladder, lighting, native, opacity, proxies, regression, trees
 from . import forest as _forest
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, own_primitives, split_trees
 from .ladder import DEFAULT_TAU
+from .rungs import base as rungs
 from .settings import BakeSettings, validate
 
 
@@ -50,7 +52,8 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
     plan.notes.extend(opacity.notes(whole))
     proxies.fit_scene(plan, items)
     plan.timings["fit"] = time.perf_counter() - t0
-    if settings.method in ladder.TAU_METHODS + ("auto",) and (plan.fits or plan.trunks):
+    rung = rungs.get(settings.method)
+    if (rung.scene_plan or rung.chooses) and (plan.fits or plan.trunks):
         t0 = time.perf_counter()
         lighting.lights(plan)  # the native scene plan: built once, calibration reuses it
         plan.timings["scene_plan"] = time.perf_counter() - t0
@@ -59,23 +62,23 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
         _forest.attach(plan, prototypes, None)
     # Grass has no proxies to calibrate, nor has a ground under instanced trees alone, but
     # auto still weighs their laws against rays.
-    proxyless_auto = (settings.method == "auto" and not plan.fits
+    proxyless_auto = (rung.chooses and not plan.fits
                       and (any(it.role == "GRASS" for it in items)
                            or bool(_forest.traced_meshes(prototypes))))
-    needs_tracer = settings.method in ("raytrace", "hybrid") or proxyless_auto or (
-        settings.method == "auto" or settings.tau is None) and bool(plan.fits) or (
-        settings.tau is None and settings.method != "hybrid" and bool(_forest.traced_meshes(prototypes)))
+    needs_tracer = rung.needs_tracer or proxyless_auto or (
+        rung.chooses or settings.tau is None) and bool(plan.fits) or (
+        settings.tau is None and rung.tracer_holds_instances
+        and bool(_forest.traced_meshes(prototypes)))
     if needs_tracer:
         t0 = time.perf_counter()
         try:
             # The hybrid's far field is the density grid of the scene's own triangles, so
             # instanced trees stay its analytic occluders (near rays must not see them twice).
             plan.tracer = lighting.build_tracer(
-                whole, plan.tracer_bases,
-                prototypes if settings.method != "hybrid" else None)
+                whole, plan.tracer_bases, prototypes if rung.tracer_holds_instances else None)
             plan.tracer_items = whole
         except CanopyAOError as exc:
-            if settings.method in ("raytrace", "hybrid"):
+            if rung.needs_tracer:
                 raise
             plan.notes.append(f"calibration skipped: {exc}")
         plan.timings["tracer"] = time.perf_counter() - t0
@@ -96,17 +99,17 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
                     samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
                     **shared)
         except CanopyAOError as exc:
-            if settings.method == "regression":
+            if rung.needs_regression:
                 raise
             plan.notes.append(f"regression rung not considered: {exc}")
-        if settings.method == "regression":
+        if rung.needs_regression:
             plan.calibration = plan.regression.report
         plan.timings["regression"] = time.perf_counter() - t0
-    if settings.method in ("grid", "hybrid"):
+    if rung.needs_grid:
         t0 = time.perf_counter()
         plan.grid = lighting.build_grid(whole)
         plan.timings["grid"] = time.perf_counter() - t0
-    elif settings.method == "auto" and plan.fits and plan.tracer is not None:
+    elif rung.chooses and plan.fits and plan.tracer is not None:
         t0 = time.perf_counter()
         try:  # the top rung of the ladder: only worth it if it beats the shells (calibrate)
             plan.grid = lighting.build_grid(whole)
@@ -143,15 +146,17 @@ def _wants_regression(plan: Plan, items, settings) -> bool:
     """Whether prepare builds the ray-free rung: asked for, --ray-free, or auto where rays are
     over the time budget (a big tree: on real trees the ray-free rung is the best one short of
     rays, docs/DESIGN.md 'Auto mode'). Decided from counted work, never a clock."""
-    if settings.method == "regression":
+    rung = rungs.get(settings.method)
+    if rung.needs_regression:
         return True
-    if settings.method != "auto" or not plan.fits or plan.tracer is None:
+    if not rung.chooses or not plan.fits or plan.tracer is None:
         return False
     if settings.ray_free:
         return True
     receivers = cost.receiver_count(plan, items)
+    exact = rungs.exact()
     return (settings.time_budget > 0
-            and cost.predict(plan, "raytrace", receivers)["seconds"] > settings.time_budget)
+            and cost.predict(plan, exact, receivers)["seconds"] > settings.time_budget)
 
 
 @refusals_are_user_errors
@@ -181,7 +186,7 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
     else:
         labels = (item.tree_labels[vertices] if vertices is not None
                   else _nearest_crown(plan, item.tree_names, p))
-        if plan.method in ladder.TAU_METHODS:  # the scene plan: one call, a tree per receiver
+        if rungs.get(plan.method).scene_plan:  # one call, a tree per receiver
             ao = lighting.evaluate_points(plan, item.role, (item.tree_names, labels), item.name,
                                           p, n, plan.method, plan.taus(), own, group)
         else:
@@ -204,22 +209,22 @@ def evaluate_receivers(plan: Plan, item: SceneItem, positions, normals,
 # The approximate rungs model a leaf whose base sits inside its twig like any other point,
 # where rays (and Cycles) read 0: on Sapling trees 5-23 % of leaf and branch vertices, which
 # doubled their MAE over all vertices. Their receivers on leaves and branches are tested as
-# auto's calibration tests its sample (ladder.buried: every ray stops within 1 % of the
+# auto's calibration tests its sample (buried.py: every ray stops within 1 % of the
 # object's size), with a few short rays per vertex dealt out to its corners,
 # and read 0 (docs/DESIGN.md, 'Buried receivers'). The exact rung and the hybrid's near rays
-# find them by themselves. (Which rungs, roles and rays: ladder.BURIED_METHODS, BURIED_ROLES,
+# find them by themselves. (Which rungs: Rung.finds_buried; roles and rays: buried.BURIED_ROLES,
 # BURIED_RECEIVER_RAYS, beside the calibration's own test.)
 def _zero_buried(plan: Plan, item: SceneItem, p, n, own, vertices, ao) -> None:
     """Set ao to 0 at receivers buried inside the surface they sit on (above), traced with the
     plan's tracer; without one (a given τ builds none; a live frame), a vertex keeps what an
     earlier bake with this plan found (plan.buried), else nothing is tested."""
-    if (plan.method not in ladder.BURIED_METHODS or item.role not in ladder.BURIED_ROLES
+    if (rungs.get(plan.method).finds_buried or item.role not in _buried.BURIED_ROLES
             or not len(p)):
         return
     if plan.tracer is not None:
         t0 = time.perf_counter()
-        mask = ladder.buried(plan, item, p, n, lighting.own_ids(plan, item.name, own),
-                             rays=ladder.BURIED_RECEIVER_RAYS, per_corner=False)
+        mask = _buried.buried(plan, item, p, n, lighting.own_ids(plan, item.name, own),
+                              rays=_buried.BURIED_RECEIVER_RAYS, per_corner=False)
         plan.timings["buried_test"] = (plan.timings.get("buried_test", 0.0)
                                        + time.perf_counter() - t0)
         if vertices is not None:  # kept for the frames of a live bake
@@ -269,7 +274,8 @@ def attach_forest(plan: Plan, prototypes, epsilon=None) -> None:
     a calibration already done did not see them; prepare(items, settings, prototypes) does
     (the add-on's bake job passes them there)."""
     _forest.attach(plan, prototypes, epsilon)
-    if (plan.forest is not None and plan.method == "raytrace" and plan.tracer is not None
+    if (plan.forest is not None and rungs.get(plan.method).rays_see_instances
+            and plan.tracer is not None
             and not lighting.traces_instances(plan) and _forest.traced_meshes(prototypes)):
         t0 = time.perf_counter()
         bases = {}

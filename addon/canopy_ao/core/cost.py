@@ -16,7 +16,7 @@ Work per receiver, counted from the plan:
   (occlusion_features.h), counted as a voxel step each;
 - hybrid: the rays of raytrace (short, but each still descends the BVH) plus grid's steps;
 - every rung but raytrace and hybrid, when the plan has a tracer: its buried test
-  (bake._zero_buried), ladder.BURIED_RECEIVER_RAYS short rays per leaf or branch receiver,
+  (bake._zero_buried), buried.BURIED_RECEIVER_RAYS short rays per leaf or branch receiver,
   each counted as a full ray's log2(triangles) BVH steps (an upper bound: they stop within 1 %
   of the object's size).
 Predicted seconds = Σ work × the unit's constant / threads; the constants are seconds per
@@ -28,9 +28,11 @@ from __future__ import annotations
 
 import math
 
-from . import texel_budget
+from . import ray_budget, texel_budget
+from .buried import BURIED_RECEIVER_RAYS, BURIED_ROLES
 from .native import _core
-from .scene import RECEIVER_ROLES
+from .rungs.base import Proxy, exact as exact_rung, get as rung_of
+from .scene import RECEIVER_ROLES, receiver_items
 
 # Seconds per unit of work on one core. Ratios measured with
 #   nice /usr/bin/python3 bench/cost_constants.py
@@ -71,19 +73,6 @@ def receiver_count(plan, items) -> int:
     return sum(len(it.positions) for it in items if it.role in RECEIVER_ROLES)
 
 
-def receiver_items(plan, names=None):
-    """(item, kind, count) of each receiver item the tracer holds that a bake with this plan
-    evaluates: named in ``names`` (None: every one) and, when the plan has targets, one of them
-    (its kind, "vertex" or "texel", and count from the target; else every vertex)."""
-    for it in plan.tracer_items:
-        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
-            continue
-        if plan.targets and it.name not in plan.targets:
-            continue
-        kind, n, _group = plan.targets.get(it.name, ("vertex", len(it.positions), 1))
-        yield it, kind, int(n)
-
-
 def corners(plan, names=None, samples=None) -> float:
     """Rays per sample a receiver of this plan casts with the exact rung at ``samples`` rays
     per corner (None: the settings'): the mean face corners per receiver over the items named
@@ -91,7 +80,6 @@ def corners(plan, names=None, samples=None) -> float:
     tracer: at Cycles' bake point its rays spread evenly over the bake's vertices
     (ray_budget.object_rays), else RayTracer.vertex_rays (its per-vertex cap included); a
     texel has one corner, and so has a vertex the tracer does not hold by name."""
-    from . import ray_budget
     tracer = plan.tracer
     if tracer is None:
         return 1.0
@@ -117,10 +105,9 @@ def corners(plan, names=None, samples=None) -> float:
 
 def buried_test_rays(plan, receivers: int, names=None) -> float:
     """The rays the bake's buried test casts for ``receivers`` points of a rung that does not
-    find buried points itself (ladder.BURIED_METHODS; bake._zero_buried): BURIED_RECEIVER_RAYS
+    find buried points itself (Rung.finds_buried False; bake._zero_buried): BURIED_RECEIVER_RAYS
     per receiver on a leaf or branch item (their share of the targets, or of the tracer's
     receiver items), none without a tracer."""
-    from .ladder import BURIED_RECEIVER_RAYS, BURIED_ROLES
     if plan.tracer is None or receivers <= 0:
         return 0.0
     tested = total = 0
@@ -130,14 +117,14 @@ def buried_test_rays(plan, receivers: int, names=None) -> float:
     return float(receivers) * (tested / total if total else 0.0) * BURIED_RECEIVER_RAYS
 
 
-def work(plan, method: str, receivers: int, names=None, samples=None) -> tuple[str, float]:
-    """(unit, count) of the work ``method`` does for ``receivers`` points of this plan (names:
-    the items they are on, for the rays' corner count; None = every receiver; samples: the
-    exact rung's rays per corner, None = the settings'), the buried test's rays included
-    (converted to the method's unit by the constants' ratio)."""
-    from .ladder import BURIED_METHODS
-    unit, count = _work(plan, method, receivers, names, samples)
-    if method in BURIED_METHODS:
+def work(plan, method, receivers: int, names=None, samples=None) -> tuple[str, float]:
+    """(unit, count) of the work ``method`` (a rung or its name) does for ``receivers`` points
+    of this plan (names: the items they are on, for the rays' corner count; None = every
+    receiver; samples: the exact rung's rays per corner, None = the settings'), the buried
+    test's rays included (converted to the method's unit by the constants' ratio)."""
+    rung = rung_of(method)
+    unit, count = _work(plan, rung, receivers, names, samples)
+    if not rung.finds_buried:
         rays = buried_test_rays(plan, receivers, names)
         if rays:
             depth = math.log2(max(int(plan.tracer.triangle_count), 2))
@@ -145,35 +132,40 @@ def work(plan, method: str, receivers: int, names=None, samples=None) -> tuple[s
     return unit, count
 
 
-def _work(plan, method: str, receivers: int, names=None, samples=None) -> tuple[str, float]:
-    """work() without the buried test."""
-    from .proxies import own_shells
+def _work(plan, method, receivers: int, names=None, samples=None) -> tuple[str, float]:
+    """work() without the buried test: the rung's own count (Rung.work)."""
+    rung = rung_of(method)
+    if rung.work is None:
+        raise ValueError(f"no cost model for method {rung.name!r}")
+    return rung.work(rung, plan, receivers, names, samples)
+
+
+def analytic_work(rung, plan, receivers: int, names=None, samples=None, unit="shell"):
+    """The analytic rungs' work: per receiver its in-shell evaluations (1, or k of its tree's
+    shells for a rung lit by k shells) + one per occluder (every tree's shells as this rung
+    lights them, every trunk solid), each a ``unit``."""
     solids = sum(len(es) for es in plan.trunks.values())
-    shells = {t: len(own_shells(plan, t, method)) for t in plan.fits} if method in (
-        "sphere", "ellipsoid", "reeves_blau", "shells", "medium") else {}
+    shells = {t: len(rung.own_shells(plan, t)) for t in plan.fits}
     total = sum(shells.values())
-    if method in ("sphere", "ellipsoid", "reeves_blau"):
-        return "shell", receivers * float(1 + total + solids)
-    if method in ("shells", "medium"):
-        k = max(shells.values(), default=1)
-        return ("medium" if method == "medium" else "shell"), receivers * float(k + total + solids)
-    if method == "grid":
-        steps = GRID_EXACT_VOXELS + 2 * math.log2(GRID_RESOLUTION)
-        return "voxel_step", receivers * float(GRID_DIRECTIONS) * steps
-    if method == "regression":
-        return "voxel_step", receivers * float(FEATURE_DIRECTIONS)
-    if method == "raytrace":
-        tracer = plan.tracer
-        m = tracer.triangle_count if tracer is not None else 1
-        depth = math.log2(max(int(m), 2))
-        k = plan.settings.samples if samples is None else samples
-        return "bvh_step", receivers * float(k) * corners(plan, names, k) * depth
-    if method == "hybrid":  # in BVH steps: the grid's voxel steps converted by their costs
-        _u, rays = _work(plan, "raytrace", receivers, names, samples)
-        _u, steps = _work(plan, "grid", receivers)
-        ratio = SECONDS_PER_UNIT["voxel_step"] / SECONDS_PER_UNIT["bvh_step"]
-        return "bvh_step", rays + steps * ratio
-    raise ValueError(f"no cost model for method {method!r}")
+    if rung.proxy is not Proxy.SHELLS:
+        return unit, receivers * float(1 + total + solids)
+    k = max(shells.values(), default=1)
+    return unit, receivers * float(k + total + solids)
+
+
+def ray_work(plan, receivers: int, names=None, samples=None) -> float:
+    """BVH steps of the exact rung's rays: samples × the receivers' corners × log2 triangles."""
+    tracer = plan.tracer
+    m = tracer.triangle_count if tracer is not None else 1
+    depth = math.log2(max(int(m), 2))
+    k = plan.settings.samples if samples is None else samples
+    return receivers * float(k) * corners(plan, names, k) * depth
+
+
+def grid_work(receivers: int) -> float:
+    """Voxel steps of the density grid's line integrals for ``receivers`` points."""
+    steps = GRID_EXACT_VOXELS + 2 * math.log2(GRID_RESOLUTION)
+    return receivers * float(GRID_DIRECTIONS) * steps
 
 
 def threads() -> int:
@@ -181,8 +173,9 @@ def threads() -> int:
     return max(1, int(_core.max_threads())) if _core is not None else 1
 
 
-def predict(plan, method: str, receivers: int, names=None, samples=None) -> dict:
-    """{"unit", "work", "seconds_per_unit", "threads", "seconds"} for ``method`` on
+def predict(plan, method, receivers: int, names=None, samples=None) -> dict:
+    """{"unit", "work", "seconds_per_unit", "threads", "seconds"} for ``method`` (a rung or its
+    name) on
     ``receivers`` points (on the items named ``names``; None = every receiver) at ``samples``
     rays per corner for the rays' rungs (None: the settings'): the cost model above, no
     timing."""
@@ -210,7 +203,8 @@ def affordable_samples(plan, receivers: int) -> int:
     k = int(s.samples)
     if s.time_budget <= 0:
         return k
-    while predict(plan, "raytrace", receivers, samples=k)["seconds"] > s.time_budget:
+    exact = exact_rung()
+    while predict(plan, exact, receivers, samples=k)["seconds"] > s.time_budget:
         if k // 2 < AUTO_MIN_RAYS:
             return int(s.samples)
         k //= 2

@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lighting import _scene_triangles, tau_of
+from .meshes import scene_triangles
 from .native import CanopyAOError, _core, require
-from .scene import ray_length
+from .scene import ray_length, tau_of
 
 DEFAULT_EPSILON = 1e-3  # the core's default cut-off (occluders.h)
 
@@ -186,9 +186,9 @@ class Forest:
 
 def prototype_mesh(items):
     """(vertices float32 (V, 3), triangles int32 (M, 3)): every non-ignored item's triangles
-    in one mesh (lighting._scene_triangles), or None when there are none."""
+    in one mesh (meshes.scene_triangles), or None when there are none."""
     try:
-        return _scene_triangles(items)
+        return scene_triangles(items)
     except CanopyAOError:  # no triangles
         return None
 

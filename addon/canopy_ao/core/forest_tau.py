@@ -25,9 +25,11 @@ import time
 import numpy as np
 
 from . import ladder
-from .taufit import TAU_RANGE
+from .buried import buried
 from .lighting import evaluate_points, trace, traces_instances
+from .rungs import base as rungs
 from .scene import Plan
+from .taufit import TAU_RANGE
 
 KEEP = 0.99  # κ replaces 1 only if it cuts the sample's squared error by more than 1 %
 SEED_OFFSET = 104729  # the sample's own draw (not the ladder's points)
@@ -38,7 +40,7 @@ def wanted(plan: Plan) -> bool:
     traces the instances themselves; the hybrid's near rays do not see them), and a tracer
     that holds the instances (their meshes)."""
     return (plan.forest is not None and plan.settings.tau is None
-            and plan.method not in ("raytrace", "hybrid")
+            and not rungs.get(plan.method).needs_tracer
             and plan.tracer is not None and traces_instances(plan))
 
 
@@ -59,7 +61,7 @@ def calibrate(plan: Plan, items) -> dict | None:
             ref.append(trace(plan, p, n, s.calibration_samples, own=own))
             own_ao.append(evaluate_points(plan, it.role, it.tree, it.name, p, n, plan.method,
                                           plan.taus(), local))
-            keep.append(~ladder.buried(plan, it, p, n, own))
+            keep.append(~buried(plan, it, p, n, own))
             P.append(p)
             N.append(n)
     finally:

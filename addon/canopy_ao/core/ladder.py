@@ -15,49 +15,39 @@ import time
 import numpy as np
 
 from . import cost, native
+from .buried import BURIED_RAYS, BURIED_SCALE, buried
 from .lighting import evaluate_points, own_ids, trace, traces_instances
+from .rungs import auto, base as rungs, registry  # noqa: F401  (registry: fills the ladder)
 from .scene import RECEIVER_ROLES, SCALED_ROLES, Plan
 from .taufit import MIN_SPLIT_POINTS, TAU_RANGE, golden_min, tau_per_tree  # noqa: F401
 
-# (name, label, help) of each rung; settings.OPTIONS offers them in this order.
-RUNGS = (
-    ("auto", "Auto", "Calibrate tau and climb sphere / ellipsoid / shells / medium / grid / "
-                     "rays against a few hundred ray-traced points: the cheapest rung that is "
-                     "good enough within the time budget"),
-    ("sphere", "Sphere", "One fitted sphere per tree (Hegeman Eq. 4-6)"),
-    ("ellipsoid", "Ellipsoid", "One fitted ellipsoid per tree"),
-    ("shells", "Shells", "Several ellipsoid shells per tree (k-means clusters)"),
-    ("medium", "Leaf medium", "The shells filled with randomly oriented leaves: exact expected "
-                              "AO of a uniform medium (tabulated)"),
-    ("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid"),
-    ("grid", "Density grid", "Leaf density voxelised, rays marched through it"),
-    ("regression", "Regression", "Ray-free: up to 1024 ray-traced points fitted on cheap "
-                                 "per-vertex features of the density grid and the tree's shape; "
-                                 "no rays beyond them, cost independent of the leaf count"),
-    ("hybrid", "Near/far hybrid", "Rays out to a few density-grid voxels, the grid beyond"),
-    ("raytrace", "Ray-traced", "Exact: Embree rays against every triangle (slowest)"),
-)
-METHODS = tuple(r[0] for r in RUNGS)
-ANALYTIC_METHODS = ("sphere", "ellipsoid", "shells")
+# (name, label, help) of each rung, in the ladder's order (rungs/registry.py); settings.OPTIONS
+# offers them in this order.
+RUNGS = tuple((r.name, r.label, r.help) for r in rungs.ladder())
+METHODS = rungs.names()
+# The rungs auto always weighs (the analytic ones; the others only where the plan has their
+# input: Rung.climbs).
+ANALYTIC_METHODS = tuple(r.name for r in rungs.ladder() if r.climbs is rungs.always)
 DEFAULT_TAU = 1.5  # τ when it is neither given nor calibrated
 # Rungs that take τ (the density grid has physical density; rays are exact).
-TAU_METHODS = ANALYTIC_METHODS + ("medium", "reeves_blau")
+TAU_METHODS = tuple(r.name for r in rungs.ladder() if r.takes_tau and not r.chooses)
 
 
 def available_methods() -> tuple[str, ...]:
     """Methods the loaded core can run: all of them, or none but "auto" without the module."""
-    return METHODS if native.core_status()[0] else ("auto",)
+    return rungs.names() if native.core_status()[0] else tuple(
+        r.name for r in rungs.ladder() if r.chooses)
 
 
 def triangles_needed(method: str, tau, role: str) -> bool:
     """Whether an item's triangles take part in a bake (the add-on skips fetching them
     otherwise: Blender's loop triangulation costs more than positions and normals together).
-    They are rays' targets (method "raytrace", and the calibration of "auto" or of any method
-    with tau None), the density grid's input, and grass blades (connected components); the
-    analytic models with a given τ need positions and normals only."""
+    They are rays' targets (the exact rung, and the calibration of auto or of any method with
+    tau None), the density grid's input, and grass blades (connected components); the
+    analytic models with a given τ need positions and normals only (Rung.needs_triangles)."""
     if role == "IGNORE":
         return False
-    if method in ("raytrace", "grid", "regression", "hybrid", "auto") or tau is None:
+    if rungs.get(method).needs_triangles or tau is None:
         return True
     return role == "GRASS"
 
@@ -76,44 +66,11 @@ def sample_receivers(items, count, seed):
     return picks
 
 
-# A point is buried when every one of BURIED_RAYS rays stops within BURIED_SCALE of its
-# object's size (bounding-box diagonal): scale-free; an open crevice lets some rays out. On
-# Sapling leaves (bench/out/real, 3000 vertices each) 1e-2 finds 89-98 % of the vertices whose
-# 64-ray AO is 0 (1e-3: 2-95 %, the twigs are thicker than that), and none it finds is lit.
-BURIED_RAYS = 16
-BURIED_SCALE = 1e-2
-# The bake's own test of its receivers (bake._zero_buried): the rungs that do not find buried
-# points by themselves, on leaves and branches, 8 rays per vertex (dealt out to its corners).
-# On the nine Sapling tree scenes (bench/real_assets.py prints it) it finds 97.3-99.7 % of the
-# vertices the benchmark's test (32 rays at every corner) finds, and 5-80 % more besides, all
-# but closed in (their reference AO 0.001-0.026 on average); it takes 0.017-0.056x the time of
-# a 64-sample bake (its printed figures, 2026-12-02).
-BURIED_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid",
-                  "regression")
-BURIED_ROLES = ("CANOPY", "TRUNK")
-BURIED_RECEIVER_RAYS = 8
-
-
 def sample_ids(plan: Plan, item, idx):
     """The tracer-mesh vertex ids of an item's sample vertices idx (a part of an item names
     the whole item's vertices: scene.parts), or None."""
     whole = item.vertex_map[idx] if item.vertex_map is not None else idx
     return own_ids(plan, item.name, {"vertex_ids": whole})
-
-
-def buried(plan: Plan, item, p, n, own=None, rays=BURIED_RAYS, per_corner=True) -> np.ndarray:
-    """bool (N,): points p, n of item enclosed by the surface they sit on (a leaf's base inside
-    a branch tube: ray-traced AO 0 whatever the model), by a trace of ``rays`` rays (at every
-    face corner, or with per_corner=False dealt out to a vertex's corners) with the distance
-    BURIED_SCALE × the item's bounding-box diagonal."""
-    if not len(p) or plan.tracer is None:
-        return np.zeros(len(p), bool)
-    size = float(np.linalg.norm(np.ptp(item.positions, axis=0)))
-    if not size > 0:
-        return np.zeros(len(p), bool)
-    short = trace(plan, p, n, rays, own=own, distance=BURIED_SCALE * size,
-                  per_corner=per_corner)
-    return np.asarray(short) <= 0.0
 
 
 def calibrate(plan: Plan, items, candidates, tau_fixed=None):
@@ -158,17 +115,18 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     batches = _batches(groups)
 
     n_receivers = cost.receiver_count(plan, items)
-    rays = cost.affordable_samples(plan, n_receivers) if "raytrace" in candidates \
-        else s.samples
+    exact = rungs.exact().name
+    rays = cost.affordable_samples(plan, n_receivers) if exact in candidates else s.samples
 
     def err(method, tau, scale=None, where=None):
         plan.role_scale = scale or {}
         sel = keep if where is None else where
-        if method == "raytrace":
+        rung = rungs.get(method)
+        if rung.exact:
             # Its own noise, not the reference's: another seed than the reference traced with.
             got = [trace(plan, p, n, rays, seed=s.seed + 7919, own=own)
                    for _it, p, n, own, _ in groups]
-        elif method in TAU_METHODS:  # the scene plan: one call per role, a tree per point
+        elif rung.scene_plan:  # the scene plan: one call per role, a tree per point
             got = [np.empty(len(ref), np.float32)]
             for (role, key), (trees, p, n, where) in batches.items():
                 got[0][where] = evaluate_points(plan, role, trees, key, p, n, method, tau)
@@ -180,7 +138,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
 
     results, predicted, scales = {}, {}, {}
     for m in candidates:
-        if m not in TAU_METHODS:  # physical density / exact: no τ to fit
+        if not rungs.get(m).takes_tau:  # physical density / exact: no τ to fit
             tau = float(tau_fixed or DEFAULT_TAU)
         elif tau_fixed is not None:
             tau = float(tau_fixed)
@@ -198,7 +156,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         results[m] = (tau, err(m, tau, scales.get(m)))
         # Counted work × fixed constants (cost.py): the same prediction whatever the load.
         predicted[m] = cost.predict(plan, m, n_receivers,
-                                    samples=rays if m == "raytrace" else None)
+                                    samples=rays if rungs.get(m).exact else None)
     # Walk up the ladder: a richer rung only if it cuts the error by > 10 %, the current one
     # misses the target, and the richer one fits the time budget.
     chosen, skipped = candidates[0], []
@@ -217,8 +175,8 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
            f"{s.target_rmse}")
     if skipped:
         why += f" within the {s.time_budget:g} s budget (over it: {', '.join(skipped)})"
-    if chosen == "raytrace" and rays != s.samples:
-        full = cost.predict(plan, "raytrace", n_receivers)["seconds"]
+    if rungs.get(chosen).exact and rays != s.samples:
+        full = cost.predict(plan, chosen, n_receivers)["seconds"]
         why += (f"; at {rays} rays per corner, not the {s.samples} asked ({full:.2g} s "
                 f"predicted, over the {s.time_budget:g} s budget)")
     info = {
@@ -234,7 +192,7 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         "candidates": {m: {"tau": _scene_tau(t), "tau_by_tree": _tree_taus(t),
                            "rmse": math.sqrt(e), "predicted_seconds": predicted[m]["seconds"],
                            **({"role_scale": scales[m]} if scales.get(m) else {}),
-                           "cost": predicted[m], **({"samples": rays} if m == "raytrace"
+                           "cost": predicted[m], **({"samples": rays} if rungs.get(m).exact
                                                     else {})}
                        for m, (t, e) in results.items()},
         "chosen": chosen,
@@ -278,8 +236,8 @@ def _bake_samples(plan: Plan) -> None:
     """Bake with the rays per corner calibrate() weighed the chosen exact rung at (fewer than
     asked where the asked ones are over the time budget): plan.settings becomes a copy, the
     caller's settings stay as given."""
-    k = (plan.calibration or {}).get("candidates", {}).get("raytrace", {}).get("samples")
-    if plan.method == "raytrace" and k is not None and int(k) != int(plan.settings.samples):
+    k = (plan.calibration or {}).get("candidates", {}).get(plan.method, {}).get("samples")
+    if rungs.get(plan.method).exact and k is not None and int(k) != int(plan.settings.samples):
         plan.notes.append(f"auto: rays at {int(k)} per corner, not the "
                           f"{plan.settings.samples} asked (those are over the time budget)")
         plan.settings = dataclasses.replace(plan.settings, samples=int(k))
@@ -291,35 +249,29 @@ def choose(plan: Plan, items, proxyless_auto: bool) -> None:
     proxyless_auto: "auto" on a scene with no tree of its own but grass or instanced trees
     (bake.prepare): their laws are weighed against rays on the same sample."""
     settings = plan.settings
-    analytic = settings.method in TAU_METHODS + ("auto",)
+    asked = rungs.get(settings.method)
+    analytic = asked.takes_tau
+    fallback = auto.FALLBACK if asked.chooses else settings.method
     plan.method = settings.method
     if analytic and plan.fits:
-        candidates = list(ANALYTIC_METHODS) if settings.method == "auto" else [settings.method]
-        if settings.method == "auto":
-            candidates.append("medium")
-            if plan.grid is not None:
-                candidates.append("grid")
-            if plan.regression is not None:
-                candidates.append("regression")
-            if plan.tracer is not None and not settings.ray_free:
-                # The exact rung tops the ladder: on small or sparse scenes a few rays per vertex
-                # beat every proxy within the time budget; on big ones the budget rules it out.
-                candidates.append("raytrace")
-        if plan.tracer is not None and (settings.method == "auto" or settings.tau is None):
+        candidates = ([r.name for r in rungs.ladder() if r.climbs is not None and r.climbs(plan)]
+                      if asked.chooses else [settings.method])
+        if plan.tracer is not None and (asked.chooses or settings.tau is None):
             plan.method, tau, plan.calibration = calibrate(plan, items, candidates,
                                                            settings.tau)
             plan.tau, plan.tau_by_tree = _scene_tau(tau), _tree_taus(tau)
         else:
-            plan.method = "ellipsoid" if settings.method == "auto" else settings.method
+            plan.method = fallback
             if settings.tau is None:
                 plan.notes.append(f"tau not calibrated; using the default {DEFAULT_TAU}")
     elif analytic:
-        plan.method = "ellipsoid" if settings.method == "auto" else settings.method
+        plan.method = fallback
         if plan.forest is None:  # all its trees may be instances: then it is no news
             plan.notes.append("no CANOPY object: no proxies fitted")
         if proxyless_auto and plan.tracer is not None and not settings.ray_free:
             # The grass law (Hegeman Eq. 9) and the instances' shells against the exact rung
             # (whose tracer holds the instances), on the same sample.
+            exact = rungs.exact().name
             plan.method, plan.tau, plan.calibration = calibrate(
-                plan, items, ["ellipsoid", "raytrace"], DEFAULT_TAU)
+                plan, items, [auto.FALLBACK, exact], DEFAULT_TAU)
     _bake_samples(plan)

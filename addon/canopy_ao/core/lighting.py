@@ -18,32 +18,14 @@ attached to it (Lights): one call per set of receivers; this module only chooses
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from . import opacity, ray_budget, texel_budget
+from . import ray_budget, texel_budget
+from .forest import tracer_instances
+from .meshes import bake_shading, scene_triangles
 from .native import CanopyAOError, _core
-from .scene import Plan, ray_length
-
-
-# The rungs the scene plan lights (scene_plan.h's PlanMethod; ladder.TAU_METHODS).
-PLAN_METHODS = ("sphere", "ellipsoid", "reeves_blau", "shells", "medium")
-
-
-def tau_of(tau, tree):
-    """τ of one tree: ``tau`` is one number for every tree or {tree: τ} (calibrated per tree;
-    a tree missing from it takes the value under None)."""
-    if isinstance(tau, dict):
-        return float(tau.get(tree, tau.get(None, 1.0)))
-    return float(tau)
-
-
-def scaled_tau(tau, scale):
-    """``tau`` (one number, or {tree: τ} with None for the rest) with every τ times scale."""
-    if isinstance(tau, dict):
-        return {t: float(v) * scale for t, v in tau.items()}
-    return float(tau) * scale
+from .rungs.base import get as rung_of, plan_method
+from .scene import Plan, ray_length, scaled_tau, tau_of
 
 
 class Lights:
@@ -109,47 +91,47 @@ def evaluate_points(plan: Plan, role: str, tree: str, grass_key: str | None,
     own: None, or {"vertex_ids" | "triangle_ids": int32 (N,)}, each point's vertex or triangle
     in its item (-1 = none), so the exact rung's rays skip only what they start on.
     group: consecutive points forming one receiver, a texel's sub-samples (ray_args)."""
-    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, method, tau, own, group)
+    rung = rung_of(method)
+    ao = _evaluate_scene_points(plan, role, tree, grass_key, p, n, rung, tau, own, group)
     # The analytic rungs' scene plan multiplies the forest in its own call; the exact rung's
     # rays already hit the instanced trees when its tracer holds them.
-    if (plan.forest is not None and len(p) and method not in PLAN_METHODS
-            and not (method == "raytrace" and traces_instances(plan))):
+    if (plan.forest is not None and len(p) and not rung.scene_plan
+            and not (rung.rays_see_instances and traces_instances(plan))):
         ao = np.clip(ao * plan.forest.ao(p, n), 0.0, 1.0).astype(np.float32, copy=False)
     return ao
 
 
 def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | None,
-                           p: np.ndarray, n: np.ndarray, method: str, tau: float,
+                           p: np.ndarray, n: np.ndarray, rung, tau: float,
                            own=None, group=1) -> np.ndarray:
-    """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree.
-
-    Any receiver inside a tree's shells (its own canopy, a trunk, but also ground or grass that
-    a low crown reaches down to) gets that tree's in-shell model; every shell it is outside of
-    is an occluder. Trunks are solid occluders for everything but their own tree's canopy and
-    trunk (which sit inside or on them)."""
+    """AO for receiver points p, n (float32 (N, 3)) of an item with this role and tree: the
+    rung's own evaluate (rungs/base.py), called here so every rung sees the same empty case."""
     if len(p) == 0:
         return np.ones(0, np.float32)
-    # The hybrid: with nothing to voxelise (a grass field alone) no far field, so the exact
-    # rung; a blade takes the grass law (the whole layer) and the grid, as the grid rung.
-    if method == "hybrid" and plan.grid is None:
-        method = "raytrace"
-    elif method == "hybrid" and role == "GRASS":
-        method = "grid"
-    if method == "raytrace":
-        ids = own_ids(plan, grass_key, own)
-        if ray_budget.applies(plan, grass_key, ids):
-            return ray_budget.trace(plan, grass_key, p, n, ids)
-        return trace(plan, p, n, own=ids, **ray_args(plan, group))
-    if method == "grid":
-        return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
-    if method == "regression":
-        return plan.regression.ao(role, tree, p, n, grass_key, own)
-    if method == "hybrid":
-        # The near rays see the blades around a ground point: a grass layer on top would count
-        # them twice (round tree on a grass field: ground bias -0.13 against rays, now +0.02).
-        return _hybrid_ao(plan, p, n, own_ids(plan, grass_key, own), group)
-    # The analytic rungs: the whole per-receiver composition, grass layers and forest
-    # included, in one native call (docs/DESIGN.md, 'How each role is lit').
+    return rung.evaluate(rung, plan, role, tree, grass_key, p, n, tau, own, group)
+
+
+def exact_ao(plan: Plan, grass_key, p, n, own=None, group=1) -> np.ndarray:
+    """The exact rung's AO: Embree rays at settings.samples (a vertex's spread evenly over the
+    bake's vertices where that applies: ray_budget.py)."""
+    ids = own_ids(plan, grass_key, own)
+    if ray_budget.applies(plan, grass_key, ids):
+        return ray_budget.trace(plan, grass_key, p, n, ids)
+    return trace(plan, p, n, own=ids, **ray_args(plan, group))
+
+
+def grid_ao(plan: Plan, role, grass_key, p, n) -> np.ndarray:
+    """The density grid's AO times the grass (a blade's own law, the layers over the ground)."""
+    return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
+
+
+def scene_plan_ao(rung, plan: Plan, role, tree, grass_key, p, n, tau, own=None, group=1):
+    """The analytic rungs' evaluate. Any receiver inside a tree's shells (its own canopy, a
+    trunk, but also ground or grass that a low crown reaches down to) gets that tree's
+    in-shell model; every shell it is outside of is an occluder. Trunks are solid occluders
+    for everything but their own tree's canopy and trunk (which sit inside or on them). The
+    whole per-receiver composition, grass layers and forest included, is one native call
+    (docs/DESIGN.md, 'How each role is lit')."""
     if plan.role_scale.get(role, 1.0) != 1.0:
         tau = scaled_tau(tau, plan.role_scale[role])
     lit = lights(plan)
@@ -157,8 +139,8 @@ def _evaluate_scene_points(plan: Plan, role: str, tree: str, grass_key: str | No
     if role == "GRASS":
         ground, blade, layer = _blades(plan, grass_key, p)
         grass = (ground, blade) if layer is None else (ground, blade, layer)
-    return lit.native.evaluate(p, n, role, lit.tree_ids(tree), method, lit.taus(tau),
-                               grass=grass)
+    return lit.native.evaluate(p, n, role, lit.tree_ids(tree), plan_method(rung),
+                               lit.taus(tau), grass=grass)
 
 
 def _blades(plan: Plan, grass_key, p):
@@ -243,9 +225,8 @@ def trace(plan: Plan, p, n, samples, seed=None, own=None, distance=None, **extra
 def _grid_ao(plan, p, n):
     if plan.grid is None:  # no leaves or branches to voxelise (a grass field): nothing above
         return np.ones(len(p), np.float32)
-    far = ray_length(plan.settings.distance)
-    kw = {"distance": far} if far < math.inf else {}
-    return np.asarray(plan.grid.ao(p, n, **kw), dtype=np.float32)
+    return np.asarray(plan.grid.ao(p, n, distance=ray_length(plan.settings.distance)),
+                      dtype=np.float32)
 
 
 # The hybrid's near distance in voxels of the density grid: the grid resolves occlusion beyond
@@ -254,7 +235,7 @@ def _grid_ao(plan, p, n):
 HYBRID_VOXELS = 2.0
 
 
-def _hybrid_ao(plan, p, n, own=None, group=1):
+def hybrid_ao(plan, p, n, own=None, group=1):
     """Near exact, far statistical (native ao_near_far): settings.samples rays out to
     HYBRID_VOXELS grid voxels, started as the exact rung's (own: the tracer ids of own_ids, a
     vertex at Cycles' bake point), times the density grid's transmittance beyond
@@ -268,59 +249,18 @@ def _hybrid_ao(plan, p, n, own=None, group=1):
                       dtype=np.float32)
 
 
-def bake_shading(items):
-    """The tracer's bake-point data for items merged in order (native raytrace.h, 'Origins'):
-    {"normals": float32 (V, 3), "polygons": int32 (M,)}, each item's faces numbered apart (an
-    item without face ids counts every triangle a face)."""
-    nrms, polys, first = [], [], 0
-    for it in items:
-        nrms.append(it.normals)
-        faces = it.polygons if it.polygons is not None else np.arange(len(it.triangles))
-        polys.append(np.asarray(faces, np.int64) + first)
-        first += int(faces.max()) + 1 if len(faces) else 0
-    if not nrms:
-        return {"normals": np.zeros((0, 3), np.float32), "polygons": np.zeros(0, np.int32)}
-    return {"normals": np.ascontiguousarray(np.concatenate(nrms), dtype=np.float32),
-            "polygons": np.ascontiguousarray(np.concatenate(polys), dtype=np.int32)}
-
-
-def _scene_triangles(items, bases=None, shading=None):
-    """Every non-ignored item's triangles in one mesh: (vertices float32, triangles int32).
-    bases: a dict to fill with item name -> (its first vertex, its first triangle) there (None
-    for a name seen twice: it cannot say which mesh it means). shading: a dict to fill with
-    bake_shading of the same items, for the tracer's bake points."""
-    verts, tris, kept, base, tri_base = [], [], [], 0, 0
-    for it in items:
-        if it.role == "IGNORE" or not len(it.triangles):
-            continue
-        if bases is not None:
-            bases[it.name] = None if it.name in bases else (base, tri_base)
-        verts.append(it.positions)
-        tris.append(it.triangles + base)
-        kept.append(it)
-        base += len(it.positions)
-        tri_base += len(it.triangles)
-    if not verts:
-        raise CanopyAOError("the scene has no triangles")
-    if shading is not None:
-        shading.update(bake_shading(kept), **opacity.tracer_args(kept))
-    return (np.ascontiguousarray(np.concatenate(verts), dtype=np.float32),
-            np.ascontiguousarray(np.concatenate(tris), dtype=np.int32))
-
-
 def build_tracer(items, bases=None, prototypes=None):
     """The Embree ray tracer over every non-ignored item's triangles; bases as
-    _scene_triangles. prototypes: forest.Prototype list whose meshes are traced at every
+    meshes.scene_triangles. prototypes: forest.Prototype list whose meshes are traced at every
     instance matrix (Embree instances: each prototype's BVH built once), so the exact rung and
     calibration see instanced trees as the real triangles they are (docs/DESIGN.md, 'How each
     role is lit'). A scene of instances alone (a ground is a receiver with triangles, so this
     is rare) still gets a tracer. Vertex receivers start where Cycles' vertex bake starts them
     (its bake point, from the items' vertex normals and faces: native raytrace.h, 'Origins')."""
-    from .forest import tracer_instances
     inst = tracer_instances(prototypes)
     shading = {}
     try:
-        mesh = _scene_triangles(items, bases, shading)
+        mesh = scene_triangles(items, bases, shading)
     except CanopyAOError:
         if not inst:
             raise
@@ -343,4 +283,4 @@ def build_grid(items):
     wood_and_leaves = [it for it in items if it.role in ("CANOPY", "TRUNK") and len(it.triangles)]
     if not wood_and_leaves:
         return None
-    return _core.DensityGrid(*_scene_triangles(wood_and_leaves))
+    return _core.DensityGrid(*scene_triangles(wood_and_leaves))

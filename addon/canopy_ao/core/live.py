@@ -19,21 +19,25 @@ import numpy as np
 
 from . import proxies
 from .native import CanopyAOError, refusals_are_user_errors
+from .rungs import base as rungs
 from .scene import Plan, SceneItem, split_trees
 
-# The rungs that refit and evaluate fast enough per frame: the analytic proxy models (the
-# Reeves-Blau baseline is analytic too). The density grid and the rays rebuild a grid or a BVH
-# over every triangle each frame, which is a full bake, not a live update.
-LIVE_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau")
+
+
+def live_methods() -> tuple:
+    """The rungs that refit and evaluate fast enough per frame (Rung.live): the analytic proxy
+    models (the Reeves-Blau baseline is analytic too). The density grid and the rays rebuild a
+    grid or a BVH over every triangle each frame, which is a full bake, not a live update."""
+    return tuple(r.name for r in rungs.ladder() if r.live)
 
 
 def check_method(method: str, by_auto: bool = False) -> None:
     """CanopyAOError unless ``method`` (a rung, or what auto chose: ``by_auto``) can run
     live."""
-    if method not in LIVE_METHODS:
+    if not rungs.get(method).live:
         which = f"auto chose the {method} rung, which" if by_auto else f"the {method} rung"
         raise CanopyAOError(
-            f"live and per-frame AO run the analytic rungs only ({', '.join(LIVE_METHODS)}); "
+            f"live and per-frame AO run the analytic rungs only ({', '.join(live_methods())}); "
             f"{which} rebuilds its grid or ray tracer from every triangle each frame: choose "
             "one of those methods (or bake single frames)")
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from . import lighting, ray_budget
 from .native import CanopyAOError
+from .rungs import base as rungs
 from .scene import Plan, SceneItem, own_primitives
 
 
@@ -86,7 +87,7 @@ def rung_is_the_trace(plan: Plan, item: SceneItem) -> bool:
     """Whether item's AO under the plan's rung is the very trace bent_normals makes (the exact
     rung, one call for the whole item, no analytic forest multiplied in), so one trace gives
     both (bent_normals(..., with_ao=True))."""
-    return (plan.method == "raytrace" and item.role != "IGNORE"
+    return (rungs.get(plan.method).exact and item.role != "IGNORE"
             and (item.tree_labels is None or len(item.tree_names) <= 1)
             and (plan.forest is None or lighting.traces_instances(plan)))
 

@@ -8,6 +8,8 @@ import numpy as np
 from . import roles as _roles
 from .grass_layer import grass_layer
 from .native import _core
+from .rungs import base as rungs
+from .rungs.base import Proxy
 from .scene import Plan, SceneItem
 
 
@@ -20,15 +22,16 @@ def fit_tree(points: np.ndarray, settings, labels=None):
     shell is refitted to the same leaves, as fit_shells fits a cluster, instead of clustering
     again, whose partition can flip between two frames (docs/DESIGN.md, 'Live and per-frame
     AO')."""
+    rung = rungs.get(settings.method)
     sphere = _core.fit_sphere(points, trim=settings.trim)
-    if settings.method == "sphere":
+    if rung.proxy is Proxy.SPHERE:
         # The sphere model uses no ellipsoid: skip its fit (~40 ms per million points); the
         # sphere is then also the crown a trunk's bole is cut from (bole), as it is the medium.
         ell = _core.Ellipsoid.from_sphere(sphere)
     else:
         ell = _core.fit_ellipsoid(points, trim=settings.trim)
     k = max(1, min(settings.shells, len(points) // 64))
-    if settings.method not in ("auto", "shells", "medium"):
+    if rung.proxy is not Proxy.SHELLS:
         k = 1
     if k > 1 and labels is not None and len(labels) == len(points):
         shells = [_core.fit_ellipsoid(np.ascontiguousarray(points[labels == c]),
@@ -42,14 +45,10 @@ def fit_tree(points: np.ndarray, settings, labels=None):
     return (sphere, ell, shells), labels
 
 
-def own_shells(plan: Plan, tree: str, method: str) -> list:
-    """The shells of ``tree`` that ``method`` lights with (and that occlude for it)."""
-    sphere, ell, shells = plan.fits[tree]
-    if method == "sphere":
-        return [_core.Ellipsoid.from_sphere(sphere)]
-    if method in ("ellipsoid", "reeves_blau"):
-        return [ell]
-    return list(shells)
+def own_shells(plan: Plan, tree: str, method) -> list:
+    """The shells of ``tree`` that ``method`` (a rung or its name) lights with (and that
+    occlude for it): Rung.own_shells."""
+    return rungs.get(method).own_shells(plan, tree)
 
 
 def bole(plan: Plan, item: SceneItem) -> np.ndarray:

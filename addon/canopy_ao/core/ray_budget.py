@@ -7,7 +7,7 @@ quads casts 4 S rays and a leaf card's corner S. But the corners of a vertex are
 rays, falling as R^-α with its rays R, whatever its corners. For the same rays in all, Σ_v R_v
 fixed, the sum of the vertices' errors Σ R_v^-α is least when every R_v is the same. So a bake
 at S samples casts Cycles' rays — S × k̄ per vertex, k̄ the mean corners per vertex over the
-bake's vertex receivers (cost.receiver_items: its targets, else every receiver) — and deals
+bake's vertex receivers (scene.receiver_items: its targets, else every receiver) — and deals
 them evenly: each vertex casts the multiple of its own corners k nearest to S k̄ (at least k),
 one lattice dealt out to its corners in turn (ray s to corner s mod k: each corner has the same
 weight, so the estimate stays the corners' mean, unbiased). On the Sapling trees that moves
@@ -23,8 +23,7 @@ import math
 
 import numpy as np
 
-from . import cost
-from .scene import ray_length
+from .scene import ray_length, receiver_items
 
 
 def spreads(plan) -> bool:
@@ -48,7 +47,7 @@ def mean_corners(plan) -> float:
     got = plan.ray_shares.get(key)
     if got is None:
         corners = vertices = 0
-        for it, kind, _count in cost.receiver_items(plan):
+        for it, kind, _count in receiver_items(plan):
             base = plan.tracer_bases.get(it.name)
             if kind == "vertex" and base is not None and len(it.positions):
                 corners += plan.tracer.vertex_rays(base[0], len(it.positions), 1)

@@ -16,7 +16,7 @@ Fit, per (tree, role) group with enough sample points (else per role, else scene
 standardised features, expanded to [1, z, z², z_grid·z] (native), ridge regression with λ
 chosen by 5-fold cross-validation on the sample (ties to the larger λ); the piece columns
 (LeafTable) only where they cut that CV error by more than PIECES_GAIN (_fit). Buried sample points
-(every ray stops within ``BURIED_FRACTION`` of the object's size: a leaf base inside its branch)
+(every ray stops within ``buried.BURIED_SCALE`` of the object's size: a leaf base inside its branch)
 are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
 predicts them like any vertex.
 """
@@ -27,8 +27,9 @@ import time
 import numpy as np
 
 from . import native
-from .ladder import BURIED_RAYS as LADDER_BURIED_RAYS, BURIED_SCALE
+from . import buried as _buried
 from .leaf_features import LeafTable
+from .meshes import bake_shading, merged
 from .native import CanopyAOError
 from .regression_fit import NATIVE, Model
 from .scene import RECEIVER_ROLES, ray_length
@@ -37,29 +38,15 @@ OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
 # Meshes whose connected pieces (a leaf card, a branch tube) give a receiver piece features.
 LEAF_TABLE_ROLES = ("CANOPY", "TRUNK")
 PIECES_GAIN = 0.02       # the piece columns must cut a fit's CV MAE by more than this (_fit)
-# Buried: every one of BURIED_RAYS rays stops within BURIED_FRACTION of the receiver's object
-# bounding-box diagonal (auto's test, ladder.py, with twice its rays: with 16 rays more of the
-# darkest unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046).
-BURIED_FRACTION = BURIED_SCALE
-BURIED_RAYS = 2 * LADDER_BURIED_RAYS
+# Buried: the one test (buried.py) with twice auto's rays: with 16 rays more of the darkest
+# unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046.
+BURIED_RAYS = 2 * _buried.BURIED_RAYS
 MIN_GROUP = 96           # sample points a group needs for its own fit
 POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
 # Sizing on small scenes (calibration_size): counted work, scale-free.
 RAYS_PER_RECEIVER = 8    # calibration samples per receiver at most: 1/8 of a 64-sample bake
 MIN_SAMPLES = 32         # rays per calibration point at least
 MIN_POINTS = 256         # calibration points at least (when the scene has them)
-
-
-def _merged(items):
-    verts, tris, off = [], [], 0
-    for it in items:
-        verts.append(it.positions)
-        tris.append(it.triangles + off)
-        off += len(it.positions)
-    if not verts:
-        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)
-    return (np.ascontiguousarray(np.concatenate(verts), np.float32),
-            np.ascontiguousarray(np.concatenate(tris), np.int32))
 
 
 def tree_frame(points):
@@ -144,7 +131,7 @@ class RegressionRung:
         receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
         n_recv = sum(len(it.positions) for it in receivers)
         points, samples = calibration_size(n_recv, points, samples)
-        grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
+        grid = _core.DensityGrid(*merged(occ), resolution=resolution)
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
 
@@ -174,8 +161,7 @@ class RegressionRung:
             for it in traced:
                 bases[id(it)] = base
                 base += len(it.positions)
-            from .lighting import bake_shading
-            tracer = _core.RayTracer(*_merged(traced), **bake_shading(traced))  # bake points
+            tracer = _core.RayTracer(*merged(traced), **bake_shading(traced))  # bake points
             ids = _own_ids_from(bases)
         t_tracer = time.perf_counter()
         groups = {}
@@ -197,9 +183,9 @@ class RegressionRung:
                 got = ids(it, idx[m] - offs[k]) if m.any() else None
                 if got is not None:
                     own[m] = got
-            diag = np.array([_diag(it.positions) for it in its])[owner]
+            diag = np.array([_buried.size(it.positions) for it in its])[owner]
             ao = _trace(tracer, P, N, samples, d, seed + 1, own)
-            buried = _near_ao(tracer, P, N, diag, own) <= 0.0
+            buried = _buried_mask(tracer, P, N, diag, own)
             F = np.zeros((len(idx), NATIVE + LeafTable.COUNT), np.float32)
             for k, it in enumerate(its):
                 m = owner == k
@@ -323,10 +309,6 @@ def _fit(F, y):
     return full if full.cv_mae < (1.0 - PIECES_GAIN) * plain.cv_mae else plain
 
 
-def _diag(p):
-    return float(np.linalg.norm(p.max(0) - p.min(0))) if len(p) else 0.0
-
-
 def _trace(tracer, P, N, samples, distance, seed, ids):
     """Traced AO; points with an own vertex id (>= 0) skip only their own triangles."""
     P, N = np.ascontiguousarray(P, np.float32), np.ascontiguousarray(N, np.float32)
@@ -334,12 +316,13 @@ def _trace(tracer, P, N, samples, distance, seed, ids):
                                 vertex_ids=np.ascontiguousarray(ids, np.int32)))
 
 
-def _near_ao(tracer, P, N, diag, ids):
-    """Traced AO out to BURIED_FRACTION × each point's object diagonal (0 = buried)."""
-    out = np.ones(len(P), np.float32)
+def _buried_mask(tracer, P, N, diag, ids):
+    """bool: the points buried (buried.enclosed) in their object, of diagonal ``diag``."""
+    out = np.zeros(len(P), bool)
     for dg in np.unique(diag):
         m = diag == dg
         if dg <= 0:
             continue
-        out[m] = _trace(tracer, P[m], N[m], BURIED_RAYS, BURIED_FRACTION * dg, 7, ids[m])
+        out[m] = _buried.enclosed(tracer, P[m], N[m], dg, BURIED_RAYS, 7,
+                                  vertex_ids=np.ascontiguousarray(ids[m], np.int32))
     return out

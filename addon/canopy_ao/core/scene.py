@@ -66,6 +66,35 @@ class SceneItem:
                                 f"{len(self.normals)} normals")
 
 
+def receiver_items(plan, names=None):
+    """(item, kind, count) of each receiver item the tracer holds that a bake with this plan
+    evaluates: named in ``names`` (None: every one) and, when the plan has targets, one of them
+    (its kind, "vertex" or "texel", and count from the target; else every vertex)."""
+    for it in plan.tracer_items:
+        if it.role not in RECEIVER_ROLES or (names is not None and it.name not in names):
+            continue
+        if plan.targets and it.name not in plan.targets:
+            continue
+        kind, n, _group = plan.targets.get(it.name, ("vertex", len(it.positions), 1))
+        yield it, kind, int(n)
+
+
+
+def tau_of(tau, tree):
+    """τ of one tree: ``tau`` is one number for every tree or {tree: τ} (calibrated per tree;
+    a tree missing from it takes the value under None)."""
+    if isinstance(tau, dict):
+        return float(tau.get(tree, tau.get(None, 1.0)))
+    return float(tau)
+
+
+def scaled_tau(tau, scale):
+    """``tau`` (one number, or {tree: τ} with None for the rest) with every τ times scale."""
+    if isinstance(tau, dict):
+        return {t: float(v) * scale for t, v in tau.items()}
+    return float(tau) * scale
+
+
 def ray_length(distance) -> float:
     """The bake's AO distance as a ray length: 0 (or None), the add-on's spelling of
     'unlimited', is math.inf. Every model and tracer takes its cut-off from here. Cycles' World
@@ -109,7 +138,7 @@ class Plan:
     # item name -> ("vertex" | "texel", count): the receivers the bake evaluates (its
     # targets), or empty: every receiver item at its vertices (what the cost model counts)
     targets: dict = field(default_factory=dict)
-    # item name -> bool (V,): its vertices found buried (bake.BURIED_METHODS; kept for live
+    # item name -> bool (V,): its vertices found buried (Rung.finds_buried False; kept for live
     # frames, which have no tracer), and -> how many receivers a bake set to 0 so
     buried: dict = field(default_factory=dict)
     buried_count: dict = field(default_factory=dict)

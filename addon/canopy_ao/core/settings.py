@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
-from .ladder import DEFAULT_TAU, RUNGS
+from .ladder import DEFAULT_TAU
+from .rungs import base as rungs, registry  # noqa: F401  (registry: fills the ladder)
 from .native import LIMITS, CanopyAOError
 
 
@@ -34,7 +36,7 @@ class Option:
     min_exclusive: bool = False
     max_exclusive: bool = False
     soft_max: float | None = None  # the UI slider's end; values up to max stay valid
-    items: tuple = ()  # enum: ((id, label, help), ...)
+    items: tuple = ()  # enum: ((id, label, help[, number]), ...); number: see blender/properties
     none_prop: str = ""  # optional number: the switch that stands for None ...
     none_label: str = ""  # ... its label ...
     none_help: str = ""  # ... and help
@@ -126,10 +128,28 @@ def _enum(pairs):
     return tuple((i, label, text) for i, label, text in pairs)
 
 
+class RungChoices(Sequence):
+    """The method option's (id, label, help, number) items: the ladder's rungs as registered
+    now (rungs/registry.py), so a rung registered later is offered too; number: Rung.number,
+    what a saved .blend stores for it."""
+
+    def _items(self):
+        return [(r.name, r.label, r.help, r.number) for r in rungs.ladder()]
+
+    def __getitem__(self, i):
+        return self._items()[i]
+
+    def __len__(self):
+        return len(rungs.ladder())
+
+    def __repr__(self):
+        return f"RungChoices({rungs.names()})"
+
+
 OPTIONS = (
     # --- how the AO is computed (BakeSettings) ---
     Option("method", "enum", "auto", "Method", "How the AO is computed (the method ladder)",
-           items=_enum(RUNGS)),
+           items=RungChoices()),
     Option("tau", "float", None, "τ", "Optical depth of a canopy: AO at its centre is exp(-τ)",
            min=0.0, min_exclusive=True, max=LIMITS["tau"], soft_max=20.0,
            number_default=DEFAULT_TAU,

@@ -1,0 +1,19 @@
+"""regression: ray-free, a ridge fit of ray-traced points on cheap per-vertex features of the
+density grid and the tree's shape (core/regression.py)."""
+from .. import cost
+from .base import Rung
+
+
+def _evaluate(rung, plan, role, tree, grass_key, p, n, tau, own, group):
+    return plan.regression.ao(role, tree, p, n, grass_key, own)
+
+
+def _work(rung, plan, receivers, names=None, samples=None):
+    return "voxel_step", receivers * float(cost.FEATURE_DIRECTIONS)
+
+
+RUNG = Rung("regression", "Regression", "Ray-free: up to 1024 ray-traced points fitted on "
+            "cheap per-vertex features of the density grid and the tree's shape; no rays "
+            "beyond them, cost independent of the leaf count",
+            evaluate=_evaluate, work=_work, needs_triangles=True, needs_regression=True,
+            climbs=lambda plan: plan.regression is not None, number=7)
