@@ -17,7 +17,7 @@ best wall time kept:
   --samples S --save``, every visible mesh) with CANOPY_AO_PROFILE=1, whose stage lines
   (core/stage_profile.py) give Blender's start and load, the add-on's imports and
   registration, the bake's stages (gather, tracer: checks, corner tables, BVH build; rays:
-  sampling, tracing, reduction as CPU seconds over every thread; write), the save, and the
+  sampling, tracing, reduction as CPU seconds the workers ran, summed; write), the save, and the
   exit (the command's wall time less the process's age at its last line);
 - Cycles per ``--cycles-samples`` C: a plain-bpy script (no add-on) baking AO per vertex into a
   colour attribute of every visible mesh (denoising and adaptive sampling off, the file's

@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <cfloat>
-#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -1326,10 +1325,9 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   const bool profiling = stage_profiling();
   StageTimer wall_timer("rays: wall (all blocks)");
   parallel_for_blocks(n, grain, [&](std::size_t begin, std::size_t end) {
-    // Profiling: CPU seconds of this block in Embree's traversal (tracing), the rest of the
-    // loop (sampling: starts, directions, ray setup) and the per-point division (reduction).
-    using Clock = std::chrono::steady_clock;
-    const Clock::time_point block_start = profiling ? Clock::now() : Clock::time_point{};
+    // Profiling: this thread's CPU seconds in Embree's traversal (tracing), in the rest of the
+    // loop (sampling: starts, directions, ray setup) and in the per-point division (reduction).
+    const double block_start = profiling ? thread_cpu_seconds() : 0.0;
     double traversal = 0.0;
     // INV: rays[0..filled) belong to points owner[0..filled); hits are counted when flushed.
     alignas(64) RTCRay rays[kStream];
@@ -1356,9 +1354,9 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
 
     auto flush = [&] {
       if (profiling) {
-        const Clock::time_point t0 = Clock::now();
+        const double t0 = thread_cpu_seconds();
         embree::occluded(scene, &context.base, rays, filled);
-        traversal += std::chrono::duration<double>(Clock::now() - t0).count();
+        traversal += thread_cpu_seconds() - t0;
       } else {
         embree::occluded(scene, &context.base, rays, filled);
       }
@@ -1487,20 +1485,17 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       if (filled >= kMinStream) flush();
     }
     if (filled) flush();
-    const Clock::time_point reduce_start = profiling ? Clock::now() : Clock::time_point{};
+    const double reduce_start = profiling ? thread_cpu_seconds() : 0.0;
     for (std::size_t i = begin; i < end; ++i) {
       out[i] = std::min(1.0f, static_cast<float>(open[i - begin]) /
                                   static_cast<float>(cast[i - begin]));
     }
     if (bent) finish_bent(normals, begin, end, open_sum.data(), bent);
     if (profiling) {
-      const Clock::time_point block_end = Clock::now();
+      const double block_end = thread_cpu_seconds();
       add_stage_seconds("rays: tracing (CPU)", traversal);
-      add_stage_seconds("rays: sampling, starts (CPU)",
-                        std::chrono::duration<double>(reduce_start - block_start).count() -
-                            traversal);
-      add_stage_seconds("rays: reduction (CPU)",
-                        std::chrono::duration<double>(block_end - reduce_start).count());
+      add_stage_seconds("rays: sampling, starts (CPU)", reduce_start - block_start - traversal);
+      add_stage_seconds("rays: reduction (CPU)", block_end - reduce_start);
     }
   });
   wall_timer.stop();

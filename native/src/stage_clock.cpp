@@ -1,7 +1,9 @@
 #include "canopy_ao/stage_clock.h"
 
+#include <time.h>
+
 #include <atomic>
-#include <cstring>
+#include <chrono>
 #include <mutex>
 
 namespace canopy_ao {
@@ -11,6 +13,17 @@ std::mutex g_mutex;
 // Few stages (a dozen names): a vector searched by name keeps their first-seen order.
 std::vector<std::pair<std::string, std::pair<double, long long>>> g_totals;
 }  // namespace
+
+double thread_cpu_seconds() {
+#if defined(CLOCK_THREAD_CPUTIME_ID)
+  timespec ts;
+  if (clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts) == 0) {
+    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+  }
+#endif
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
 
 bool set_stage_profiling(bool on) { return g_on.exchange(on); }
 

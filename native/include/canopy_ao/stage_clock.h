@@ -1,10 +1,11 @@
 // Canopy AO — seconds per native stage, for profiling a bake (bench/stage_profile.py).
 //
 // Off by default, and then each timed section costs one relaxed atomic load. On, a section adds
-// its seconds to a process-wide total per stage name; sections on worker threads add CPU
-// seconds of every thread (a parallel stage's total is its wall time × the threads busy), so a
-// stage's share of the work is comparable whatever the thread count. Results never depend on
-// whether profiling is on.
+// its seconds to a process-wide total per stage name: StageTimer's wall seconds on the calling
+// thread (which may wait for parallel work: a BVH build), or sums of thread CPU seconds over
+// the worker threads of a parallel stage (names ending in "(CPU)"), which count only the time
+// those threads ran, so a stage's share of the work holds whatever the thread count and the
+// machine's load. Results never depend on whether profiling is on.
 #pragma once
 
 #include <chrono>
@@ -22,6 +23,11 @@ bool stage_profiling();
 void add_stage_seconds(const char* name, double seconds);
 /// Every stage's total seconds and number of sections, in the order first seen; clears them.
 std::vector<std::pair<std::string, std::pair<double, long long>>> take_stage_seconds();
+
+/// This thread's CPU seconds so far (POSIX CLOCK_THREAD_CPUTIME_ID; elsewhere the steady
+/// clock): a parallel stage summed over its worker threads counts only the time they ran, so
+/// it stays meaningful on a machine shared with other jobs.
+double thread_cpu_seconds();
 
 /// Times one section: from construction to stop() (or destruction) into stage `name`.
 /// `name` must outlive the timer (a string literal).
