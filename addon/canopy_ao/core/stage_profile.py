@@ -7,9 +7,9 @@ The command line (cli.py) then prints, on stderr after the bake, one line per st
 in the order a bake meets them: Blender's start and the file's load (the process's age when the
 script began; Linux only), the add-on's module imports and registration, the bake's own stages
 (BakeJob.timings and the plan's), the native core's (the tracer's checks, corner tables and BVH
-build; the rays' sampling, tracing and reduction, as CPU seconds the worker threads ran, summed: native
-stage_clock.h), the save, and last ``process age`` (seconds since the process started), so a
-caller timing the whole command sees what Blender's exit took. bench/stage_profile.py reads
+build; the rays' sampling, tracing and reduction as the CPU seconds their worker threads ran,
+summed: native stage_clock.h), the save, and last ``process age`` (seconds since the process
+started), so a caller timing the whole command sees what Blender's exit took. bench/stage_profile.py reads
 these lines. Profiling changes no result.
 """
 
