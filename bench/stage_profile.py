@@ -23,6 +23,9 @@ best wall time kept:
   colour attribute of every visible mesh (denoising and adaptive sampling off, the file's
   World AO distance), then saving: the bake call's seconds and the whole command's.
 
+Each time is given as wall seconds and as CPU seconds of every thread (the command's rusage;
+the bake's process_time), which hold their ratios when other jobs load the machine.
+
 The pairs are compared in order (S with C): by default each S with 2 S, the Cycles sample count
 whose error our rays matched on the real Sapling trees (issue #39: ours at 16 against Cycles at
 32, 64 against 128; bench/real_rays.py measures it). Prints the stage table of the last
@@ -33,6 +36,7 @@ The machine is shared: the load average is printed; compare ratios within one ru
 
 import argparse
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -66,23 +70,30 @@ for o in meshes:
     ca = o.data.color_attributes
     ca.active_color = ca.get("AO") or ca.new("AO", "FLOAT_COLOR", "POINT")
 t1 = time.perf_counter()
+c1 = time.process_time()
 bpy.ops.object.bake(type="AO", target="VERTEX_COLORS", margin=0, use_selected_to_active=False)
 t2 = time.perf_counter()
+c2 = time.process_time()
 bpy.ops.wm.save_mainfile()
 t3 = time.perf_counter()
-print(f"cycles_profile: setup {t1 - t0:.4f} bake {t2 - t1:.4f} save {t3 - t2:.4f}", flush=True)
+print(f"cycles_profile: setup {t1 - t0:.4f} bake {t2 - t1:.4f} bake_cpu {c2 - c1:.4f} "
+      f"save {t3 - t2:.4f}", flush=True)
 """
 
 
 def run(cmd, env=None):
-    """(wall seconds, stdout, stderr) of cmd; raises with its stderr on a non-zero exit."""
+    """(wall seconds, CPU seconds of every thread, stdout, stderr) of cmd; raises with its
+    stderr on a non-zero exit."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     p = subprocess.run(cmd, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if p.returncode != 0:
         raise SystemExit(f"stage_profile: {' '.join(cmd)} failed ({p.returncode}):\n"
                          f"{p.stderr[-3000:]}")
-    return wall, p.stdout, p.stderr
+    return wall, cpu, p.stdout, p.stderr
 
 
 def best_of(repeats, fn):
@@ -123,49 +134,56 @@ def main(argv=None):
             return work
 
         def floor():
-            return run([a.blender, "-b", fresh(), "--python-expr", "pass"])[:1]
+            return run([a.blender, "-b", fresh(), "--python-expr", "pass"])[:2]
 
         def ours(s):
-            wall, out, err = run([a.blender, "-b", fresh(), "--python-exit-code", "1",
+            wall, cpu, out, err = run([a.blender, "-b", fresh(), "--python-exit-code", "1",
                                   "--python-expr", CLI_EXPR, "--", "--method", "raytrace",
                                   "--samples", str(s), "--threads", str(a.threads), "--save"],
                                  env)
-            return wall, parse(err)
+            return wall, cpu, parse(err)
 
         def cycles(c):
-            wall, out, _ = run([a.blender, "-b", fresh(), "--python-exit-code", "1",
-                                "--python", cycles_py, "--", str(c)])
+            wall, cpu, out, _ = run([a.blender, "-b", fresh(), "--python-exit-code", "1",
+                                     "--python", cycles_py, "--", str(c)])
             line = next(ln for ln in out.splitlines() if ln.startswith("cycles_profile:"))
             w = line.split()
-            return wall, {w[i]: float(w[i + 1]) for i in range(1, len(w), 2)}
+            return wall, cpu, {w[i]: float(w[i + 1]) for i in range(1, len(w), 2)}
 
         print(f"stage_profile: {a.blend}, load average {os.getloadavg()[0]:.2f}, best of "
               f"{a.repeats}", flush=True)
-        (t_floor,) = best_of(a.repeats, floor)
+        t_floor, cpu_floor = best_of(a.repeats, floor)
         rows = []
         for s, c in zip(a.samples, cyc):
-            w_ours, st = best_of(a.repeats, lambda: ours(s))
-            w_cyc, cs = best_of(a.repeats, lambda: cycles(c))
-            rows.append((s, c, w_ours, st, w_cyc, cs))
+            w_ours, c_ours, st = best_of(a.repeats, lambda: ours(s))
+            w_cyc, c_cyc, cs = best_of(a.repeats, lambda: cycles(c))
+            rows.append((s, c, w_ours, c_ours, st, w_cyc, c_cyc, cs))
 
-        for s, c, w_ours, st, w_cyc, cs in rows:
-            print(f"\nours, rays at {s} samples: whole command {w_ours:.3f} s")
+        for s, c, w_ours, c_ours, st, w_cyc, c_cyc, cs in rows:
+            print(f"\nours, rays at {s} samples: whole command {w_ours:.3f} s, "
+                  f"{c_ours:.3f} CPU s")
             print(f"  {'stage':<48} {'seconds':>8}")
             for k, v in st.items():
-                if k != "process age":
+                if k not in ("process age", "process CPU"):
                     print(f"  {k:<48} {v:8.4f}")
             if "process age" in st:
                 print(f"  {'exit (wall less the process age at the end)':<48} "
                       f"{w_ours - st['process age']:8.4f}")
-        print(f"\nBlender's floor (start, load, exit): {t_floor:.3f} s")
-        print(f"\n{'ours S':>6} {'Cycles C':>8} {'bake ours':>10} {'bake Cycles':>11} "
-              f"{'ratio':>6} {'whole ours':>10} {'whole Cycles':>12} {'ratio':>6} "
-              f"{'ours - floor':>12} {'Cycles - floor':>14}")
-        for s, c, w_ours, st, w_cyc, cs in rows:
+        print(f"\nBlender's floor (start, load, exit): {t_floor:.3f} s, {cpu_floor:.3f} CPU s")
+        print("\nSeconds (wall, then CPU of every thread: steadier on a shared machine) and "
+              "Cycles / ours")
+        print(f"{'ours S':>6} {'Cycles C':>8} | {'bake ours':>9} {'Cycles':>7} {'ratio':>6} | "
+              f"{'CPU ours':>8} {'Cycles':>7} {'ratio':>6} | {'whole ours':>10} {'Cycles':>7} "
+              f"{'ratio':>6} | {'CPU ours':>8} {'Cycles':>7} {'ratio':>6} | "
+              f"{'above the floor: ours':>21} {'Cycles':>7}")
+        for s, c, w_ours, c_ours, st, w_cyc, c_cyc, cs in rows:
             b = st.get("bake: whole (job.run_bake)", float("nan"))
-            print(f"{s:6d} {c:8d} {b:10.3f} {cs['bake']:11.3f} {cs['bake'] / b:6.1f} "
-                  f"{w_ours:10.3f} {w_cyc:12.3f} {w_cyc / w_ours:6.2f} "
-                  f"{w_ours - t_floor:12.3f} {w_cyc - t_floor:14.3f}")
+            bc = st.get("bake: whole, CPU of every thread", float("nan"))
+            print(f"{s:6d} {c:8d} | {b:9.3f} {cs['bake']:7.3f} {cs['bake'] / b:6.1f} | "
+                  f"{bc:8.3f} {cs['bake_cpu']:7.3f} {cs['bake_cpu'] / bc:6.1f} | "
+                  f"{w_ours:10.3f} {w_cyc:7.3f} {w_cyc / w_ours:6.2f} | "
+                  f"{c_ours:8.3f} {c_cyc:7.3f} {c_cyc / c_ours:6.2f} | "
+                  f"{w_ours - t_floor:21.3f} {w_cyc - t_floor:7.3f}")
         print(f"\nload average now {os.getloadavg()[0]:.2f}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -213,6 +213,7 @@ def run(args, profile=None):
             ob.select_set(False)
     if args.frames:
         return _run_frames(args, context, opts)
+    cpu0 = time.process_time()
     try:
         bake_job, rep = _with_progress(
             lambda progress: job.run_bake(context, args.objects or [], opts, progress))
@@ -239,6 +240,7 @@ def run(args, profile=None):
         profile.add_report(rep)
         profile.add_native(require().take_stage_seconds())
         profile.add("bake: whole (job.run_bake)", rep["seconds"])
+        profile.add("bake: whole, CPU of every thread", time.process_time() - cpu0)
     t_finish = time.perf_counter()
     _finish(args, rep)
     if profile is not None:

@@ -8,9 +8,10 @@ in the order a bake meets them: Blender's start and the file's load (the process
 script began; Linux only), the add-on's module imports and registration, the bake's own stages
 (BakeJob.timings and the plan's), the native core's (the tracer's checks, corner tables and BVH
 build; the rays' sampling, tracing and reduction as the CPU seconds their worker threads ran,
-summed: native stage_clock.h), the save, and last ``process age`` (seconds since the process
-started), so a caller timing the whole command sees what Blender's exit took. bench/stage_profile.py reads
-these lines. Profiling changes no result.
+summed: native stage_clock.h), the save, the CPU seconds of the bake and of the process so far
+(every thread: steadier than wall time on a shared machine), and last ``process age`` (seconds
+since the process started), so a caller timing the whole command sees what Blender's exit
+took. bench/stage_profile.py reads these lines. Profiling changes no result.
 """
 
 from __future__ import annotations
@@ -76,6 +77,7 @@ class StageLog:
         age = process_age()
         for line in self.lines():
             print(line, file=stream)
+        print(f"{PREFIX} process CPU {time.process_time():.4f} s", file=stream)
         if age is not None:
             print(f"{PREFIX} process age {age:.4f} s", file=stream)
         stream.flush()
