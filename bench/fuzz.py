@@ -546,6 +546,27 @@ def c_gray_rgba(g, core, tmp):
     return (lambda: core.gray_rgba(v)), check
 
 
+def c_connected_components(g, core, tmp):
+    v, t = g.mesh()
+    n = g.integer(0, 3 * len(t) + 2) if g.chance(0.3) else len(v)
+
+    def check(r):
+        assert r.shape == (n,) and r.dtype == np.int64, "not int64 (n_vertices,)"
+        if n:
+            _, first = np.unique(r, return_index=True)
+            assert r.min() == 0 and np.all(np.diff(first) > 0), "not numbered by first vertex"
+    return (lambda: core.connected_components(n, t)), check
+
+
+def c_stage_profiling(g, core, tmp):
+    def call():
+        previous = core.set_stage_profiling(g.chance(0.5))
+        got = core.take_stage_seconds()
+        core.set_stage_profiling(previous)
+        assert isinstance(got, dict) and all(s >= 0 and k >= 1 for s, k in got.values())
+    return call, None
+
+
 def c_threads(g, core, tmp):
     def call():
         previous = core.set_max_threads(g.integer(0, 4))

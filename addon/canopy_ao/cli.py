@@ -138,8 +138,12 @@ def main(argv=None):
                      "exits Blender first and nothing is rendered: add --live, or render in a "
                      "second command (blender -b FILE.blend -a)")
     from .core.progress import Cancelled
+    from .core import stage_profile
+    profile = stage_profile.StageLog() if stage_profile.enabled() else None
+    if profile is not None:
+        profile.add("Blender start, file load (to the script)", stage_profile.process_age() or 0)
     try:
-        run(args)
+        run(args, profile)
         code = 0
     except BakeFailed as exc:
         _fail(str(exc))
@@ -152,6 +156,8 @@ def main(argv=None):
         traceback.print_exc()
         _fail(f"{type(exc).__name__}: {exc}")
     sys.stdout.flush()
+    if profile is not None:
+        profile.print()
     if args.live:
         # Blender goes on with its own arguments before "--" (-a renders the animation, live
         # AO re-evaluated at every frame by the handler this bake armed).
@@ -159,12 +165,15 @@ def main(argv=None):
     sys.exit(code)
 
 
-def run(args):
+def run(args, profile=None):
     """Bake the open file as ``args`` (from build_parser) say, print one line per object, and
-    return the report; raises BakeFailed with a message when the bake cannot be done."""
+    return the report; raises BakeFailed with a message when the bake cannot be done.
+    profile: a core.stage_profile.StageLog to add the stages' seconds to, or None."""
+    import time
     import addon_utils
     import bpy
 
+    t_enable = time.perf_counter()
     if not hasattr(bpy.types.Scene, "canopy_ao"):
         # Imported by a plain `import canopy_ao.cli`: mark the package current so enable()
         # registers it as it is instead of reloading it ("module changed on disk").
@@ -182,6 +191,13 @@ def run(args):
     ok, msg = core_status()
     if not ok:
         raise BakeFailed(msg)
+    if profile is not None:
+        reg = sys.modules[__package__].REGISTER_SECONDS
+        profile.add("add-on: module imports", reg.get("imports", 0.0))
+        profile.add("add-on: registration", reg.get("registration", 0.0))
+        profile.add("add-on: enable (rest)", time.perf_counter() - t_enable - sum(reg.values()))
+        require().set_stage_profiling(True)
+        require().take_stage_seconds()  # only this bake's
     require().set_max_threads(args.threads)  # 0 also lifts a cap an earlier bake here set
     if args.save and not bpy.data.filepath:
         raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
@@ -198,6 +214,7 @@ def run(args):
             ob.select_set(False)
     if args.frames:
         return _run_frames(args, context, opts)
+    cpu0 = time.process_time()
     try:
         bake_job, rep = _with_progress(
             lambda progress: job.run_bake(context, args.objects or [], opts, progress))
@@ -221,7 +238,15 @@ def run(args):
           f"{rep['seconds']:.2f} s", flush=True)
     for note in rep["notes"]:
         print(f"canopy_ao: note: {note}", flush=True)
+    if profile is not None:
+        profile.add_report(rep)
+        profile.add_native(require().take_stage_seconds())
+        profile.add("bake: whole (job.run_bake)", rep["seconds"])
+        profile.add("bake: whole, CPU of every thread", time.process_time() - cpu0)
+    t_finish = time.perf_counter()
     _finish(args, rep)
+    if profile is not None:
+        profile.add("report file, save", time.perf_counter() - t_finish)
     return rep
 
 

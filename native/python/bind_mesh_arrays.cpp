@@ -4,11 +4,13 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <algorithm>
 #include <sstream>
 #include <string>
 
 #include "arrays.h"
 #include "canopy_ao/mesh_arrays.h"
+#include "canopy_ao/mesh_components.h"
 
 namespace canopy_ao::py_bind {
 
@@ -24,6 +26,25 @@ float* rows3_writeable(const py::array& a, const char* name) {
 }  // namespace
 
 void bind_mesh_arrays(py::module_& m) {
+  m.def(
+      "connected_components",
+      [](const py::object& n_vertices, const py::array& triangles) {
+        const auto n = static_cast<std::size_t>(int_arg(n_vertices, "n_vertices", 0, 0x7fffffff));
+        std::size_t count = 0;
+        const std::int32_t* t = triangles_arg(triangles, "triangles", n, &count);
+        py::array_t<std::int64_t> out(static_cast<py::ssize_t>(n));
+        std::int64_t* o = out.mutable_data();
+        {
+          py::gil_scoped_release release;
+          const std::vector<std::int64_t> labels = connected_components(n, t, count);
+          std::copy(labels.begin(), labels.end(), o);
+        }
+        return out;
+      },
+      py::arg("n_vertices"), py::arg("triangles"),
+      "Each vertex's connected component, int64 (n_vertices,) in [0, #components), numbered in "
+      "order of each component's first vertex; a vertex no triangle uses is its own. "
+      "triangles: int32 (M, 3), C-contiguous, indices in [0, n_vertices) (else ValueError).");
   m.def(
       "to_world",
       [](const py::array& positions, const py::array& normals, const py::object& matrix) {

@@ -7,6 +7,7 @@
 
 #include "arrays.h"
 #include "canopy_ao/parallel.h"
+#include "canopy_ao/stage_clock.h"
 
 namespace py = pybind11;
 
@@ -85,6 +86,21 @@ PYBIND11_MODULE(_core, m) {
       "Returns the previous cap. "
         "Results do not depend on the thread count.");
   m.def("max_threads", &max_threads, "Worker threads calls use now.");
+  m.def("set_stage_profiling", &set_stage_profiling, py::arg("on"),
+        "Turns native stage timing on or off (process-wide; results never depend on it). "
+        "Returns the previous state.");
+  m.def(
+      "take_stage_seconds",
+      [] {
+        py::dict out;  // insertion order: the order stages were first seen
+        for (const auto& [name, total] : take_stage_seconds()) {
+          out[py::str(name)] = py::make_tuple(total.first, total.second);
+        }
+        return out;
+      },
+      "Seconds per native stage since the last call, {name: (seconds, sections)}, in the "
+      "order first seen, then cleared. Stages on worker threads sum every thread's seconds "
+      "(their names say CPU). Empty while profiling is off.");
 
   py_bind::bind_fitting(m);
   py_bind::bind_models(m);

@@ -1,5 +1,6 @@
 // Canopy AO — ray-traced AO reference with Embree 3 or 4 (see raytrace.h for the contract).
 #include "canopy_ao/raytrace.h"
+#include "canopy_ao/stage_clock.h"
 
 #include <tbb/task_arena.h>
 
@@ -1022,6 +1023,7 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
                      const std::vector<Instance>& instances, const RayTracerBuildOptions& build)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
+  StageTimer setup_timer("tracer: checks, copies");
   check_mesh(vertices, triangles, triangle_count, "");
   m.alpha = alpha_data(opacity, triangle_count);
   const PointsView vertex_normals = shading.vertex_normals;
@@ -1129,7 +1131,10 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
         m.tris_of[fill[m.indices[3 * j + k]]++] = static_cast<std::uint32_t>(j);
       }
     }
-    if (!m.vertex_normals.empty() && vertices.size > 0) m.build_bake_corners(vertices.size);
+    if (!m.vertex_normals.empty() && vertices.size > 0) {
+      StageTimer corner_timer("tracer: corner tables");
+      m.build_bake_corners(vertices.size);
+    }
     // Both windings share primitive ids, so one filter on the original indices serves both
     // (the opacity's barycentrics swap on the second: AlphaData::flipped_geometry).
     if (m.alpha && culls) m.alpha->flipped_geometry = 1;
@@ -1178,6 +1183,8 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
   m.check("instance setup");
 
   // 4. The BVH build, on the caller's thread cap (Embree's TBB tasks join this arena).
+  setup_timer.stop();
+  StageTimer bvh_timer("tracer: BVH build");
   arena.execute([&] { rtcCommitScene(m.scene.get()); });
   m.check("rtcCommitScene");
 }
@@ -1315,7 +1322,13 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
   const std::size_t grain =
       std::max<std::size_t>(1, kRaysPerBlock / static_cast<std::size_t>(samples));
 
+  const bool profiling = stage_profiling();
+  StageTimer wall_timer("rays: wall (all blocks)");
   parallel_for_blocks(n, grain, [&](std::size_t begin, std::size_t end) {
+    // Profiling: this thread's CPU seconds in Embree's traversal (tracing), in the rest of the
+    // loop (sampling: starts, directions, ray setup) and in the per-point division (reduction).
+    const double block_start = profiling ? thread_cpu_seconds() : 0.0;
+    double traversal = 0.0;
     // INV: rays[0..filled) belong to points owner[0..filled); hits are counted when flushed.
     alignas(64) RTCRay rays[kStream];
     std::uint32_t owner[kStream];
@@ -1340,7 +1353,13 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
     context.alpha = m.alpha.get();
 
     auto flush = [&] {
-      embree::occluded(scene, &context.base, rays, filled);
+      if (profiling) {
+        const double t0 = thread_cpu_seconds();
+        embree::occluded(scene, &context.base, rays, filled);
+        traversal += thread_cpu_seconds() - t0;
+      } else {
+        embree::occluded(scene, &context.base, rays, filled);
+      }
       for (std::size_t r = 0; r < filled; ++r) {
         // Embree sets tfar to -inf on an occluded ray.
         open[owner[r]] += rays[r].tfar >= 0.0f ? 1 : 0;
@@ -1466,12 +1485,20 @@ void RayTracer::ao(PointsView points, PointsView normals, const OwnPrimitives& o
       if (filled >= kMinStream) flush();
     }
     if (filled) flush();
+    const double reduce_start = profiling ? thread_cpu_seconds() : 0.0;
     for (std::size_t i = begin; i < end; ++i) {
       out[i] = std::min(1.0f, static_cast<float>(open[i - begin]) /
                                   static_cast<float>(cast[i - begin]));
     }
     if (bent) finish_bent(normals, begin, end, open_sum.data(), bent);
+    if (profiling) {
+      const double block_end = thread_cpu_seconds();
+      add_stage_seconds("rays: tracing (CPU)", traversal);
+      add_stage_seconds("rays: sampling, starts (CPU)", reduce_start - block_start - traversal);
+      add_stage_seconds("rays: reduction (CPU)", block_end - reduce_start);
+    }
   });
+  wall_timer.stop();
   m.check("rtcOccluded");
 }
 

@@ -42,6 +42,20 @@ def test_components_long_chain_and_random_graphs():
         assert _same_partition(roles.connected_components(v, e), ref)
 
 
+def test_components_numbered_by_first_vertex_and_bad_indices_refused():
+    rng = np.random.default_rng(3)
+    for v in (40, 5000):
+        e = rng.integers(0, v, (v // 3, 3))
+        lab = roles.connected_components(v, e)
+        _, first = np.unique(lab, return_index=True)
+        assert np.all(np.diff(first) > 0) and lab[0] == 0
+        # any integer dtype and a flat layout of rows of 3 give the same labels
+        assert np.array_equal(roles.connected_components(v, e.astype(np.int64).ravel()), lab)
+    for bad in ([[0, 1, 5]], [[0, -1, 2]]):
+        with pytest.raises(ValueError, match="outside"):
+            roles.connected_components(5, np.array(bad))
+
+
 def test_empty_mesh():
     assert roles.connected_components(0, np.zeros((0, 3), np.int32)).shape == (0,)
     assert roles.guess_role(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))[0] == "IGNORE"

@@ -49,7 +49,8 @@ _REQUIRED = ("Ellipsoid", "fit_sphere", "fit_ellipsoid", "fit_shells", "ao_occlu
              "ao_reeves_blau", "ao_grass", "RayTracer", "DensityGrid", "OccluderField",
              "rasterize_uv", "splat_texels", "ao_near_far", "OcclusionFeatures",
              "expand_features", "predict_features",
-             "to_world", "gray_rgba", "ScenePlan", "ForestOccluders", "GrassCover")
+             "to_world", "gray_rgba", "ScenePlan", "ForestOccluders", "GrassCover",
+             "connected_components")
 
 
 def missing_functions(module) -> list[str]:

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .native import require
+
 ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS", "IGNORE")
 
 # A piece is "many small disconnected pieces" when the mesh has at least this many components.
@@ -34,18 +36,6 @@ SURFACE_PLATE = 0.7
 SURFACE_OPEN = 0.5
 
 
-def _hook(parent, hi, lo):
-    """parent[hi] = min(parent[hi], lo), the smallest lo winning for a repeated hi (what
-    np.minimum.at does, by a sort: ufunc.at is slow in numpy < 1.25)."""
-    order = np.lexsort((lo, hi))
-    hs, ls = hi[order], lo[order]
-    first = np.empty(len(hs), bool)
-    first[:1] = True
-    np.not_equal(hs[1:], hs[:-1], out=first[1:])
-    h, l = hs[first], ls[first]
-    parent[h] = np.minimum(parent[h], l)
-
-
 def _group_min_max(values, labels, k):
     """Per-label min and max of values (N, D) for labels in [0, k) (each label present)."""
     order = np.argsort(labels, kind="stable")
@@ -57,37 +47,20 @@ def _group_min_max(values, labels, k):
 def connected_components(n_vertices: int, triangles: np.ndarray) -> np.ndarray:
     """Label each vertex with its connected component.
 
-    n_vertices: V. triangles: #F by 3 int array of vertex indices in [0, V).
+    n_vertices: V. triangles: #F by 3 int array of vertex indices in [0, V) (any integer
+    dtype and layout; rows of 3).
     Returns int64 (V,) labels in [0, #components), numbered in order of first vertex.
     Vertices used by no triangle are components of their own.
 
-    Union-find done in bulk (Shiloach-Vishkin style): every round hooks the larger root of each
-    edge onto the smaller one, then compresses paths by pointer jumping, until no edge joins two
-    roots. Rounds grow with log V, not with the mesh's diameter.
+    Native union-find (mesh_components.h): near-linear in V + F, whatever the mesh's diameter
+    (numpy's bulk pointer jumping took 0.25 s on a 250k-vertex Sapling branch mesh, a third of
+    the role guess). Raises ValueError for an index outside [0, V).
     """
-    parent = np.arange(n_vertices, dtype=np.int64)
-    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    if n_vertices == 0:
-        return parent
-    if len(tris):
-        a = np.concatenate([tris[:, 0], tris[:, 1]])
-        b = np.concatenate([tris[:, 1], tris[:, 2]])
-        while True:
-            ra, rb = parent[a], parent[b]
-            differ = ra != rb
-            if not differ.any():
-                break
-            a, b = a[differ], b[differ]  # edges already inside one component never matter again
-            ra, rb = ra[differ], rb[differ]
-            _hook(parent, np.maximum(ra, rb), np.minimum(ra, rb))
-            # INV: parent[i] <= i, so pointer jumping terminates.
-            while True:
-                grand = parent[parent]
-                if np.array_equal(grand, parent):
-                    break
-                parent = grand
-    _, labels = np.unique(parent, return_inverse=True)
-    return labels.astype(np.int64)
+    tris = np.asarray(triangles).reshape(-1, 3)
+    if len(tris) and (tris.min() < 0 or tris.max() >= n_vertices):
+        raise ValueError(f"triangles hold vertex indices outside [0, {n_vertices})")
+    return require().connected_components(int(n_vertices),
+                                          np.ascontiguousarray(tris, dtype=np.int32))
 
 
 @dataclass
