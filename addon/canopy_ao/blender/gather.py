@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from . import mesh_io, opacity_io
+from . import mesh_io, opacity_io, parts_io
 from .visibility import RenderVisibility, casts_shadow
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
@@ -233,20 +233,27 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             triangles=tris_needed, timings=timings, polygons=faces)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
-        if declared is None and not bent and not ladder.triangles_needed(opts["method"],
-                                                                         opts["tau"], role):
-            tris = tris[:0]  # not part of this bake (kept only for the guess)
         timings["roles"] = timings.get("roles", 0.0) + time.perf_counter() - t0
         if role == "IGNORE":
             continue
         tree, source = tree_and_source(obj)
         polys = faces[0] if faces and len(faces[0]) == len(tris) else None
-        items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source,
-                               polygons=polys))
+        item = SceneItem(name, role, tree, pos, nor, tris, tree_source=source, polygons=polys)
         if len(tris):  # which triangles rays pass (the materials' alpha)
-            items[-1].opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
+            item.opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
+        # A guessed mesh of parts of different roles (bark and leaves) bakes part by part.
+        cut = parts_io.split(obj, item, depsgraph, opts, alphas, notes) if declared is None \
+            else None
+        for it, _idx in cut or [(item, None)]:
+            if declared is None and not bent and not ladder.triangles_needed(
+                    opts["method"], opts["tau"], it.role):
+                # not part of this bake (kept only for the guess)
+                it.triangles, it.polygons, it.opacity = it.triangles[:0], None, None
+            items.append(it)
+            objects[it.name] = obj
+            how[it.name] = f"part of {name}: {it.part_why}" if cut else why
         objects[name] = obj
-        how[name] = why
+        how[name] = parts_io.describe(cut) if cut else why
     return items, objects, how
 
 

@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 
 from . import (bent_io, checks, cycles_check, gather, instances, live, materials, mesh_io,
-               tiles_io)
+               parts_io, tiles_io)
 from .commit import Transaction
 from .targets import TexelTarget, VertexTarget, check_outputs, chunks, chunks_done, \
     split_vertex_chunks
@@ -61,6 +61,7 @@ class BakeJob:
                         if opts["mode"] == 'VERTEX'
                         else TexelTarget(it, self.objects[it.name], opts, depsgraph)
                         for it in self.items if it.name in target_names]
+        self.targets += parts_io.targets(self.items, self.objects, target_names, opts, depsgraph)
         if not self.targets:
             raise CanopyAOError("every object to bake has the role Ignore")
         check_outputs(self.targets, opts)  # image files: none collide, none is the user's
@@ -111,7 +112,7 @@ class BakeJob:
             protos = self.prototypes.bake(self.settings, skip=skip)
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
-        targets = {t.item.name: (t.kind, t.count, t.group) for t in self.targets}
+        targets = parts_io.receivers(self.targets)  # a mesh baked by parts: its parts'
         self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:
@@ -139,6 +140,8 @@ class BakeJob:
                 # A grass blade instanced over a field: what its instances see, not the lone
                 # prototype (instances.Prototypes.bake_realized).
                 t.ao[a:b] = self.prototypes.means[t.item.name][a:b]
+            elif getattr(t, "parts", None):  # a mesh baked by parts (parts_io.py)
+                t.ao[a:b] = parts_io.evaluate(self.plan, t, a, b)
             elif bent and maps.rung_is_the_trace(self.plan, t.item):  # one trace gives both
                 t.ao[a:b] = self._bent_step(t, a, b)
             else:
@@ -290,6 +293,8 @@ class BakeJob:
             e = rep["objects"][t.item.name]
             e["role_source"] = self.how[t.item.name]
             e["vertices"] = len(t.item.positions)
+            if getattr(t, "parts", None):
+                e["parts"] = parts_io.summary(t)
             if t.thickness is not None:
                 e["thickness_mean"] = float(t.thickness.mean()) if t.count else None
             if t.bent is not None:
