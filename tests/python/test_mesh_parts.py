@@ -35,7 +35,8 @@ def test_slots_by_alpha_name_and_shape():
         parts = mesh_parts.split(p, t, slot, hints)
         assert [q.role for q in parts] == ["TRUNK", "CANOPY"]
         assert bark_why in parts[0].why and leaf_why in parts[1].why, [q.why for q in parts]
-        assert parts[0].triangles.sum() == nb and not (parts[0].triangles & parts[1].triangles).any()
+        assert parts[0].triangles.sum() == nb
+        assert not (parts[0].triangles & parts[1].triangles).any()
 
 
 def test_loose_pieces_by_shape_without_slots():

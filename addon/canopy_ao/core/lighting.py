@@ -343,4 +343,6 @@ def build_grid(items):
     wood_and_leaves = [it for it in items if it.role in ("CANOPY", "TRUNK") and len(it.triangles)]
     if not wood_and_leaves:
         return None
-    return _core.DensityGrid(*_scene_triangles(wood_and_leaves))
+    # cards by their opaque area, where opaque (opacity.counted_item)
+    return _core.DensityGrid(*_scene_triangles([opacity.counted_item(it)
+                                                for it in wood_and_leaves]))

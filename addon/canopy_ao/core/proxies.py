@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import opacity as _opacity
 from . import roles as _roles
 from .grass_layer import grass_layer
 from .native import _core
@@ -73,7 +74,8 @@ def fit_scene(plan: Plan, items) -> None:
     trees = {}
     for it in items:
         if it.role == "CANOPY" and len(it.positions):
-            trees.setdefault(it.tree, []).append(it.positions)
+            # a card's points where it is opaque (opacity.counted_points)
+            trees.setdefault(it.tree, []).append(_opacity.counted_points(it))
     for tree, pts in trees.items():
         pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
                                    dtype=np.float32)
