@@ -73,9 +73,10 @@ def fit_scene(plan: Plan, items) -> None:
     plan.grass_layers (each grass field as an occluder of the ground under it)."""
     trees = {}
     for it in items:
-        if it.role == "CANOPY" and len(it.positions):
-            # a card's points where it is opaque (opacity.counted_points)
-            trees.setdefault(it.tree, []).append(_opacity.counted_points(it))
+        # a card's points where it is opaque (opacity.counted_points): none when all clear
+        pts = _opacity.counted_points(it) if it.role == "CANOPY" else ()
+        if len(pts):
+            trees.setdefault(it.tree, []).append(pts)
     for tree, pts in trees.items():
         pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
                                    dtype=np.float32)
