@@ -35,13 +35,14 @@ TREE = dict(preset="quaking_aspen", seed=5, leaf_factor=0.25)
 
 # === Materials ===============================================================================
 
-def leaf_card_image(name, res=64, width=LEAF_WIDTH):
-    """A packed RGBA image: a green lens-shaped leaf, alpha 1 inside and 0 outside. Returns
+def leaf_card_image(name, res=64, width=LEAF_WIDTH, centre=0.0, length=1.0):
+    """A packed RGBA image: a green lens-shaped leaf, alpha 1 inside and 0 outside: in card
+    coordinates x = 2u − 1, y = 2v − 1, (x / width)² + ((y − centre) / length)² < 1. Returns
     (image, opaque fraction of its texels)."""
     import bpy
     c = (np.arange(res) + 0.5) / res * 2.0 - 1.0
     u, v = np.meshgrid(c, c)  # row = v
-    inside = (u / width) ** 2 + v ** 2 < 1.0
+    inside = (u / width) ** 2 + ((v - centre) / length) ** 2 < 1.0
     px = np.zeros((res, res, 4), np.float32)
     px[..., 1] = 0.4
     px[..., 3] = inside

@@ -13,7 +13,7 @@ from .commit import Transaction
 from .targets import TexelTarget, VertexTarget, check_outputs, chunks, chunks_done, \
     split_vertex_chunks
 from .. import core
-from ..core import maps, metrics, packing, settings
+from ..core import card_ao, maps, metrics, packing, settings
 from ..core.native import CanopyAOError
 
 # Receivers per step: a modal tick stays short, and per-call overhead stays small.
@@ -149,6 +149,7 @@ class BakeJob:
                     self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
                     vertices=slice(a, b) if t.kind == "vertex" else None,
                     triangles=t.triangles[a:b] if t.triangles is not None else None)
+                card_ao.carry(self.plan, t.item, t.ao[a:b], t.kind == "vertex" and slice(a, b))
                 if bent:
                     self._bent_step(t, a, b)
         except CanopyAOError as exc:

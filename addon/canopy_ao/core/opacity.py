@@ -255,25 +255,32 @@ def texture_alpha(mat: MaterialAlpha, uv):
     return np.clip(mat.offset + mat.scale * t, 0.0, 1.0)
 
 
-def counted_triangles(item):
-    """(positions float32 (V', 3), triangles int32 (M', 3)) of an item's triangles as leaf area
-    counts them: an opaque triangle as it is; one whose material is not opaque shrunk about the
-    alpha-weighted centroid of its area by √(its mean alpha), so its area is its opaque area
-    and it sits where it is opaque (one with no opaque point dropped). An item without such
-    triangles gives its own arrays back, untouched."""
+def _clear_triangles(item):
+    """(triangles int64 (M, 3), bool (M,) of those whose material is not opaque, slot (M,)),
+    or None when the item has no such triangle."""
     op = getattr(item, "opacity", None)
     tris = np.asarray(item.triangles, np.int64).reshape(-1, 3)
     if op is None or not len(tris) or len(op.triangle_material) != len(tris) \
             or all(m.opaque for m in op.materials):
-        return item.positions, item.triangles
+        return None
     slot = np.clip(np.asarray(op.triangle_material, np.int64), 0, len(op.materials) - 1)
-    clear = np.array([not m.opaque for m in op.materials])[slot]
-    keep = [tris[~clear]]
-    verts = [np.asarray(item.positions, np.float64)]
+    return tris, np.array([not m.opaque for m in op.materials])[slot], slot
+
+
+def opaque_parts(item):
+    """(corners float64 (K, 3, 3), source int64 (K,)): each triangle of ``item`` whose material
+    is not opaque and that has an opaque point, shrunk about the alpha-weighted centroid of its
+    area by √(its mean alpha) (corner j of the shrunk triangle stands for its vertex j), and
+    its index in the item's triangles; None when the item has no such triangle."""
+    got = _clear_triangles(item)
+    if got is None:
+        return None
+    tris, clear, slot = got
+    op = item.opacity
     bary = _subdivision_points()
     w = np.column_stack([1.0 - bary.sum(1), bary])  # (S, 3) weights of the corners
-    p = verts[0]
-    base = len(p)
+    p = np.asarray(item.positions, np.float64)
+    out, src = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)]
     for k, mat in enumerate(op.materials):
         sel = np.flatnonzero(clear & (slot == k))
         for a in range(0, len(sel), _CHUNK):
@@ -284,17 +291,30 @@ def counted_triangles(item):
             alpha = texture_alpha(mat, uv.reshape(-1, 2)).reshape(len(s), -1)
             f = alpha.mean(1)
             pts = np.einsum("sc,mcd->msd", w, corners)
-            total = np.maximum(alpha.sum(1), 1e-300)[:, None]
-            centre = np.einsum("ms,msd->md", alpha, pts) / total
+            centre = np.einsum("ms,msd->md", alpha, pts) / np.maximum(alpha.sum(1), 1e-300)[:, None]
             g = corners.mean(1)
             ok = f > 0
-            shrunk = centre[ok, None, :] + np.sqrt(f[ok])[:, None, None] * (corners[ok]
-                                                                             - g[ok, None, :])
-            verts.append(shrunk.reshape(-1, 3))
-            keep.append(base + np.arange(3 * int(ok.sum())).reshape(-1, 3))
-            base += 3 * int(ok.sum())
-    return (np.ascontiguousarray(np.concatenate(verts), np.float32),
-            np.ascontiguousarray(np.concatenate(keep), np.int32))
+            out.append(centre[ok, None, :]
+                       + np.sqrt(f[ok])[:, None, None] * (corners[ok] - g[ok, None, :]))
+            src.append(s[ok])
+    return np.concatenate(out), np.concatenate(src)
+
+
+def counted_triangles(item):
+    """(positions float32 (V', 3), triangles int32 (M', 3)) of an item's triangles as leaf area
+    counts them: an opaque triangle as it is, one whose material is not opaque as
+    opaque_parts gives it, so its area is its opaque area and it sits where it is opaque (one
+    with no opaque point dropped). An item without such triangles gives its own arrays back,
+    untouched."""
+    got = _clear_triangles(item)
+    if got is None:
+        return item.positions, item.triangles
+    tris, clear, _slot = got
+    shrunk, _src = opaque_parts(item)
+    n = len(item.positions)
+    verts = np.concatenate([np.asarray(item.positions, np.float64), shrunk.reshape(-1, 3)])
+    keep = np.concatenate([tris[~clear], n + np.arange(3 * len(shrunk)).reshape(-1, 3)])
+    return (np.ascontiguousarray(verts, np.float32), np.ascontiguousarray(keep, np.int32))
 
 
 def counted_item(item):
