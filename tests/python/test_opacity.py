@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from canopy_ao import _core
-from canopy_ao.core import lighting, opacity
+from canopy_ao.core import card_area, lighting, opacity
 from canopy_ao.core.scene import SceneItem
 
 
@@ -124,7 +124,7 @@ def test_a_material_many_items_share_reaches_the_tracer_once():
     assert args["opacity_materials"].tolist() == [-1, -1, 0, 0, 0, 0]
 
 
-# === Cards as the proxies count them (opacity.counted_triangles) ==============================
+# === Cards as the proxies count them (card_area.counted_triangles) ========================
 
 def _card(material, uvs=True):
     """A 2 × 1 card (x in [0, 2], y in [0, 1]) of two triangles, UVs x/2, y."""
@@ -149,19 +149,19 @@ def test_counted_card_by_its_opaque_area_and_where():
     tex[:, :8] = 1.0  # u < 0.5: opaque
     for nearest in (True, False):
         it = _card(opacity.MaterialAlpha("Half", texture=tex, nearest=nearest))
-        p, t = opacity.counted_triangles(it)
+        p, t = card_area.counted_triangles(it)
         assert abs(_area(p, t).sum() - 1.0) < 0.03, nearest
         centre = (p[t].mean(1) * _area(p, t)[:, None]).sum(0) / _area(p, t).sum()
         assert abs(centre[0] - 0.5) < 0.03 and abs(centre[1] - 0.5) < 0.1, centre
     it = _card(opacity.MaterialAlpha("Const", alpha=0.3), uvs=False)
-    p, t = opacity.counted_triangles(it)
+    p, t = card_area.counted_triangles(it)
     np.testing.assert_allclose(_area(p, t), 0.3, rtol=1e-5)
     np.testing.assert_allclose(p[t].mean(1), it.positions[it.triangles].mean(1), atol=1e-6)
     clear = _card(opacity.MaterialAlpha("Clear", alpha=0.0), uvs=False)
-    assert len(opacity.counted_triangles(clear)[1]) == 0
+    assert len(card_area.counted_triangles(clear)[1]) == 0
     solid = _card(opacity.MaterialAlpha("Solid"))
-    assert opacity.counted_item(solid) is solid
-    assert opacity.counted_points(solid) is solid.positions
+    assert card_area.counted_item(solid) is solid
+    assert card_area.counted_points(solid) is solid.positions
 
 
 def test_texture_alpha_reads_as_the_tracer():
@@ -169,11 +169,11 @@ def test_texture_alpha_reads_as_the_tracer():
     decoded before offset and scale."""
     tex = np.array([[0.0, 1.0]], np.float32)  # one row, two texels
     lin = opacity.MaterialAlpha("L", texture=tex)
-    np.testing.assert_allclose(opacity.texture_alpha(lin, [[0.25, 0.5], [0.5, 0.5], [1.0, 0.5]]),
-                               [0.0, 0.5, 0.5])
+    got = card_area.texture_alpha(lin, [[0.25, 0.5], [0.5, 0.5], [1.0, 0.5]])
+    np.testing.assert_allclose(got, [0.0, 0.5, 0.5])
     near = opacity.MaterialAlpha("N", texture=tex, nearest=True)
-    np.testing.assert_allclose(opacity.texture_alpha(near, [[0.49, 0.5], [0.51, 0.5]]), [0, 1])
+    np.testing.assert_allclose(card_area.texture_alpha(near, [[0.49, 0.5], [0.51, 0.5]]), [0, 1])
     s = opacity.MaterialAlpha("S", texture=np.full((2, 2), 0.5, np.float32), srgb=True,
                               scale=-1.0, offset=1.0)
-    np.testing.assert_allclose(opacity.texture_alpha(s, [[0.3, 0.3]]),
+    np.testing.assert_allclose(card_area.texture_alpha(s, [[0.3, 0.3]]),
                                1.0 - opacity.srgb_decode(0.5), rtol=1e-6)

@@ -3,7 +3,7 @@
 A leaf card's vertices sit in its clear corners. Cycles' vertex bake reads 0 there (the bake
 point's surface is transparent), so vertex AO baked in Cycles leaves cards black; the AO at the
 corner itself is the card plane's, not the leaf's. Here a card vertex carries the AO its card's
-opaque part receives: each card triangle is shrunk to its opaque part (opacity.opaque_parts:
+opaque part receives: each card triangle is shrunk to its opaque part (card_area.opaque_parts:
 its opaque area, about where it is opaque), the AO is evaluated at the shrunk triangle's corner
 that stands for the vertex (on the card's plane, the rays skipping that triangle, as a texel on
 it would), and a vertex shared by several card triangles takes the mean. A vertex that also
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import opacity
+from . import card_area
 
 
 class CardVertices:
@@ -22,14 +22,14 @@ class CardVertices:
     point float32 (K, 3) and normal float32 (K, 3) of each, the triangle int32 (K,) it lies on."""
 
     def __init__(self, item):
-        got = opacity.opaque_parts(item)
+        got = card_area.opaque_parts(item)
         self.vertex = np.zeros(0, np.int64)
         if got is None or not len(got[1]):
             return
         shrunk, src = got
         tris = np.asarray(item.triangles, np.int64)
         opaque = np.ones(len(tris), bool)
-        opaque[opacity._clear_triangles(item)[1]] = False
+        opaque[card_area._clear_triangles(item)[1]] = False
         on_opaque = np.zeros(len(item.positions), bool)
         on_opaque[tris[opaque].reshape(-1)] = True
         vertex = tris[src].reshape(-1)

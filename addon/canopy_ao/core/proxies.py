@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import opacity as _opacity
+from . import card_area
 from . import roles as _roles
 from .grass_layer import grass_layer
 from .native import _core
@@ -73,8 +73,8 @@ def fit_scene(plan: Plan, items) -> None:
     plan.grass_layers (each grass field as an occluder of the ground under it)."""
     trees = {}
     for it in items:
-        # a card's points where it is opaque (opacity.counted_points): none when all clear
-        pts = _opacity.counted_points(it) if it.role == "CANOPY" else ()
+        # a card's points where it is opaque (card_area.counted_points): none when all clear
+        pts = card_area.counted_points(it) if it.role == "CANOPY" else ()
         if len(pts):
             trees.setdefault(it.tree, []).append(pts)
     for tree, pts in trees.items():
