@@ -8,8 +8,9 @@ and the benchmark:
   about its centre by √(opaque fraction));
 - ``sapling_joined``: the plain Sapling tree (no materials) joined into one mesh;
 - ``ivy_wall``: IvyGen ivy on a wall over a ground (Blender ≤ 4.1 bundles IvyGen);
-- ``gn_cards``: leaf cards scattered on a crown by Geometry Nodes (Instance on Points on a
-  sphere's faces, realised with ``--realize``), with a Sapling trunk.
+- ``gn_cards``: leaf cards scattered on a crown by Geometry Nodes (Instance on Points on an
+  icosphere's faces, realised with ``--realize``) over a trunk and a ground;
+- ``particle_cards``: the same cards scattered by a hair particle system drawn as objects.
 
     blender -b --factory-startup --python-exit-code 1 --python examples/foliage_scenes.py -- \\
         --scene card_tree_joined --blend /tmp/card_tree_joined.blend
@@ -27,7 +28,7 @@ sys.path.insert(0, HERE)
 import numpy as np  # noqa: E402
 
 SCENES = ("card_tree", "card_tree_joined", "opaque_tree", "sapling_joined", "ivy_wall",
-          "gn_cards")
+          "gn_cards", "particle_cards")
 # The card's leaf: a lens |2u − 1|² / w² + |2v − 1|² < 1 of half-width w across the card.
 LEAF_WIDTH = 0.6
 TREE = dict(preset="quaking_aspen", seed=5, leaf_factor=0.25)
@@ -157,6 +158,184 @@ def sapling_card_tree(col, cards=True, opaque_area=False, joined=False, material
     return {"trunk": branches, "canopy": leaves}
 
 
+def leaf_card_object(col, name="LeafCard", size=0.2, named_uv=True):
+    """One leaf card (a quad, UVs [0, 1]², the card material) hidden from renders, to be
+    instanced. named_uv: its material reads the map through a UV Map node (realised by
+    geometry nodes in Blender 3.4, a UV map is an attribute Cycles finds only by name)."""
+    import bpy
+    h = 0.5 * size
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([[-h, 0, 0], [h, 0, 0], [h, 0, size], [-h, 0, size]], [], [[0, 1, 2, 3]])
+    uv = me.uv_layers.new(name="UVMap")
+    uv.data.foreach_set("uv", np.float32([[0, 0], [1, 0], [1, 1], [0, 1]]).ravel())
+    img, _frac = leaf_card_image(f"{name}Image", 32)
+    mat = card_material(f"{name} card", img)
+    if named_uv:
+        node = mat.node_tree.nodes.new("ShaderNodeUVMap")
+        node.uv_map = "UVMap"
+        tex = next(n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE")
+        mat.node_tree.links.new(node.outputs[0], tex.inputs["Vector"])
+    me.materials.append(mat)
+    ob = bpy.data.objects.new(name, me)
+    col.objects.link(ob)
+    ob.hide_render = True  # only its instances render
+    ob.location = (0.0, 0.0, -10.0 * size)  # out of the way (instances keep their own place)
+    return ob
+
+
+def gn_scatter(crown, card, density=30.0, realize=False, seed=0):
+    """Geometry Nodes on ``crown``: Distribute Points on Faces, Instance on Points of ``card``
+    (Object Info, original space) at random rotations, and Realize Instances when asked."""
+    import bpy
+    ng = bpy.data.node_groups.new("Scatter leaves", "GeometryNodeTree")
+    ng.inputs.new("NodeSocketGeometry", "Geometry")
+    ng.outputs.new("NodeSocketGeometry", "Geometry")
+    n, link = ng.nodes, ng.links.new
+    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
+    dist = n.new("GeometryNodeDistributePointsOnFaces")
+    dist.inputs["Density"].default_value = density
+    dist.inputs["Seed"].default_value = seed
+    inst = n.new("GeometryNodeInstanceOnPoints")
+    info = n.new("GeometryNodeObjectInfo")
+    info.inputs[0].default_value = card
+    info.transform_space = 'ORIGINAL'
+    rot = n.new("FunctionNodeRandomValue")
+    rot.data_type = 'FLOAT_VECTOR'
+    rot.inputs["Max"].default_value = (2 * math.pi,) * 3
+    link(gin.outputs[0], dist.inputs["Mesh"])
+    link(dist.outputs["Points"], inst.inputs["Points"])
+    link(info.outputs["Geometry"], inst.inputs["Instance"])
+    link(rot.outputs[0], inst.inputs["Rotation"])
+    out = inst.outputs[0]
+    if realize:
+        real = n.new("GeometryNodeRealizeInstances")
+        link(out, real.inputs[0])
+        out = real.outputs[0]
+    link(out, gout.inputs[0])
+    crown.modifiers.new("Scatter leaves", "NODES").node_group = ng
+
+
+def particle_scatter(crown, card, count=800, seed=0):
+    """A hair particle system on ``crown`` drawing ``card`` at each particle (random
+    rotations); the crown itself is not rendered."""
+    crown.modifiers.new("Leaves", "PARTICLE_SYSTEM")
+    ps = crown.particle_systems[0]
+    ps.seed = seed
+    st = ps.settings
+    st.type = 'HAIR'
+    st.count = count
+    st.hair_length = 0.2
+    st.render_type = 'OBJECT'
+    st.instance_object = card
+    st.particle_size = 1.0
+    st.use_rotations = True
+    st.rotation_mode = 'NOR'
+    st.rotation_factor_random = 1.0
+    crown.show_instancer_for_render = False
+    crown.show_instancer_for_viewport = False
+
+
+def scatter_tree(col, how="gn", made_real=False):
+    """A trunk (a cylinder) and a crown (an icosphere) whose leaf cards are scattered by
+    ``how``: "gn" (instances), "gn_realized" (Realize Instances) or "particles". made_real: the
+    scattered cards then made into a plain mesh object ("Leaves", as Object > Apply > Visual
+    Geometry to Mesh or Make Instances Real and Join would). Returns {name: object}."""
+    import bpy
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.15, depth=3.0, location=(0, 0, 1.5))
+    trunk = bpy.context.active_object
+    trunk.name = trunk.data.name = "Trunk"
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.5, location=(0, 0, 3.2))
+    crown = bpy.context.active_object
+    crown.name = crown.data.name = "Crown"
+    for ob in (trunk, crown):
+        for c in list(ob.users_collection):
+            c.objects.unlink(ob)
+        col.objects.link(ob)
+    card = leaf_card_object(col)
+    if how == "particles":
+        particle_scatter(crown, card)
+    else:
+        gn_scatter(crown, card, realize=how == "gn_realized")
+    bpy.context.view_layer.update()
+    if made_real:
+        crown = _made_real(crown, how)
+    return {"trunk": trunk, "crown": crown, "card": card}
+
+
+def _made_real(crown, how):
+    """The crown's scattered cards as one plain mesh object named "Leaves" (the crown goes)."""
+    import bpy
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    crown.select_set(True)
+    bpy.context.view_layer.objects.active = crown
+    if how == "particles":
+        before = set(bpy.data.objects)
+        bpy.ops.object.duplicates_make_real()
+        made = [o for o in bpy.data.objects if o not in before]
+        for o in made:
+            o.hide_render = False
+        leaves = join(made, "Leaves")
+        bpy.data.objects.remove(crown)
+    else:
+        gn_realize(crown)
+        bpy.ops.object.convert(target='MESH')
+        leaves = bpy.context.view_layer.objects.active
+        leaves.name = leaves.data.name = "Leaves"
+    bpy.context.view_layer.update()
+    return leaves
+
+
+def gn_realize(crown):
+    """Put a Realize Instances node before the crown's node-group output, if none is there."""
+    ng = crown.modifiers[-1].node_group
+    out = next(n for n in ng.nodes if n.type == "GROUP_OUTPUT")
+    src = out.inputs[0].links[0].from_node
+    if src.type == "REALIZE_INSTANCES":
+        return
+    real = ng.nodes.new("GeometryNodeRealizeInstances")
+    ng.links.new(src.outputs[0], real.inputs[0])
+    ng.links.new(real.outputs[0], out.inputs[0])
+
+
+def ivy_wall(col, thick=0.0, length=3.0, seed=3):
+    """IvyGen ivy grown from the foot of a 3 m × 2 m wall (a quad, or a slab ``thick`` deep)
+    standing on an 8 m ground: {"wall", "ground", and IvyGen's objects}. Needs IvyGen (bundled
+    up to Blender 4.1)."""
+    import addon_utils
+    import bpy
+    addon_utils.enable("add_curve_ivygen", default_set=False)
+    if thick:
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, 1))
+        bpy.context.active_object.scale = (3, thick, 2)
+    else:
+        bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0, 0, 1), rotation=(math.pi / 2, 0, 0))
+        bpy.context.active_object.scale = (3, 2, 1)
+    wall = bpy.context.active_object
+    wall.name = "Wall"
+    bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
+    bpy.ops.mesh.primitive_plane_add(size=8.0)
+    ground = bpy.context.active_object
+    ground.name = "Ground"
+    bpy.ops.object.select_all(action='DESELECT')
+    wall.select_set(True)
+    bpy.context.view_layer.objects.active = wall
+    before = set(bpy.data.objects)
+    bpy.context.scene.cursor.location = (0.0, -thick / 2 - 0.01, 0.02)
+    props = bpy.context.window_manager.ivy_gen_props
+    props.maxIvyLength, props.randomSeed = length, seed
+    if bpy.ops.curve.ivy_gen(updateIvy=True) != {'FINISHED'}:
+        raise RuntimeError("IvyGen did not grow the ivy")
+    bpy.context.scene.cursor.location = (0.0, 0.0, 0.0)
+    out = {"wall": wall, "ground": ground}
+    out.update({o.name: o for o in bpy.data.objects if o not in before})
+    for ob in out.values():
+        for c in list(ob.users_collection):
+            c.objects.unlink(ob)
+        col.objects.link(ob)
+    return out
+
+
 def build(scene, realize=False):
     """Build ``scene`` (SCENES) in an empty file. Returns {name: object}."""
     import bpy
@@ -169,6 +348,14 @@ def build(scene, realize=False):
                                      opaque_area=scene == "opaque_tree",
                                      joined=scene.endswith("joined"),
                                      materials=scene != "sapling_joined"))
+        out["ground"] = ground(col)
+    elif scene == "ivy_wall":
+        out.update(ivy_wall(col))
+    elif scene == "gn_cards":
+        out.update(scatter_tree(col, "gn_realized" if realize else "gn"))
+        out["ground"] = ground(col)
+    elif scene == "particle_cards":
+        out.update(scatter_tree(col, "particles"))
         out["ground"] = ground(col)
     else:
         raise ValueError(f"unknown scene {scene!r} (one of {', '.join(SCENES)})")

@@ -177,3 +177,23 @@ def test_texture_alpha_reads_as_the_tracer():
                               scale=-1.0, offset=1.0)
     np.testing.assert_allclose(card_area.texture_alpha(s, [[0.3, 0.3]]),
                                1.0 - opacity.srgb_decode(0.5), rtol=1e-6)
+
+
+def test_tiled_copies_carry_their_materials_and_mirror_their_uvs():
+    """A realised field's opacity: each item's triangles copied in turn, a mirrored copy's UVs
+    in reversed corner order (forest.realize winds its triangles back), an item without
+    opacity opaque."""
+    tex = np.ones((2, 2), np.float32) * 0.5
+    card = SceneItem("Card", "CANOPY", "T", np.eye(3, dtype=np.float32),
+                     np.tile([0, 0, 1], (3, 1)), np.array([[0, 1, 2]], np.int32))
+    uv = np.array([[[0, 0], [1, 0], [0, 1]]], np.float32)
+    card.opacity = opacity.ItemOpacity([opacity.MaterialAlpha("Leaf", texture=tex)],
+                                       np.zeros(1, np.int32), uv)
+    twig = SceneItem("Twig", "TRUNK", "T", np.eye(3, dtype=np.float32),
+                     np.tile([0, 0, 1], (3, 1)), np.array([[0, 1, 2]], np.int32))
+    op = opacity.tiled([(card, np.array([False, True])), (twig, np.array([False]))])
+    assert [m.name for m in op.materials] == ["Leaf", "Twig"] and op.materials[1].opaque
+    assert op.triangle_material.tolist() == [0, 0, 1]
+    np.testing.assert_array_equal(op.uvs[0], uv[0])
+    np.testing.assert_array_equal(op.uvs[1], uv[0][::-1])
+    assert opacity.tiled([(twig, np.array([False]))]) is None

@@ -98,11 +98,14 @@ def is_candidate(obj):
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
 
 
-def bake_targets(context, object_names):
+def bake_targets(context, object_names, vertex_mode=False):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
-    mesh that renders and occludes (visibility.py). Raises CanopyAOError when there are none, a
-    name is wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays,
-    which a bake here cannot do)."""
+    mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
+    modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
+    vertex (vertex_mode), one whose modifiers change its vertex count (they realise the
+    scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
+    wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
+    bake here cannot do)."""
     scene = context.scene
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
@@ -117,9 +120,10 @@ def bake_targets(context, object_names):
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
             vis = RenderVisibility(context.view_layer)
+            dg = context.evaluated_depsgraph_get()
             targets = [o for o in scene.objects
                        if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
-                       and vis.mesh_renders(o)]
+                       and vis.mesh_renders(o) and _holds_result(o, dg, vertex_mode)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets)
@@ -130,6 +134,14 @@ def bake_targets(context, object_names):
                             "bake cannot do; turn Shadow on, or bake other objects (nothing "
                             "was changed)")
     return targets
+
+
+def _holds_result(obj, depsgraph, vertex_mode):
+    """Whether obj's evaluated mesh can take a bake's result (bake_targets)."""
+    if mesh_io.evaluated_is_original(obj):
+        return True
+    n = len(obj.evaluated_get(depsgraph).data.vertices)
+    return n > 0 and not (vertex_mode and n != len(obj.data.vertices))
 
 
 def check_writable(targets):
