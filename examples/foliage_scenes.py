@@ -337,10 +337,16 @@ def ivy_wall(col, thick=0.0, length=3.0, seed=3):
 
 
 def build(scene, realize=False):
-    """Build ``scene`` (SCENES) in an empty file. Returns {name: object}."""
+    """Build ``scene`` (SCENES) in the current file, emptied of objects, meshes, curves,
+    collections, materials, images, node groups and particle settings first. Returns {role or
+    name: object}."""
     import bpy
     import sapling_scenes
     sapling_scenes._clear()
+    for data in (bpy.data.materials, bpy.data.images, bpy.data.node_groups,
+                 bpy.data.particles):
+        for block in list(data):
+            data.remove(block)
     col = _collection(scene)
     out = {}
     if scene in ("card_tree", "card_tree_joined", "opaque_tree", "sapling_joined"):

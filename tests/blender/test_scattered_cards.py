@@ -82,3 +82,15 @@ def test_scattered_cards_are_the_trees_canopy(tmp_path, capsys, how):
         # which differs between instances and the cards made real: a fit of another sample.
         assert mae <= (0.02 if method == "regression" else 0.01), (how, method, mae)
     _clear_scene()
+
+
+@pytest.mark.parametrize("how", ["gn", "gn_realized"])
+def test_every_visible_mesh_leaves_the_scattering_crown_out(tmp_path, capsys, how):
+    """--all per vertex: the crown whose node tree replaces its mesh by cards (its vertex count
+    changed, or none left of its own) only occludes; it used to fail the whole bake ("its
+    modifiers change the vertex count")."""
+    _scene(how, False)
+    rep = _bake(tmp_path, capsys, "--all", "--method", "ellipsoid")
+    assert {"Trunk", "Ground"} <= set(rep["objects"]) and "Crown" not in rep["objects"]
+    assert "LeafCard" not in rep["objects"]  # hidden from renders: no target either
+    _clear_scene()
