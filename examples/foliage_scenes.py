@@ -154,6 +154,11 @@ def sapling_card_tree(col, cards=True, opaque_area=False, joined=False, material
         else:
             leaves.data.materials.append(plain_material("Leaves", (0.1, 0.4, 0.1)))
     if joined:
+        # One UV map name for both, or the join keeps two maps and the leaves' would not be
+        # the one that renders (the card's image would be read at UV (0, 0), Cycles too).
+        if leaves.data.uv_layers:
+            leaves.data.uv_layers[0].name = (branches.data.uv_layers[0].name
+                                             if branches.data.uv_layers else "UVMap")
         return {"tree": join([branches, leaves], "Tree")}
     return {"trunk": branches, "canopy": leaves}
 

@@ -1,7 +1,7 @@
 """Parts of one mesh (core/mesh_parts.py, blender/parts_io.py; issue #38 item 4): a Sapling tree
 joined into one object bakes, rung by rung, as the same tree in two objects (bark, leaves),
-whether its parts are told by material slots or, without materials, by the shape of its loose
-pieces; the report lists each part, its role and why."""
+whether its parts are told by material slots (leaves named so, or alpha-textured cards) or,
+without materials, by the shape of its loose pieces; the report lists each part, its role and why."""
 
 import json
 import os
@@ -36,12 +36,12 @@ def _ao(name):
     return v[0::4]
 
 
-def _scene(joined, materials):
+def _scene(joined, materials, cards=False):
     require_sapling()
     _clear_scene()
     col = bpy.data.collections.new("Tree")
     bpy.context.scene.collection.children.link(col)
-    objs = foliage_scenes.sapling_card_tree(col, cards=False, joined=joined,
+    objs = foliage_scenes.sapling_card_tree(col, cards=cards, joined=joined,
                                             materials=materials)
     foliage_scenes.ground(col)
     for ob in bpy.context.scene.objects:
@@ -50,26 +50,29 @@ def _scene(joined, materials):
     return objs
 
 
-@pytest.mark.parametrize("materials", [True, False], ids=["slots", "shape"])
-def test_joined_tree_bakes_as_two_objects(tmp_path, capsys, materials):
+@pytest.mark.parametrize("materials,cards", [(True, False), (True, True), (False, False)],
+                         ids=["slots", "cards", "shape"])
+def test_joined_tree_bakes_as_two_objects(tmp_path, capsys, materials, cards):
     """Every rung: the joined tree's AO (bark vertices first, as Object > Join keeps them)
     within 0.005 MAE of the two objects', and its report lists the parts: bark TRUNK, leaves
     CANOPY, each with its reason."""
     split = {}
     for method in RUNGS:
-        objs = _scene(False, materials)
+        objs = _scene(False, materials, cards)
         rep = _bake(tmp_path, capsys, "--method", method, "--samples", "32")
         assert rep["objects"][objs["trunk"].name]["role"] == "TRUNK"
         assert rep["objects"][objs["canopy"].name]["role"] == "CANOPY"
         split[method] = np.concatenate([_ao(objs["trunk"].name), _ao(objs["canopy"].name)])
     for method in RUNGS:
-        _scene(True, materials)
+        _scene(True, materials, cards)
         rep = _bake(tmp_path, capsys, "--method", method, "--samples", "32")
         e = rep["objects"]["Tree"]
         assert [p["role"] for p in e["parts"]] == ["TRUNK", "CANOPY"], e
         assert all(p["why"] for p in e["parts"])
         assert "parts:" in e["role_source"]
-        if materials:
+        if cards:
+            assert "Bark" in e["parts"][0]["why"] and "alpha" in e["parts"][1]["why"]
+        elif materials:
             assert "Bark" in e["parts"][0]["why"] and "Leaves" in e["parts"][1]["why"]
         else:
             assert "closed pieces" in e["parts"][0]["why"]
