@@ -82,3 +82,25 @@ def test_joined_tree_bakes_as_two_objects(tmp_path, capsys, materials, cards):
         print(f"{method}: joined vs two objects MAE {mae:.5f}")
         assert mae <= 0.005, (method, mae)
     _clear_scene()
+
+
+
+def test_joined_card_tree_per_texel(tmp_path, capsys):
+    """Per texel, a texel takes its triangle's part: the joined card tree bakes into one image
+    with its parts listed, values in [0, 1] and shaded (its cards overlap in UV space, every
+    leaf on the whole square, so texels are not compared one by one with two objects')."""
+    from canopy_ao.blender.job import run_bake
+    from canopy_ao.blender import properties
+    objs = _scene(True, True, True)
+    opts = properties.scene_options(bpy.context.scene)
+    opts.update(method="ellipsoid", mode="TEXEL", resolution=64, image_dir=str(tmp_path),
+                overwrite=True)
+    _job, rep = run_bake(bpy.context, [objs["tree"].name], opts)
+    e = rep["objects"][objs["tree"].name]
+    assert [p["role"] for p in e["parts"]] == ["TRUNK", "CANOPY"]
+    img = bpy.data.images.load(e["texel"]["path"], check_existing=False)
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    ao = px.reshape(64, 64, -1)[:, :, 0]
+    assert np.all((ao >= 0) & (ao <= 1)) and ao.min() < 0.9
+    _clear_scene()
