@@ -87,6 +87,9 @@ def main(argv):
     ap = argparse.ArgumentParser(prog="foliage.py")
     ap.add_argument("--out", default=os.path.join(REPO, "bench", "out", "foliage.md"))
     a = ap.parse_args(argv)
+    import addon_utils
+    if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
+        raise RuntimeError("the canopy_ao add-on did not enable")
     import foliage_scenes
     res = {}
     for scene in foliage_scenes.SCENES:
