@@ -3,7 +3,6 @@ are alpha-textured cards and the same tree with opaque leaves of the cards' opaq
 the trunk and the ground under it alike, rung by rung: each rung's bias against the rays of its
 own scene (which honour the alpha) within ±0.03 of the other's."""
 
-import json
 import os
 import sys
 
@@ -11,6 +10,7 @@ import bpy
 import numpy as np
 import pytest
 
+from foliage_helpers import baked_ao, cli_bake
 from conftest import REPO, _clear_scene, require_sapling
 
 sys.path.insert(0, os.path.join(REPO, "examples"))
@@ -18,22 +18,6 @@ import foliage_scenes  # noqa: E402
 
 RUNGS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid", "regression",
          "hybrid")
-
-
-def _bake(tmp_path, capsys, *args):
-    from canopy_ao import cli
-    report = tmp_path / "r.json"
-    with pytest.raises(SystemExit) as exc:
-        cli.main(["--all", "--overwrite", "--report", str(report), *args])
-    assert exc.value.code == 0, capsys.readouterr().err
-    return json.loads(report.read_text())
-
-
-def _ao(name):
-    a = bpy.data.objects[name].data.attributes[bpy.context.scene.canopy_ao.attribute]
-    v = np.empty(len(a.data) * 4, np.float32)
-    a.data.foreach_get("color", v)
-    return v[0::4]
 
 
 def _scene(cards):
@@ -57,8 +41,8 @@ def _biases(tmp_path, capsys, cards):
     under = np.hypot(g[:, 0], g[:, 1]) < reach
     got = {}
     for method in ("raytrace",) + RUNGS:
-        _bake(tmp_path, capsys, "--method", method, "--samples", "64")
-        got[method] = (_ao(objs["trunk"].name).mean(), _ao("Ground")[under].mean())
+        cli_bake(tmp_path, capsys, "--all", "--method", method, "--samples", "64")
+        got[method] = (baked_ao(objs["trunk"].name).mean(), baked_ao("Ground")[under].mean())
     rays = got.pop("raytrace")
     return {m: (t - rays[0], g - rays[1]) for m, (t, g) in got.items()}
 

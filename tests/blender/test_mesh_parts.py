@@ -1,9 +1,9 @@
 """Parts of one mesh (core/mesh_parts.py, blender/parts_io.py; issue #38 item 4): a Sapling tree
 joined into one object bakes, rung by rung, as the same tree in two objects (bark, leaves),
 whether its parts are told by material slots (leaves named so, or alpha-textured cards) or,
-without materials, by the shape of its loose pieces; the report lists each part, its role and why."""
+without materials, by the shape of its loose pieces; the report lists each part, its role and
+why."""
 
-import json
 import os
 import sys
 
@@ -11,6 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
+from foliage_helpers import baked_ao, cli_bake
 from conftest import REPO, _clear_scene, require_sapling
 
 sys.path.insert(0, os.path.join(REPO, "examples"))
@@ -18,22 +19,6 @@ import foliage_scenes  # noqa: E402
 
 RUNGS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid", "regression",
          "hybrid", "raytrace")
-
-
-def _bake(tmp_path, capsys, *args):
-    from canopy_ao import cli
-    report = tmp_path / "r.json"
-    with pytest.raises(SystemExit) as exc:
-        cli.main(["--all", "--overwrite", "--report", str(report), *args])
-    assert exc.value.code == 0, capsys.readouterr().err
-    return json.loads(report.read_text())
-
-
-def _ao(name):
-    a = bpy.data.objects[name].data.attributes[bpy.context.scene.canopy_ao.attribute]
-    v = np.empty(len(a.data) * 4, np.float32)
-    a.data.foreach_get("color", v)
-    return v[0::4]
 
 
 def _scene(joined, materials, cards=False):
@@ -59,13 +44,14 @@ def test_joined_tree_bakes_as_two_objects(tmp_path, capsys, materials, cards):
     split = {}
     for method in RUNGS:
         objs = _scene(False, materials, cards)
-        rep = _bake(tmp_path, capsys, "--method", method, "--samples", "32")
+        rep = cli_bake(tmp_path, capsys, "--all", "--method", method, "--samples", "32")
         assert rep["objects"][objs["trunk"].name]["role"] == "TRUNK"
         assert rep["objects"][objs["canopy"].name]["role"] == "CANOPY"
-        split[method] = np.concatenate([_ao(objs["trunk"].name), _ao(objs["canopy"].name)])
+        split[method] = np.concatenate([baked_ao(objs["trunk"].name),
+                                        baked_ao(objs["canopy"].name)])
     for method in RUNGS:
         _scene(True, materials, cards)
-        rep = _bake(tmp_path, capsys, "--method", method, "--samples", "32")
+        rep = cli_bake(tmp_path, capsys, "--all", "--method", method, "--samples", "32")
         e = rep["objects"]["Tree"]
         assert [p["role"] for p in e["parts"]] == ["TRUNK", "CANOPY"], e
         assert all(p["why"] for p in e["parts"])
@@ -76,7 +62,7 @@ def test_joined_tree_bakes_as_two_objects(tmp_path, capsys, materials, cards):
             assert "Bark" in e["parts"][0]["why"] and "Leaves" in e["parts"][1]["why"]
         else:
             assert "closed pieces" in e["parts"][0]["why"]
-        joined = _ao("Tree")
+        joined = baked_ao("Tree")
         assert joined.shape == split[method].shape
         mae = float(np.abs(joined - split[method]).mean())
         print(f"{method}: joined vs two objects MAE {mae:.5f}")

@@ -5,7 +5,6 @@ and the ground under them bake, rung by rung, as under the same cards made into 
 not seen at all (Blender names the instancer as their object), and scattered cards were opaque
 (the ground under the particles' crown 0.013 darker)."""
 
-import json
 import os
 import sys
 
@@ -13,28 +12,13 @@ import bpy
 import numpy as np
 import pytest
 
+from foliage_helpers import baked_ao, cli_bake
 from conftest import REPO, _clear_scene
 
 sys.path.insert(0, os.path.join(REPO, "examples"))
 import foliage_scenes  # noqa: E402
 
 RUNGS = ("ellipsoid", "shells", "grid", "regression", "hybrid", "raytrace")
-
-
-def _bake(tmp_path, capsys, *args):
-    from canopy_ao import cli
-    report = tmp_path / "r.json"
-    with pytest.raises(SystemExit) as exc:
-        cli.main(["--overwrite", "--report", str(report), *args])
-    assert exc.value.code == 0, capsys.readouterr().err
-    return json.loads(report.read_text())
-
-
-def _ao(name):
-    a = bpy.data.objects[name].data.attributes[bpy.context.scene.canopy_ao.attribute]
-    v = np.empty(len(a.data) * 4, np.float32)
-    a.data.foreach_get("color", v)
-    return v[0::4]
 
 
 def _scene(how, made_real):
@@ -55,9 +39,9 @@ def _rungs(tmp_path, capsys, how, made_real):
     near = np.hypot(g[:, 0], g[:, 1]) < 2.5  # the ground under the crown (radius 1.5)
     out, reps = {}, {}
     for method in RUNGS:
-        reps[method] = _bake(tmp_path, capsys, "--objects", "Trunk", "Ground", "--method",
+        reps[method] = cli_bake(tmp_path, capsys, "--objects", "Trunk", "Ground", "--method",
                              method, "--samples", "64")
-        out[method] = np.concatenate([_ao("Trunk"), _ao("Ground")[near]])
+        out[method] = np.concatenate([baked_ao("Trunk"), baked_ao("Ground")[near]])
     return objs, out, reps
 
 
@@ -90,7 +74,7 @@ def test_every_visible_mesh_leaves_the_scattering_crown_out(tmp_path, capsys, ho
     changed, or none left of its own) only occludes; it used to fail the whole bake ("its
     modifiers change the vertex count")."""
     _scene(how, False)
-    rep = _bake(tmp_path, capsys, "--all", "--method", "ellipsoid")
+    rep = cli_bake(tmp_path, capsys, "--all", "--method", "ellipsoid")
     assert {"Trunk", "Ground"} <= set(rep["objects"]) and "Crown" not in rep["objects"]
     assert "LeafCard" not in rep["objects"]  # hidden from renders: no target either
     _clear_scene()
