@@ -9,6 +9,7 @@ MAE and bias, beside a constant (each object's mean reference AO), and the issue
 
     blender -b --factory-startup --python-exit-code 1 --python bench/foliage.py -- \\
         --out bench/out/foliage.md
+    blender -b --factory-startup --python-exit-code 1 --python bench/foliage.py -- --speed
 
 Exits non-zero on failure (not when a target is missed: the table says so).
 """
@@ -83,13 +84,50 @@ def table(scene, res):
     return lines
 
 
+def speed(repeats=3):
+    """Lines: per rung, the seconds of a bake of the card tree (leaves at the preset's full
+    count) with its card vertices carrying their opaque part's AO (core/card_ao.py) over the
+    same bake without, best of ``repeats``, as a ratio (one run: compare ratios, not times)."""
+    import time
+    import bpy
+    import foliage_scenes
+    from canopy_ao.core import card_ao
+    foliage_scenes.build("card_tree")  # an empty file with its World, then the bigger tree
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob)
+    col = bpy.data.collections.new("Speed")
+    bpy.context.scene.collection.children.link(col)
+    foliage_scenes.sapling_card_tree(col, leaf_factor=1.0)
+    foliage_scenes.ground(col)
+    bpy.context.view_layer.update()
+    carry, out = card_ao.carry, []
+    for m in ("ellipsoid", "grid", "raytrace"):
+        best = {}
+        for on in (True, False):
+            card_ao.carry = carry if on else (lambda *a, **k: None)
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                _bake(m)
+                best[on] = min(best.get(on, 1e9), time.perf_counter() - t0)
+        card_ao.carry = carry
+        out.append(f"| {m} | {best[True]:.2f} | {best[False]:.2f} | "
+                   f"{best[True] / best[False]:.2f} |")
+    return ["### Card vertices' AO: cost", "", "| rung | with (s) | without (s) | ratio |",
+            "|---|---|---|---|"] + out + [""]
+
+
 def main(argv):
     ap = argparse.ArgumentParser(prog="foliage.py")
     ap.add_argument("--out", default=os.path.join(REPO, "bench", "out", "foliage.md"))
+    ap.add_argument("--speed", action="store_true",
+                    help="only time the card vertices' AO (with over without, per rung)")
     a = ap.parse_args(argv)
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
         raise RuntimeError("the canopy_ao add-on did not enable")
+    if a.speed:
+        print("\n".join(speed()))
+        return 0
     import foliage_scenes
     res = {}
     for scene in foliage_scenes.SCENES:
