@@ -149,7 +149,7 @@ class BakeJob:
                     self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
                     vertices=slice(a, b) if t.kind == "vertex" else None,
                     triangles=t.triangles[a:b] if t.triangles is not None else None)
-                card_ao.carry(self.plan, t.item, t.ao[a:b], t.kind == "vertex" and slice(a, b))
+                card_ao.carry_target(self.plan, t, a, b, self.opts)
                 if bent:
                     self._bent_step(t, a, b)
         except CanopyAOError as exc:

@@ -3,10 +3,9 @@
 A leaf card's vertices sit in its clear corners. Cycles' vertex bake reads 0 there (the bake
 point's surface is transparent), so vertex AO baked in Cycles leaves cards black; the AO at the
 corner itself is the card plane's, not the leaf's. Here a card vertex carries the AO its card's
-opaque part receives: each card triangle is shrunk to its opaque part (card_area.opaque_parts:
-its opaque area, about where it is opaque), the AO is evaluated at the shrunk triangle's corner
-that stands for the vertex (on the card's plane, the rays skipping that triangle, as a texel on
-it would), and a vertex shared by several card triangles takes the mean. A vertex that also
+opaque part receives: the AO at the opaque point of each of its card triangles nearest it
+(card_area.opaque_corners: on the card, the rays skipping that triangle, as a texel on it
+would), a vertex shared by several card triangles taking the mean. A vertex that also
 belongs to an opaque triangle, or to none with an opaque point, keeps its own AO. No bpy.
 """
 
@@ -22,11 +21,11 @@ class CardVertices:
     point float32 (K, 3) and normal float32 (K, 3) of each, the triangle int32 (K,) it lies on."""
 
     def __init__(self, item):
-        got = card_area.opaque_parts(item)
+        got = card_area.opaque_corners(item)
         self.vertex = np.zeros(0, np.int64)
         if got is None or not len(got[1]):
             return
-        shrunk, src = got
+        near, src = got
         tris = np.asarray(item.triangles, np.int64)
         opaque = np.ones(len(tris), bool)
         opaque[card_area._clear_triangles(item)[1]] = False
@@ -36,7 +35,7 @@ class CardVertices:
         keep = ~on_opaque[vertex]
         order = np.argsort(vertex[keep], kind="stable")
         self.vertex = vertex[keep][order]
-        self.points = np.ascontiguousarray(shrunk.reshape(-1, 3)[keep][order], np.float32)
+        self.points = np.ascontiguousarray(near.reshape(-1, 3)[keep][order], np.float32)
         self.normals = np.ascontiguousarray(item.normals[self.vertex], np.float32)
         self.triangle = np.ascontiguousarray(np.repeat(src, 3)[keep][order], np.int32)
 
@@ -68,3 +67,12 @@ def carry(plan, item, ao, vertices):
     count = np.bincount(v, None, b - a)
     has = count > 0
     ao[has] = (total[has] / count[has]).astype(ao.dtype)
+
+
+def carry_target(plan, target, a, b, opts):
+    """carry() for receivers a..b of a bake's target (blender/targets.py: item, ao, kind):
+    vertex targets only, and not with bent normals or live AO on, whose traces and frames
+    evaluate a card's vertices where they are (one AO for the bake and every frame)."""
+    if target.kind == "vertex" and opts.get("bent_normals", "OFF") == "OFF" \
+            and not opts.get("live"):
+        carry(plan, target.item, target.ao[a:b], slice(a, b))

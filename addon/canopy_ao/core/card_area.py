@@ -62,36 +62,65 @@ def _clear_triangles(item):
     return tris, np.array([not m.opaque for m in op.materials])[slot], slot
 
 
-def opaque_parts(item):
-    """(corners float64 (K, 3, 3), source int64 (K,)): each triangle of ``item`` whose material
-    is not opaque and that has an opaque point, shrunk about the alpha-weighted centroid of its
-    area by √(its mean alpha) (corner j of the shrunk triangle stands for its vertex j), and
-    its index in the item's triangles; None when the item has no such triangle."""
+def _sampled(item):
+    """Per batch of the item's triangles whose material is not opaque: (their indices int64
+    (m,), corners float64 (m, 3, 3), sample points float64 (m, S, 3), alpha there (m, S)), the
+    samples the centroids of each triangle's regular subdivision; nothing when it has none."""
     got = _clear_triangles(item)
     if got is None:
-        return None
+        return
     tris, clear, slot = got
     op = item.opacity
     bary = _subdivision_points()
     w = np.column_stack([1.0 - bary.sum(1), bary])  # (S, 3) weights of the corners
     p = np.asarray(item.positions, np.float64)
-    out, src = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)]
     for k, mat in enumerate(op.materials):
         sel = np.flatnonzero(clear & (slot == k))
         for a in range(0, len(sel), _CHUNK):
             s = sel[a:a + _CHUNK]
-            corners = p[tris[s]]  # (m, 3, 3)
+            corners = p[tris[s]]
             uv = np.einsum("sc,mcd->msd", w, np.asarray(op.uvs[s], np.float64)) \
                 if op.uvs is not None and mat.texture is not None else np.zeros((len(s), len(w), 2))
             alpha = texture_alpha(mat, uv.reshape(-1, 2)).reshape(len(s), -1)
-            f = alpha.mean(1)
-            pts = np.einsum("sc,mcd->msd", w, corners)
-            centre = np.einsum("ms,msd->md", alpha, pts) / np.maximum(alpha.sum(1), 1e-300)[:, None]
-            g = corners.mean(1)
-            ok = f > 0
-            out.append(centre[ok, None, :]
-                       + np.sqrt(f[ok])[:, None, None] * (corners[ok] - g[ok, None, :]))
-            src.append(s[ok])
+            yield s, corners, np.einsum("sc,mcd->msd", w, corners), alpha
+
+
+def opaque_parts(item):
+    """(corners float64 (K, 3, 3), source int64 (K,)): each triangle of ``item`` whose material
+    is not opaque and that has an opaque point, shrunk by √(its mean alpha) and moved to the
+    alpha-weighted centroid of its area (so its area is its opaque area, centred where that
+    is), and its index in the item's triangles; None when the item has no such triangle."""
+    if _clear_triangles(item) is None:
+        return None
+    out, src = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)]
+    for s, corners, pts, alpha in _sampled(item):
+        f = alpha.mean(1)
+        centre = np.einsum("ms,msd->md", alpha, pts) / np.maximum(alpha.sum(1), 1e-300)[:, None]
+        g = corners.mean(1)
+        ok = f > 0
+        out.append(centre[ok, None, :]
+                   + np.sqrt(f[ok])[:, None, None] * (corners[ok] - g[ok, None, :]))
+        src.append(s[ok])
+    return np.concatenate(out), np.concatenate(src)
+
+
+def opaque_corners(item):
+    """(points float64 (K, 3, 3), source int64 (K,)): for each triangle of ``item`` whose
+    material is not opaque and that has an opaque point, the opaque point nearest each of its
+    corners (among its subdivision's centroids, those of alpha ≥ ½, else of its highest alpha:
+    on the card, where it is opaque), and its index in the item's triangles; None when the
+    item has no such triangle."""
+    if _clear_triangles(item) is None:
+        return None
+    out, src = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)]
+    for s, corners, pts, alpha in _sampled(item):
+        ok = alpha.max(1) > 0
+        opaque = alpha >= np.minimum(0.5, alpha.max(1, keepdims=True))
+        d = ((pts[:, None, :, :] - corners[:, :, None, :]) ** 2).sum(-1)  # (m, 3, S)
+        d = np.where(opaque[:, None, :], d, np.inf)
+        near = np.argmin(d, axis=2)  # (m, 3)
+        out.append(np.take_along_axis(pts, near[:, :, None], axis=1)[ok])
+        src.append(s[ok])
     return np.concatenate(out), np.concatenate(src)
 
 
