@@ -98,11 +98,11 @@ def is_candidate(obj):
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
 
 
-def bake_targets(context, object_names, vertex_mode=False):
+def bake_targets(context, object_names, opts=None):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
     mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
     modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
-    vertex (vertex_mode), one whose modifiers change its vertex count (they realise the
+    vertex (opts' mode), one whose modifiers change its vertex count (they realise the
     scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
     wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
     bake here cannot do)."""
@@ -121,6 +121,7 @@ def bake_targets(context, object_names, vertex_mode=False):
         if not targets:
             vis = RenderVisibility(context.view_layer)
             dg = context.evaluated_depsgraph_get()
+            vertex_mode = (opts or {}).get("mode", 'VERTEX') == 'VERTEX'
             targets = [o for o in scene.objects
                        if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
                        and vis.mesh_renders(o) and _holds_result(o, dg, vertex_mode)]
