@@ -252,15 +252,17 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
         tree, source = tree_and_source(obj)
         polys = faces[0] if faces and len(faces[0]) == len(tris) else None
         item = SceneItem(name, role, tree, pos, nor, tris, tree_source=source, polygons=polys)
-        if len(tris):  # which triangles rays pass (the materials' alpha)
-            item.opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
         # A guessed mesh of parts of different roles (bark and leaves) bakes part by part.
         cut = parts_io.split(obj, item, depsgraph, opts, alphas, notes) if declared is None \
             else None
+        kept = {id(it) for it, _idx in cut or [(item, None)]
+                if declared is not None or bent or ladder.triangles_needed(
+                    opts["method"], opts["tau"], it.role)}
+        if len(tris) and kept:  # which triangles rays pass (the materials' alpha)
+            parts_io.set_opacity(item, cut, opacity_io.item_opacity(obj, depsgraph, len(tris),
+                                                                    alphas))
         for it, _idx in cut or [(item, None)]:
-            if declared is None and not bent and not ladder.triangles_needed(
-                    opts["method"], opts["tau"], it.role):
-                # not part of this bake (kept only for the guess)
+            if id(it) not in kept:  # not part of this bake (kept only for the guess)
                 it.triangles, it.polygons, it.opacity = it.triangles[:0], None, None
             items.append(it)
             objects[it.name] = obj

@@ -70,6 +70,14 @@ def split(obj, item, depsgraph, opts, alphas, notes=None):
     return out
 
 
+def set_opacity(item, parts, op):
+    """Give ``item`` the opacity ``op`` (opacity_io.item_opacity), and each of its parts
+    (split's, or None) the share of it on the part's triangles."""
+    item.opacity = op
+    for sub, _idx in parts or ():
+        sub.opacity = mesh_parts.opacity_of(op, sub.part_triangles)
+
+
 def describe(parts):
     """The whole object's role source: each part, its role and why."""
     return "parts: " + "; ".join(f"'{p.name}' {p.role} ({p.part_why})" for p, _ in parts)

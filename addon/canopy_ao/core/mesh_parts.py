@@ -153,12 +153,12 @@ def cut(item: SceneItem, parts):
                         item.normals[idx], remap[t], tree_source=item.tree_source,
                         polygons=item.polygons[q.triangles] if item.polygons is not None
                         else None)
-        sub.opacity = _opacity_of(item.opacity, q.triangles)
+        sub.opacity = opacity_of(item.opacity, q.triangles)
         out.append((sub, idx))
     return out
 
 
-def _opacity_of(op, keep):
+def opacity_of(op, keep):
     """An ItemOpacity restricted to the triangles ``keep`` (the same materials)."""
     if op is None or len(op.triangle_material) != len(keep):
         return op
