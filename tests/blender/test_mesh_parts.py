@@ -90,3 +90,18 @@ def test_joined_card_tree_per_texel(tmp_path, capsys):
     ao = px.reshape(64, 64, -1)[:, :, 0]
     assert np.all((ao >= 0) & (ao <= 1)) and ao.min() < 0.9
     _clear_scene()
+
+
+def test_a_frame_range_bakes_a_joined_tree_whole(tmp_path, capsys):
+    """A frame range (live frames alike) reads each object as one item: the joined tree bakes
+    whole, with one role (a note says why), instead of failing on its parts' names ('Tree
+    [trunk] is no longer in scene')."""
+    _scene(True, True, True)
+    rep = cli_bake(tmp_path, capsys, "--all", "--method", "ellipsoid", "--frames", "1", "2")
+    assert "Tree" in rep["objects"], rep
+    a = bpy.data.objects["Tree"].data.attributes[rep["cache"][0]]
+    ao = np.empty(len(a.data), np.float32)
+    a.data.foreach_get("value", ao)
+    assert len(ao) == len(bpy.data.objects["Tree"].data.vertices)
+    assert np.all((ao >= 0) & (ao <= 1))
+    _clear_scene()

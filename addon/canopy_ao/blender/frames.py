@@ -73,7 +73,7 @@ class FrameBake:
             live.suspend(False)
         dg = self.context.evaluated_depsgraph_get()
         if self.session is None:  # the first frame: gather, fit, calibrate (as a bake does)
-            job = BakeJob(self.context, self.names, self.opts)
+            job = BakeJob(self.context, self.names, dict(self.opts, frames=True))
             job.prepare()
             self.session = live.Session(job)
             self._check_names()

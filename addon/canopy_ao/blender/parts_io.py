@@ -10,8 +10,9 @@ from ..core import card_ao, mesh_parts
 from . import opacity_io
 
 # Options under which an object keeps one role: their per-object maps (bent normals,
-# thickness) and live frames read the object's item as a whole.
-WHOLE_OPTIONS = (("bent_normals", "bent normals"), ("thickness", "thickness"), ("live", "live"))
+# thickness), live frames and a frame range's (frames.py) read the object's item as a whole.
+WHOLE_OPTIONS = (("bent_normals", "bent normals"), ("thickness", "thickness"), ("live", "live"),
+                 ("frames", "a frame range"))
 
 
 def _triangle_materials(obj, depsgraph, count):
