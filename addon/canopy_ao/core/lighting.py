@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from . import opacity, ray_budget, texel_budget
+from . import card_area, opacity, ray_budget, texel_budget
 from .native import CanopyAOError, _core
 from .scene import Plan, ray_length
 
@@ -343,4 +343,6 @@ def build_grid(items):
     wood_and_leaves = [it for it in items if it.role in ("CANOPY", "TRUNK") and len(it.triangles)]
     if not wood_and_leaves:
         return None
-    return _core.DensityGrid(*_scene_triangles(wood_and_leaves))
+    # cards by their opaque area, where opaque (card_area.counted_item)
+    return _core.DensityGrid(*_scene_triangles([card_area.counted_item(it)
+                                                for it in wood_and_leaves]))

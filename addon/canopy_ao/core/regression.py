@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from . import native
+from . import card_area, native
 from .ladder import BURIED_RAYS as LADDER_BURIED_RAYS, BURIED_SCALE
 from .leaf_features import LeafTable
 from .native import CanopyAOError
@@ -144,7 +144,8 @@ class RegressionRung:
         receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
         n_recv = sum(len(it.positions) for it in receivers)
         points, samples = calibration_size(n_recv, points, samples)
-        grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
+        grid = _core.DensityGrid(*_merged([card_area.counted_item(it) for it in occ]),
+                                 resolution=resolution)  # cards by their opaque area
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
 
