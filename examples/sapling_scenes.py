@@ -156,8 +156,9 @@ def _smooth(ob):
     me.update()
 
 
-def sapling_tree(preset, seed, offset, name, leaf_factor, collection, coarse=False):
-    """One Sapling tree: (branches mesh object, leaves mesh object) linked to ``collection``."""
+def sapling_tree(preset, seed, offset, name, leaf_factor, collection, coarse=False, **extra):
+    """One Sapling tree: (branches mesh object, leaves mesh object) linked to ``collection``.
+    extra: Sapling settings over the preset's (leafShape="rect": rectangular leaf cards)."""
     import bpy
     params = load_preset(preset)
     props = bpy.ops.curve.tree_add.get_rna_type().properties.keys()
@@ -166,6 +167,7 @@ def sapling_tree(preset, seed, offset, name, leaf_factor, collection, coarse=Fal
                   leaves=max(1, int(round(params.get("leaves", 25) * leaf_factor))))
     if coarse:
         params.update(resU=1, bevelRes=0)
+    params.update(extra)
     before = set(bpy.data.objects)
     res = bpy.ops.curve.tree_add(**params)
     if "FINISHED" not in res:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from canopy_ao import _core
-from canopy_ao.core import lighting, opacity
+from canopy_ao.core import card_area, lighting, opacity
 from canopy_ao.core.scene import SceneItem
 
 
@@ -122,3 +122,78 @@ def test_a_material_many_items_share_reaches_the_tracer_once():
     args = opacity.tracer_args(items)
     assert len(args["opacity_alphas"]) == 1
     assert args["opacity_materials"].tolist() == [-1, -1, 0, 0, 0, 0]
+
+
+# === Cards as the proxies count them (card_area.counted_triangles) ========================
+
+def _card(material, uvs=True):
+    """A 2 × 1 card (x in [0, 2], y in [0, 1]) of two triangles, UVs x/2, y."""
+    from canopy_ao.core.scene import SceneItem
+    p = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], np.float32)
+    t = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    it = SceneItem("Card", "CANOPY", "T", p, np.tile([0, 0, 1], (4, 1)), t)
+    uv = (p[:, :2] / [2, 1])[t].astype(np.float32)
+    it.opacity = opacity.ItemOpacity([material], np.zeros(2, np.int32), uv if uvs else None)
+    return it
+
+
+def _area(p, t):
+    a, b, c = (p[t[:, i]].astype(np.float64) for i in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def test_counted_card_by_its_opaque_area_and_where():
+    """A card opaque on its left half counts half its area, centred on that half; a constant
+    alpha scales the area about each triangle's centre; an opaque card is itself."""
+    tex = np.zeros((16, 16), np.float32)
+    tex[:, :8] = 1.0  # u < 0.5: opaque
+    for nearest in (True, False):
+        it = _card(opacity.MaterialAlpha("Half", texture=tex, nearest=nearest))
+        p, t = card_area.counted_triangles(it)
+        assert abs(_area(p, t).sum() - 1.0) < 0.03, nearest
+        centre = (p[t].mean(1) * _area(p, t)[:, None]).sum(0) / _area(p, t).sum()
+        assert abs(centre[0] - 0.5) < 0.03 and abs(centre[1] - 0.5) < 0.1, centre
+    it = _card(opacity.MaterialAlpha("Const", alpha=0.3), uvs=False)
+    p, t = card_area.counted_triangles(it)
+    np.testing.assert_allclose(_area(p, t), 0.3, rtol=1e-5)
+    np.testing.assert_allclose(p[t].mean(1), it.positions[it.triangles].mean(1), atol=1e-6)
+    clear = _card(opacity.MaterialAlpha("Clear", alpha=0.0), uvs=False)
+    assert len(card_area.counted_triangles(clear)[1]) == 0
+    solid = _card(opacity.MaterialAlpha("Solid"))
+    assert card_area.counted_item(solid) is solid
+    assert card_area.counted_points(solid) is solid.positions
+
+
+def test_texture_alpha_reads_as_the_tracer():
+    """Bilinear between texel centres with wrap, or the texel the UV falls in; sRGB masks
+    decoded before offset and scale."""
+    tex = np.array([[0.0, 1.0]], np.float32)  # one row, two texels
+    lin = opacity.MaterialAlpha("L", texture=tex)
+    got = card_area.texture_alpha(lin, [[0.25, 0.5], [0.5, 0.5], [1.0, 0.5]])
+    np.testing.assert_allclose(got, [0.0, 0.5, 0.5])
+    near = opacity.MaterialAlpha("N", texture=tex, nearest=True)
+    np.testing.assert_allclose(card_area.texture_alpha(near, [[0.49, 0.5], [0.51, 0.5]]), [0, 1])
+    s = opacity.MaterialAlpha("S", texture=np.full((2, 2), 0.5, np.float32), srgb=True,
+                              scale=-1.0, offset=1.0)
+    np.testing.assert_allclose(card_area.texture_alpha(s, [[0.3, 0.3]]),
+                               1.0 - opacity.srgb_decode(0.5), rtol=1e-6)
+
+
+def test_tiled_copies_carry_their_materials_and_mirror_their_uvs():
+    """A realised field's opacity: each item's triangles copied in turn, a mirrored copy's UVs
+    in reversed corner order (forest.realize winds its triangles back), an item without
+    opacity opaque."""
+    tex = np.ones((2, 2), np.float32) * 0.5
+    card = SceneItem("Card", "CANOPY", "T", np.eye(3, dtype=np.float32),
+                     np.tile([0, 0, 1], (3, 1)), np.array([[0, 1, 2]], np.int32))
+    uv = np.array([[[0, 0], [1, 0], [0, 1]]], np.float32)
+    card.opacity = opacity.ItemOpacity([opacity.MaterialAlpha("Leaf", texture=tex)],
+                                       np.zeros(1, np.int32), uv)
+    twig = SceneItem("Twig", "TRUNK", "T", np.eye(3, dtype=np.float32),
+                     np.tile([0, 0, 1], (3, 1)), np.array([[0, 1, 2]], np.int32))
+    op = opacity.tiled([(card, np.array([False, True])), (twig, np.array([False]))])
+    assert [m.name for m in op.materials] == ["Leaf", "Twig"] and op.materials[1].opaque
+    assert op.triangle_material.tolist() == [0, 0, 1]
+    np.testing.assert_array_equal(op.uvs[0], uv[0])
+    np.testing.assert_array_equal(op.uvs[1], uv[0][::-1])
+    assert opacity.tiled([(twig, np.array([False]))]) is None

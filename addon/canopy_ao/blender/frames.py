@@ -60,7 +60,7 @@ class FrameBake:
             live_session.suspend(False)
         dg = self.context.evaluated_depsgraph_get()
         if self.session is None:  # the first frame: gather, fit, calibrate (as a bake does)
-            job = BakeJob(self.context, self.names, self.opts)
+            job = BakeJob(self.context, self.names, dict(self.opts, frames=True))
             job.prepare()
             self.session = live_session.Session(job)
             self._check_names()

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from . import mesh_io, opacity_io
+from . import mesh_io, opacity_io, parts_io
 from .visibility import RenderVisibility, casts_shadow
 from ..core import ladder, roles
 from ..core.native import CanopyAOError
@@ -98,11 +98,14 @@ def is_candidate(obj):
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
 
 
-def bake_targets(context, object_names):
+def bake_targets(context, object_names, opts=None):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
-    mesh that renders and occludes (visibility.py). Raises CanopyAOError when there are none, a
-    name is wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays,
-    which a bake here cannot do)."""
+    mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
+    modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
+    vertex (opts' mode), one whose modifiers change its vertex count (they realise the
+    scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
+    wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
+    bake here cannot do)."""
     scene = context.scene
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
@@ -117,9 +120,11 @@ def bake_targets(context, object_names):
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
             vis = RenderVisibility(context.view_layer)
+            dg = context.evaluated_depsgraph_get()
+            vertex_mode = (opts or {}).get("mode", 'VERTEX') == 'VERTEX'
             targets = [o for o in scene.objects
                        if is_candidate(o) and o.visible_get(view_layer=context.view_layer)
-                       and vis.mesh_renders(o)]
+                       and vis.mesh_renders(o) and _holds_result(o, dg, vertex_mode)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets)
@@ -130,6 +135,14 @@ def bake_targets(context, object_names):
                             "bake cannot do; turn Shadow on, or bake other objects (nothing "
                             "was changed)")
     return targets
+
+
+def _holds_result(obj, depsgraph, vertex_mode):
+    """Whether obj's evaluated mesh can take a bake's result (bake_targets)."""
+    if mesh_io.evaluated_is_original(obj):
+        return True
+    n = len(obj.evaluated_get(depsgraph).data.vertices)
+    return n > 0 and not (vertex_mode and n != len(obj.data.vertices))
 
 
 def check_writable(targets):
@@ -233,20 +246,29 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             triangles=tris_needed, timings=timings, polygons=faces)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
-        if declared is None and not bent and not ladder.triangles_needed(opts["method"],
-                                                                         opts["tau"], role):
-            tris = tris[:0]  # not part of this bake (kept only for the guess)
         timings["roles"] = timings.get("roles", 0.0) + time.perf_counter() - t0
         if role == "IGNORE":
             continue
         tree, source = tree_and_source(obj)
         polys = faces[0] if faces and len(faces[0]) == len(tris) else None
-        items.append(SceneItem(name, role, tree, pos, nor, tris, tree_source=source,
-                               polygons=polys))
-        if len(tris):  # which triangles rays pass (the materials' alpha)
-            items[-1].opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
+        item = SceneItem(name, role, tree, pos, nor, tris, tree_source=source, polygons=polys)
+        # A guessed mesh of parts of different roles (bark and leaves) bakes part by part.
+        cut = parts_io.split(obj, item, depsgraph, opts, alphas, notes) if declared is None \
+            else None
+        kept = {id(it) for it, _idx in cut or [(item, None)]
+                if declared is not None or bent or ladder.triangles_needed(
+                    opts["method"], opts["tau"], it.role)}
+        if len(tris) and kept:  # which triangles rays pass (the materials' alpha)
+            parts_io.set_opacity(item, cut, opacity_io.item_opacity(obj, depsgraph, len(tris),
+                                                                    alphas))
+        for it, _idx in cut or [(item, None)]:
+            if id(it) not in kept:  # not part of this bake (kept only for the guess)
+                it.triangles, it.polygons, it.opacity = it.triangles[:0], None, None
+            items.append(it)
+            objects[it.name] = obj
+            how[it.name] = f"part of {name}: {it.part_why}" if cut else why
         objects[name] = obj
-        how[name] = why
+        how[name] = parts_io.describe(cut) if cut else why
     return items, objects, how
 
 

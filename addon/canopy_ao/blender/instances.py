@@ -12,7 +12,9 @@ prototype's mesh, which the instances share), and its shells and trunks, moved b
 occluders for everything the main bake evaluates; the exact rung and auto's calibration trace
 its triangles at every M (Embree instances).
 
-Limits: geometry instanced without an object (a geometry-nodes primitive realised inside the
+A geometry-nodes instance of an object (Object Info, a collection on points) names the
+instancer as its object; its prototype is found by the instanced mesh (_mesh_owner).
+Limits: geometry instanced without an object (a geometry-nodes primitive made inside the
 node tree) has no prototype object and is skipped; a prototype's self-AO does not include the
 ground or neighbouring instances (the mesh is shared, so one value per vertex must do for every
 instance).
@@ -23,14 +25,33 @@ import time
 import bpy
 import numpy as np
 
-from . import gather, materials, mesh_io, ownership
+from . import gather, materials, mesh_io, opacity_io, ownership
 from .visibility import RenderVisibility
 from .. import core
-from ..core import forest, roles
+from ..core import forest, opacity, roles
 
 # A blade's AO per vertex is its mean over this many of its instances at most (evenly spread
 # over the field): the mean of 2000 is within ~0.005 of all of them, at a bounded cost.
 MEAN_INSTANCES = 2000
+
+
+def _mesh_owner(instance_object, owners, depsgraph):
+    """The mesh object whose mesh a geometry-nodes instance shows (an Object Info or a
+    collection's object instanced on points: Blender names the instancer as the instance's
+    object, and its data a copy of the instanced object's evaluated mesh, under that mesh's
+    name), or None when no mesh object of that name and size is found (a mesh the node tree
+    made). owners: a dict kept over one pass, (mesh name, vertices) -> object."""
+    data = instance_object.data
+    if not isinstance(data, bpy.types.Mesh):
+        return None
+    key = (data.name, len(data.vertices))
+    if key not in owners:
+        owners[key] = next((o for o in bpy.data.objects
+                            if o.type == 'MESH' and o.data.name == data.name
+                            and o.data.library is None
+                            and len(o.evaluated_get(depsgraph).data.vertices)
+                            == key[1]), None) if data.name in bpy.data.meshes else None
+    return owners[key]
 
 
 def instance_matrices(depsgraph):
@@ -39,7 +60,7 @@ def instance_matrices(depsgraph):
     instancers are the objects whose particles or node tree made the instances (None: none).
     Only instances that occlude in Cycles (visibility.py: the instancer renders, both cast
     shadows, a collection instance's own render flags)."""
-    found = {}
+    found, owners = {}, {}
     vis = RenderVisibility(depsgraph.view_layer)
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -49,6 +70,8 @@ def instance_matrices(depsgraph):
             continue
         orig = ob.original
         parent = inst.parent.original if inst.parent is not None else None
+        if orig is not None and orig == parent:  # geometry nodes: the mesh's own object
+            orig = _mesh_owner(inst.object, owners, depsgraph)
         if orig is None or orig == parent or orig.get(mesh_io.PROXY_PROP):
             continue  # no prototype object of its own (geometry made by the node tree)
         if not vis.instance_renders(orig, parent):
@@ -60,6 +83,18 @@ def instance_matrices(depsgraph):
     for name, (orig, mats, parents) in found.items():
         inv = np.linalg.pinv(np.array(orig.matrix_world, dtype=np.float64))
         out[name] = (orig, np.stack(mats) @ inv, parents)
+    return out
+
+
+def _copies(items, matrices):
+    """[(item, mirrored bool (k,))]: the copies forest.realize makes of each item (singular
+    matrices dropped, items without copies or vertices left out), those it mirrors flagged."""
+    out = []
+    for it, mats in zip(items, matrices):
+        det = np.linalg.det(np.asarray(mats, np.float64).reshape(-1, 4, 4)[:, :3, :3])
+        det = det[np.abs(det) > 1e-12]
+        if len(det) and len(it.positions):
+            out.append((it, det < 0))
     return out
 
 
@@ -77,6 +112,7 @@ class Prototypes:
         self.plans = {}
         self.means = {}  # prototype object name -> its vertices' mean AO over the instances
         self.instancers = {}  # item name -> names of the objects that instance it
+        alphas = {}  # each material's alpha, read once (gather.scene_items')
         for name, (obj, mats, parents) in instance_matrices(depsgraph).items():
             self.instancers[name] = parents
             try:
@@ -89,8 +125,10 @@ class Prototypes:
             if role == "IGNORE":
                 continue
             tree = gather.tree_of(obj)
-            self.items.setdefault(tree, []).append(
-                core.SceneItem(name, role, tree, pos, nor, tris))
+            it = core.SceneItem(name, role, tree, pos, nor, tris)
+            if len(tris):  # leaf cards: what their alpha keeps (realised, they honour it)
+                it.opacity = opacity_io.item_opacity(obj, depsgraph, len(tris), alphas)
+            self.items.setdefault(tree, []).append(it)
             self.matrices.setdefault(tree, []).append(mats)
             self.objects[name] = obj
             self.how[name] = how
@@ -143,6 +181,7 @@ class Prototypes:
         if real is None:
             return None
         it = real.item
+        it.opacity = opacity.tiled(_copies(items, mats))
         if any(d is not None and d[0] == "GRASS" for d in declared):
             how = "declared Grass on the prototype"
         else:

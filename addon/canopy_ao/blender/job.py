@@ -8,7 +8,8 @@ import time
 
 import bpy
 
-from . import bent_io, checks, gather, instances, live_session, materials, mesh_io
+from . import (bent_io, checks, gather, instances, live_session, materials, mesh_io,
+               parts_io)
 from .commit import Transaction
 from .loop import KINDS, Loop
 from .. import core
@@ -48,7 +49,7 @@ class BakeJob:
         t_start = time.perf_counter()
         self.lines = []
         checks.check_request(opts)  # what needs no geometry: refused before any work
-        targets = gather.bake_targets(context, object_names)
+        targets = gather.bake_targets(context, object_names, opts)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
         self.gather_notes = []
@@ -59,6 +60,8 @@ class BakeJob:
         self.kind = KINDS[opts["mode"]]
         self.targets = [self.kind(it, self.objects[it.name], opts, depsgraph)
                         for it in self.items if it.name in target_names]
+        self.targets += parts_io.targets(self.kind, self.items, self.objects, target_names, opts,
+                                         depsgraph)  # a mesh baked by parts: one target
         if not self.targets:
             raise CanopyAOError("every object to bake has the role Ignore")
         self.kind.check_outputs(self.targets, opts)  # image files: none collide, none the user's
@@ -107,7 +110,7 @@ class BakeJob:
             protos = self.prototypes.bake(self.settings, skip=skip)
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
-        targets = {t.item.name: (t.kind, t.count, t.group) for t in self.targets}
+        targets = parts_io.receivers(self.targets)  # a mesh baked by parts: its parts'
         self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:
@@ -118,7 +121,7 @@ class BakeJob:
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)
         self.loop.start(self.plan, self.opts["bent_normals"], bool(self.opts["thickness"]),
-                        self.prototypes.means)
+                        self.prototypes.means, cards=not self.opts["live"])
         if self.blocking and core.rung(self.plan.method).uses_samples:  # steps of a few seconds
             self.loop.split(max(4096, CHUNK * BLOCKING_CHUNKS * 16
                                 // max(self.settings.samples, 16)))

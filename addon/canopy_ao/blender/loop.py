@@ -8,9 +8,9 @@ import time
 import numpy as np
 
 from .. import core
-from ..core import maps
+from ..core import card_ao, maps
 from ..core.native import CanopyAOError
-from . import bent_io
+from . import bent_io, parts_io
 from .targets import chunks, chunks_done, split_chunks
 from .texel_target import TexelTarget
 from .vertex_target import VertexTarget
@@ -29,13 +29,17 @@ class Loop:
         self.next = 0  # the next step's index
         self.plan = None
         self.bent, self.thickness, self.means = "OFF", False, {}
+        self.cards = False
 
-    def start(self, plan, bent="OFF", thickness=False, means=None):
+    def start(self, plan, bent="OFF", thickness=False, means=None, cards=False):
         """Evaluate under ``plan`` from now on. bent: the space of the bent normals to make
         too ("OFF": none); thickness: make the thickness too; means: {prototype name: the
-        mean AO of its vertices over its instances} (instances.Prototypes.means)."""
+        mean AO of its vertices over its instances} (instances.Prototypes.means); cards: leaf
+        cards' vertices carry their opaque part's AO (core/card_ao.py), unless bent normals
+        are made (their trace evaluates a card's vertices where they are, as live frames do)."""
         self.plan, self.bent, self.thickness = plan, bent, thickness
         self.means = means or {}
+        self.cards = cards and bent == "OFF"
 
     def split(self, size):
         """Cut the steps still to come to ``size`` receivers where a target allows
@@ -61,12 +65,16 @@ class Loop:
                 # A grass blade instanced over a field: what its instances see, not the lone
                 # prototype (instances.Prototypes.bake_realized).
                 t.ao[a:b] = shared[a:b]
+            elif t.parts:  # a mesh baked by parts: each part's receivers by its item
+                t.ao[a:b] = parts_io.evaluate(self.plan, t, a, b, self.cards)
             elif bent and maps.rung_is_the_trace(self.plan, t.item):  # one trace gives both
                 t.ao[a:b] = self._bent_step(t, a, b)
             else:
                 t.ao[a:b] = core.evaluate_receivers(
                     self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
                     vertices=t.vertices(a, b), triangles=t.triangles_of(a, b))
+                if self.cards:
+                    card_ao.carry(self.plan, t.item, t.ao[a:b], t.vertices(a, b))
                 if bent:
                     self._bent_step(t, a, b)
         except CanopyAOError as exc:

@@ -176,15 +176,19 @@ def _uv_corners(mesh, name):
     layers = mesh.uv_layers
     if not name:
         name = next((l.name for l in layers if l.active_render), layers[0].name if layers else "")
-    layer = layers.get(name) if name else None
-    if layer is None:
-        return None
+        if not name:  # Cycles reads a missing default map as (0, 0) (item_opacity)
+            return np.zeros((len(mesh.loops), 2), np.float32)
+    layer = layers.get(name)
     uv = np.empty(2 * len(mesh.loops), np.float32)
     attr = mesh.attributes.get(name)
     if attr is not None and attr.data_type == "FLOAT2" and attr.domain == "CORNER":
-        attr.data.foreach_get("vector", uv)  # Blender 3.5+: UV maps are attributes
-    else:
+        # Blender 3.5+: UV maps are attributes; before, geometry nodes that realise
+        # instances keep a UV map as such an attribute, which Cycles finds by name
+        attr.data.foreach_get("vector", uv)
+    elif layer is not None:
         layer.data.foreach_get("uv", uv)
+    else:
+        return None
     return uv.reshape(-1, 2)
 
 
@@ -195,7 +199,9 @@ def item_opacity(obj, depsgraph, triangle_count, cache=None):
     (its images' pixels) once and handed to the tracer once."""
     cache = {} if cache is None else cache
     mats, notes = [], []
-    for slot in obj.material_slots:
+    # The evaluated object's slots: geometry nodes that realise instances bring the instances'
+    # materials, which the original object's slots do not list.
+    for slot in obj.evaluated_get(depsgraph).material_slots:
         key = slot.material.name_full if slot.material is not None else None
         if key not in cache:  # a material's note goes with the first object using it
             cache[key] = material_alpha(slot.material)
@@ -223,6 +229,12 @@ def item_opacity(obj, depsgraph, triangle_count, cache=None):
             if m.texture is None:
                 continue
             corner = _uv_corners(mesh, m.uv_map)
+            if not m.uv_map and not len(mesh.uv_layers):  # measured in Cycles 3.4
+                notes.append(f"{obj.name}: material '{m.name}' reads the default UV map, "
+                             "which the mesh lacks (geometry nodes that realise instances "
+                             "keep it as an attribute in Blender 3.4), so Cycles reads its "
+                             "image at UV (0, 0) on every face, and so does the bake; name "
+                             "the map in a UV Map node to read it")
             if corner is None:
                 notes.append(f"{obj.name}: material '{m.name}' reads UV map "
                              f"'{m.uv_map or '(default)'}', which the mesh lacks; treated "

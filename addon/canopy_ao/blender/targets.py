@@ -11,7 +11,7 @@ classmethod taking the list."""
 import numpy as np
 
 from ..core.native import CanopyAOError
-from . import materials, ownership
+from . import materials, ownership, parts_io
 
 
 class Target:
@@ -33,6 +33,8 @@ class Target:
         self.seconds = 0.0
         self.stats = {}
         self.group = 1  # consecutive receivers per result (a texel's sub-samples; finish())
+        # [(part item, its vertex indices)] when the object bakes by parts (parts_io.py).
+        self.parts = None
 
     # === Receivers ===========================================================================
 
@@ -94,7 +96,10 @@ class Target:
     # === Reporting ===========================================================================
 
     def report_into(self, entry, notes):
-        """Add this kind's figures to the target's report entry, its warnings to notes."""
+        """Add this kind's figures to the target's report entry, its warnings to notes (and
+        its parts, when it bakes by parts)."""
+        if self.parts:
+            entry["parts"] = parts_io.summary(self)
 
     @classmethod
     def check_cycles(cls, context, targets, distance, samples, rep):

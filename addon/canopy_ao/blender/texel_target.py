@@ -170,6 +170,7 @@ class TexelTarget(Target):
         return {k: v for k, v in self.stats.items() if isinstance(v, (int, float, str, list))}
 
     def report_into(self, entry, notes):
+        super().report_into(entry, notes)
         entry["texel"] = self.report()
         notes.extend(self.stats.get("warnings", []))
 

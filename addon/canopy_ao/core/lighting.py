@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import ray_budget, texel_budget
+from . import card_area, ray_budget, texel_budget
 from .forest import tracer_instances
 from .meshes import bake_shading, scene_triangles
 from .native import CanopyAOError, _core
@@ -283,4 +283,6 @@ def build_grid(items):
     wood_and_leaves = [it for it in items if it.role in ("CANOPY", "TRUNK") and len(it.triangles)]
     if not wood_and_leaves:
         return None
-    return _core.DensityGrid(*scene_triangles(wood_and_leaves))
+    # cards by their opaque area, where opaque (card_area.counted_item)
+    return _core.DensityGrid(*scene_triangles([card_area.counted_item(it)
+                                               for it in wood_and_leaves]))

@@ -210,3 +210,29 @@ def tracer_args(items):
     return {"opacity_materials": np.ascontiguousarray(np.concatenate(mats), dtype=np.int32),
             "opacity_uvs": np.ascontiguousarray(np.concatenate(uvs), dtype=np.float32),
             "opacity_alphas": alphas}
+
+
+def tiled(parts):
+    """The ItemOpacity of items' triangles copied as forest.realize copies them, or None when
+    none of them has one. parts: [(item, mirrored bool (k,))] in realize's order: k copies of
+    the item's triangles in turn, a mirrored copy wound the other way (its corners', so its
+    UVs', order reversed)."""
+    if all(getattr(it, "opacity", None) is None for it, _f in parts):
+        return None
+    mats, tms, uvs, notes = [], [], [], []
+    for it, flip in parts:
+        m, k, op = len(it.triangles), len(flip), getattr(it, "opacity", None)
+        if op is None or len(op.triangle_material) != m or not op.materials:
+            tm, uv = np.full(m, len(mats), np.int64), np.zeros((m, 3, 2), np.float32)
+            mats.append(MaterialAlpha(it.name))  # opaque
+        else:
+            tm = np.clip(np.asarray(op.triangle_material, np.int64), 0,
+                         len(op.materials) - 1) + len(mats)
+            uv = op.uvs if op.uvs is not None else np.zeros((m, 3, 2), np.float32)
+            mats.extend(op.materials)
+        notes.extend(op.notes if op is not None else ())
+        tms.append(np.tile(tm, k))
+        u = np.broadcast_to(np.asarray(uv, np.float32), (k, m, 3, 2)).copy()
+        u[np.asarray(flip, bool)] = u[np.asarray(flip, bool)][:, :, ::-1]
+        uvs.append(u.reshape(-1, 3, 2))
+    return ItemOpacity(mats, np.concatenate(tms).astype(np.int32), np.concatenate(uvs), notes)

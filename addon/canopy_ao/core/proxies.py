@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import card_area
 from . import roles as _roles
 from .grass_layer import grass_layer
 from .native import _core
@@ -71,8 +72,10 @@ def fit_scene(plan: Plan, items) -> None:
     plan.grass_layers (each grass field as an occluder of the ground under it)."""
     trees = {}
     for it in items:
-        if it.role == "CANOPY" and len(it.positions):
-            trees.setdefault(it.tree, []).append(it.positions)
+        # a card's points where it is opaque (card_area.counted_points): none when all clear
+        pts = card_area.counted_points(it) if it.role == "CANOPY" else ()
+        if len(pts):
+            trees.setdefault(it.tree, []).append(pts)
     for tree, pts in trees.items():
         pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
                                    dtype=np.float32)

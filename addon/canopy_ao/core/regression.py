@@ -26,8 +26,8 @@ import time
 
 import numpy as np
 
-from . import native
 from . import buried as _buried
+from . import card_area, native
 from .leaf_features import LeafTable
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
@@ -131,7 +131,8 @@ class RegressionRung:
         receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
         n_recv = sum(len(it.positions) for it in receivers)
         points, samples = calibration_size(n_recv, points, samples)
-        grid = _core.DensityGrid(*merged(occ), resolution=resolution)
+        grid = _core.DensityGrid(*merged([card_area.counted_item(it) for it in occ]),
+                                 resolution=resolution)  # cards by their opaque area
         self._features = _core.OcclusionFeatures(grid, directions=directions)
         t_grid = time.perf_counter()
 

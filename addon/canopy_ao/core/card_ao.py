@@ -1,0 +1,70 @@
+"""A card's own AO at its vertices (docs/DESIGN.md, 'Opacity of leaf cards'; issue #38 item 3).
+
+A leaf card's vertices sit in its clear corners. Cycles' vertex bake reads 0 there (the bake
+point's surface is transparent), so vertex AO baked in Cycles leaves cards black; the AO at the
+corner itself is the card plane's, not the leaf's. Here a card vertex carries the AO its card's
+opaque part receives: the AO at the opaque point of each of its card triangles nearest it
+(card_area.opaque_corners: on the card, the rays skipping that triangle, as a texel on it
+would), a vertex shared by several card triangles taking the mean. A vertex that also
+belongs to an opaque triangle, or to none with an opaque point, keeps its own AO. No bpy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import card_area
+
+
+class CardVertices:
+    """The receivers standing for an item's card vertices: vertex (K,) int64 ascending, the
+    point float32 (K, 3) and normal float32 (K, 3) of each, the triangle int32 (K,) it lies on."""
+
+    def __init__(self, item):
+        got = card_area.opaque_corners(item)
+        self.vertex = np.zeros(0, np.int64)
+        if got is None or not len(got[1]):
+            return
+        near, src = got
+        tris = np.asarray(item.triangles, np.int64)
+        opaque = np.ones(len(tris), bool)
+        opaque[card_area._clear_triangles(item)[1]] = False
+        on_opaque = np.zeros(len(item.positions), bool)
+        on_opaque[tris[opaque].reshape(-1)] = True
+        vertex = tris[src].reshape(-1)
+        keep = ~on_opaque[vertex]
+        order = np.argsort(vertex[keep], kind="stable")
+        self.vertex = vertex[keep][order]
+        self.points = np.ascontiguousarray(near.reshape(-1, 3)[keep][order], np.float32)
+        self.normals = np.ascontiguousarray(item.normals[self.vertex], np.float32)
+        self.triangle = np.ascontiguousarray(np.repeat(src, 3)[keep][order], np.int32)
+
+
+def card_vertices(item) -> CardVertices:
+    """The item's CardVertices, made once per item."""
+    got = getattr(item, "_card_vertices", None)
+    if got is None:
+        got = item._card_vertices = CardVertices(item)
+    return got
+
+
+def carry(plan, item, ao, vertices):
+    """Set ao (float32, the AO of the item's vertices ``vertices``, a slice a:b) at its card
+    vertices to the AO of their card's opaque part (above). vertices None or False (texels):
+    nothing to do."""
+    if not isinstance(vertices, slice):
+        return
+    from .bake import evaluate_receivers
+    a, b, _step = vertices.indices(len(item.positions))
+    cv = card_vertices(item)
+    lo, hi = np.searchsorted(cv.vertex, [a, b])
+    if hi <= lo:
+        return
+    got = evaluate_receivers(plan, item, cv.points[lo:hi], cv.normals[lo:hi],
+                             triangles=cv.triangle[lo:hi])
+    v = cv.vertex[lo:hi] - a
+    total = np.bincount(v, got, b - a)
+    count = np.bincount(v, None, b - a)
+    has = count > 0
+    ao[has] = (total[has] / count[has]).astype(ao.dtype)
+
