@@ -1,7 +1,9 @@
-"""Where our rays and Cycles' disagree on a real tree: the smallest scene that shows it, in Blender.
+"""Probe, answered: Cycles starts a vertex's rays 1e-4 × max(1, largest |coordinate|) towards each face corner's centroid (its bake point), which the tracer now does (native raytrace.h, 'Origins').
+
+Where our rays and Cycles' disagree on a real tree: the smallest scene that shows it, in Blender.
 
     BLENDER_USER_SCRIPTS=<dir with addons/canopy_ao> blender -b --factory-startup \\
-        --python bench/cycles_contact_probe.py -- [--scene sap_white_birch] [--vertices 3]
+        --python bench/probes/cycles_contact_probe.py -- [--scene sap_white_birch] [--vertices 3]
 
 Needs the scene's export and its 1024-sample Cycles bake in bench/out/real (bench/README.md,
 "Real trees": examples/sapling_scenes.py, then bench/cycles_reference.py). docs/DESIGN.md,
@@ -23,8 +25,8 @@ import argparse
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "addon"))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import addon_utils  # noqa: E402
 import bpy  # noqa: E402
@@ -34,7 +36,7 @@ addon_utils.enable("canopy_ao")
 from canopy_ao import _core  # noqa: E402
 from canopy_ao.blender import cycles_check  # noqa: E402
 
-REAL = os.path.join(HERE, "out", "real")
+REAL = harness.REAL
 CONTACT = 1e-4  # of the AO distance (bench/real_rays.py)
 GAPS_UM = (-300, -150, -75, 0, 75, 150, 300)  # signed gaps to try, micrometres
 

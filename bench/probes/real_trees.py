@@ -1,6 +1,8 @@
-"""Roles, trees and calibration on scenes exported from Blender's Sapling Tree Gen.
+"""Probe, answered: roles and trees guessed on the Sapling exports, and calibration without buried points and with τ per tree against calibration as it was (the leaf bias).
 
-    /usr/bin/python3 bench/real_trees.py [--dir bench/out/real] [--scenes sap_grove ...]
+Roles, trees and calibration on scenes exported from Blender's Sapling Tree Gen.
+
+    /usr/bin/python3 bench/probes/real_trees.py [--dir bench/out/real] [--scenes sap_grove ...]
 
 Reads <dir>/<scene>_quick.npz (names; <name>/positions, normals, triangles, role, tree;
 distance) and its 1024-ray reference <scene>_quick_embree_1024.npz (ao: every vertex, in name
@@ -15,9 +17,8 @@ import json
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "addon"))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import numpy as np  # noqa: E402
 
@@ -62,7 +63,7 @@ def leaf_bias(items, ref, distance, old):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--dir", default=os.path.join(HERE, "out", "real"))
+    ap.add_argument("--dir", default=harness.REAL)
     ap.add_argument("--scenes", nargs="+", default=["sap_grove", "sap_douglas_fir",
                                                     "sap_small_pine", "sap_quaking_aspen"])
     args = ap.parse_args()

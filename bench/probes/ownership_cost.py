@@ -1,6 +1,8 @@
-"""What the ownership check costs a write (docs/DESIGN.md, 'Ownership of what a bake writes').
+"""Probe, answered: the ownership fingerprint costs 1.2 ms per 1M-vertex colour attribute against SHA-1's 9.5 ms (docs/DESIGN.md, 'Ownership of what a bake writes').
 
-    blender -b --factory-startup --python bench/ownership_cost.py -- [--vertices 100000 1000000]
+What the ownership check costs a write (docs/DESIGN.md, 'Ownership of what a bake writes').
+
+    blender -b --factory-startup --python bench/probes/ownership_cost.py -- [--vertices 100000 1000000]
 
 The add-on is found as in scripts/test.sh (BLENDER_USER_SCRIPTS with addons/canopy_ao) or,
 without it, from this repository's addon/. Per size, the median of 9 rounds, each round timing
@@ -26,7 +28,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 def _addon():
     import importlib.util
     if importlib.util.find_spec("canopy_ao") is None:
-        sys.path.insert(0, os.path.join(HERE, "..", "addon"))
+        sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
     import addon_utils
     addon_utils.enable("canopy_ao", default_set=False)
     from canopy_ao.blender import mesh_io, ownership

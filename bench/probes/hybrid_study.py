@@ -1,6 +1,8 @@
-"""Why the near/far hybrid does or does not reach 64 plain rays' error at half their time.
+"""Probe, answered: the near/far hybrid cannot reach 64 plain rays' error at half their time on real trees (the far field's floor; bench/results/hybrid_study.txt, docs/DESIGN.md).
 
-    /usr/bin/python3 bench/hybrid_study.py [--scenes sap_callistemon ...] [--voxels 1 2 4 8 16]
+Why the near/far hybrid does or does not reach 64 plain rays' error at half their time.
+
+    /usr/bin/python3 bench/probes/hybrid_study.py [--scenes sap_callistemon ...] [--voxels 1 2 4 8 16]
                                            [--full]
 
 On the real-generator scenes (bench/out/real, examples/sapling_scenes.py; Embree 1024 rays as
@@ -30,9 +32,8 @@ import argparse
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "addon"))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import numpy as np  # noqa: E402
 
