@@ -14,8 +14,8 @@
 #   --full      realistic synthetic scene sizes (20k-60k leaves per tree) instead of quick ones
 #   --cycles    bake the missing Cycles references of the synthetic scenes (minutes per scene)
 #   --scaling   also time every method from 1e4 to 1e7 vertices (1e6 without --full)
-#   --real      also the real-tree study: every rung on the Sapling exports, its chart, the
-#               hybrid study and rays against Cycles' samples
+#   --real      also the real-tree study: every rung on the Sapling exports, its chart and
+#               rays against Cycles' samples
 #   --no-build  use the module already in addon/canopy_ao/
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -141,7 +141,6 @@ if ((real)); then
     --markdown bench/out/real/real_assets.md >/dev/null
   $py bench/chart_real.py --csv bench/out/real/real_assets.csv --png bench/out/chart_real.png \
     --md bench/out/real/equal_error.md
-  $py bench/hybrid_study.py "${size[@]}" | tee bench/out/real/hybrid_study.txt
   $py bench/real_rays.py | tee bench/out/real/real_rays.txt
 fi
 
@@ -151,7 +150,7 @@ cp bench/out/chart.png bench/out/summary.md bench/out/stability.md bench/out/ben
 for f in bench/out/chart_cycles.png bench/out/summary_cycles.md bench/out/scaling.png \
          bench/out/scaling.csv bench/out/results.csv bench/out/strip_*.png \
          bench/out/chart_real.png bench/out/real/real_assets.txt bench/out/real/real_assets.md \
-         bench/out/real/equal_error.md bench/out/real/hybrid_study.txt \
+         bench/out/real/equal_error.md \
          bench/out/real/real_rays.txt; do
   [[ -e $f ]] && cp "$f" bench/results/
 done
