@@ -22,14 +22,13 @@ from __future__ import annotations
 import argparse
 import glob
 import os
-import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "addon"))
-sys.path.insert(0, os.path.join(HERE, "..", "examples"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE = harness.HERE
 
 from canopy_ao import _core  # noqa: E402
 import real_scenes  # noqa: E402

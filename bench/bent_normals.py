@@ -23,14 +23,11 @@ import argparse
 import glob
 import math
 import os
-import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
-sys.path.insert(0, HERE)
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -110,7 +107,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     sources = [lambda n=n: scene_arrays(n, args.quick) for n in args.scenes]
     if not args.no_real:
-        real = sorted(p for p in glob.glob(os.path.join(HERE, "out", "real", "*_quick.npz"))
+        real = sorted(p for p in glob.glob(os.path.join(harness.REAL, "*_quick.npz"))
                       if "_embree_" not in p and "_cycles_" not in p)
         sources += [lambda p=p: real_arrays(p) for p in real]
     print(f"Mean angle (degrees) to the ray-traced bent normals at {REF_SAMPLES} rays; "

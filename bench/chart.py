@@ -19,8 +19,9 @@ from collections import defaultdict
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "out")
+import harness  # noqa: E402  (bench's paths)
+
+HERE, OUT = harness.HERE, harness.OUT
 
 STYLE = {  # family -> (colour, marker)
     "reeves_blau": ("#8c564b", "v"),

@@ -18,9 +18,9 @@ import math
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "out")
-sys.path.insert(0, HERE)
+import harness  # noqa: E402
+
+HERE, OUT = harness.HERE, harness.OUT
 
 import chart  # noqa: E402
 from chart import pareto  # noqa: E402

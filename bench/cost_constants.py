@@ -10,14 +10,11 @@ code and the model's prediction against the measured time per rung. Auto never t
 while it bakes; it uses the constants in the code, so its choice does not follow the load.
 """
 import argparse
-import os
-import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core, core  # noqa: E402

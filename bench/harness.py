@@ -94,13 +94,21 @@ def real_names(quick=True, cycles=None, seed=0):
 
 def load_cached(path, **key):
     """The arrays of the ``.npz`` at ``path`` as a dict if it exists and every ``key`` matches
-    what it was saved with (compared as strings: hashes, tags, distances), else None."""
+    what it was saved with (numbers by value, anything else as text: hashes, tags), else
+    None."""
+    import numbers
+
     import numpy as np
     if not os.path.exists(path):
         return None
     with np.load(path) as z:
         for k, v in key.items():
-            if k not in z.files or str(z[k]) != str(v):
+            if k not in z.files:
+                return None
+            got = z[k].item() if z[k].ndim == 0 else z[k]
+            same = (float(got) == float(v) if isinstance(v, numbers.Number)
+                    and isinstance(got, numbers.Number) else str(got) == str(v))
+            if not same:
                 return None
         return {k: z[k] for k in z.files}
 

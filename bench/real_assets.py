@@ -36,15 +36,11 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
 import sys
-import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.join(REPO, "addon"))
-sys.path.insert(0, os.path.join(REPO, "examples"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -66,9 +62,8 @@ _WARM = []
 
 
 def timed(fn):
-    t0 = time.perf_counter()
-    r = fn()
-    return r, time.perf_counter() - t0
+    """(result, seconds) of one run (the scenes are large: one run each)."""
+    return harness.timed(fn)
 
 
 def auto_choice(report):

@@ -37,8 +37,9 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE = harness.HERE
 
 import real_scenes as rs  # noqa: E402
 

@@ -17,23 +17,21 @@ import math
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core, core  # noqa: E402
 
-import accuracy  # noqa: E402  (bench/, the script's own folder)
 
-OUT = os.path.join(HERE, "out")
+OUT = harness.OUT
 
 
 def timed(fn, repeats=2):
-    return accuracy.timed(fn, repeats, stop_after=1.0)
+    return harness.timed(fn, repeats, stop_after=1.0)
 
 
 def main(argv=None):

@@ -28,10 +28,10 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-for sub in ("addon", "examples", os.path.join("tests", "python")):
-    sys.path.insert(0, os.path.join(ROOT, sub))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, ROOT = harness.HERE, harness.REPO
+sys.path.insert(0, os.path.join(ROOT, "tests", "python"))  # lighting_reference, the Python path
 
 import canopy_scenes  # noqa: E402
 import lighting_reference  # noqa: E402
