@@ -42,10 +42,9 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import harness  # noqa: E402
+import numpy as np
 
-import numpy as np  # noqa: E402
+import harness
 
 REFERENCE = 1024
 REFERENCE_SEED = 1

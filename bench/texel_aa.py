@@ -24,7 +24,10 @@ import time
 
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+REPO = harness.REPO
 DISTANCE = 2.0
 
 
@@ -122,11 +125,8 @@ def ours(res, samples, aa, image_dir):
 
 
 def main(argv):
-    import addon_utils
     import bpy
-    if not os.environ.get("BLENDER_USER_SCRIPTS"):
-        sys.path.insert(0, os.path.join(REPO, "addon"))
-    addon_utils.enable("canopy_ao", default_set=True)
+    harness.enable_addon()
     from canopy_ao.blender import cycles_check
     a = _args(argv)
     res = a.resolution

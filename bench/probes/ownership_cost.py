@@ -22,15 +22,12 @@ import time
 import bpy
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
 
 
 def _addon():
-    import importlib.util
-    if importlib.util.find_spec("canopy_ao") is None:
-        sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
-    import addon_utils
-    addon_utils.enable("canopy_ao", default_set=False)
+    harness.enable_addon()
     from canopy_ao.blender import mesh_io, ownership
     from canopy_ao.core.fingerprint import fingerprint
     return mesh_io, ownership, fingerprint
