@@ -10,7 +10,6 @@ code and the model's prediction against the measured time per rung. Auto never t
 while it bakes; it uses the constants in the code, so its choice does not follow the load.
 """
 import argparse
-import time
 
 import harness  # noqa: E402  (addon/ and examples/ on sys.path)
 
@@ -44,12 +43,8 @@ def main():
             plan = core.prepare(items, s)
             if method in ("raytrace",) or plan.tracer is None:
                 plan.tracer = plan.tracer or lighting.build_tracer(items)
-            best = float("inf")
-            for _ in range(args.repeats):
-                t0 = time.perf_counter()
-                for it in items:
-                    core.evaluate_item(plan, it)
-                best = min(best, time.perf_counter() - t0)
+            _, best = harness.timed(lambda: [core.evaluate_item(plan, it) for it in items],
+                                    args.repeats)
             unit, count = cost.work(plan, method, receivers)
             rows.append((method, unit, count, best))
     finally:
