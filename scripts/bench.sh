@@ -6,11 +6,12 @@
 # Usage: scripts/bench.sh [--quick] [--full] [--cycles] [--scaling] [--real] [--no-build]
 #   --quick     the three headline tables alone, small: equal error on two Sapling trees (aspen,
 #               callistemon), live AO at 100k vertices, the forest to 1000 trees on a 1e5-vertex
-#               ground (a few minutes once the Sapling exports and their Cycles bakes exist;
-#               making them adds ~3 min)
+#               ground (4.5 CPU-minutes once the Sapling exports and their Cycles bakes exist;
+#               making them adds ~4 CPU-minutes)
 #   (default)   also the synthetic study (accuracy, chart, stability, bent normals), the whole
 #               bake against Blender's floor, the scene plan, texel anti-aliasing; equal error
-#               on every Sapling scene; live AO at 100k and 1M; the forest to 10,000 trees
+#               on every Sapling scene (the first run bakes each scene's Cycles ladder up to
+#               1024 samples twice: hours); live AO at 100k and 1M; the forest to 10,000 trees
 #   --full      realistic synthetic scene sizes (20k-60k leaves per tree) instead of quick ones
 #   --cycles    bake the missing Cycles references of the synthetic scenes (minutes per scene)
 #   --scaling   also time every method from 1e4 to 1e7 vertices (1e6 without --full)
