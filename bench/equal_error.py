@@ -236,7 +236,7 @@ def main(argv=None):
                  f"{' '.join(ready) or 'none'}): scripts/bench.sh --equal-error makes them")
     from canopy_ao import _core  # noqa: F401  (fail here, not in Blender, without the module)
     env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts())
-    results = []
+    results, notes = [], []
     harness.log(f"equal_error: {' '.join(picked)}; {harness.load_note()}")
     for scene in picked:
         with tempfile.TemporaryDirectory(prefix="canopy_ee_") as work:
@@ -248,8 +248,12 @@ def main(argv=None):
                        for s, ao in cyc.items()}
             harness.log(f"equal_error: {scene}: bake only timed ({load})")
             wp = {} if a.no_whole else whole_process(rows, a.whole_repeats, env, work)
+            notes.append(f"{scene}: {sc.n_vertices:,} vertices; bake only, best of {a.repeats} "
+                         f"rounds, {load}" + ("" if a.no_whole else
+                                              f"; whole process, best of {a.whole_repeats}, "
+                                              f"{harness.load_note()} after"))
             results.append((scene, rows, bo, wp, cyc_mae))
-    text = table(results, not a.no_whole)
+    text = table(results, not a.no_whole) + "\n\n" + "\n".join(f"- {n}" for n in notes)
     print(text, flush=True)
     if a.md:
         with open(a.md, "w") as fh:

@@ -43,22 +43,40 @@ def test_every_script_compiles(tmp_path):
         py_compile.compile(p, cfile=str(tmp_path / "x.pyc"), doraise=True)
 
 
+HELP_DRIVER = r"""
+import contextlib, io, json, os, runpy, sys
+out = {}
+for path in sys.argv[1:]:
+    buf = io.StringIO()
+    sys.argv = [path, "--help"]
+    sys.path.insert(0, os.path.dirname(path))  # as `python path` puts the script's folder first
+    try:
+        with contextlib.redirect_stdout(buf):
+            runpy.run_path(path, run_name="__main__")
+        code = "returned without exiting"
+    except SystemExit as e:
+        code = e.code or 0
+    except BaseException as e:  # noqa: BLE001
+        code = f"{type(e).__name__}: {e}"
+    out[path] = [code, buf.getvalue()[:2000]]
+sys.stdout = sys.__stdout__
+print(json.dumps(out))
+"""
+
+
 def test_every_study_without_blender_answers_help():
-    """Each runs as `python bench/x.py --help` (all at once: the machine is shared, and the
-    imports are most of each one's time)."""
+    """Each as `python bench/x.py --help` would run it, in one interpreter (the imports are
+    most of each one's time, and the machine is shared): exits 0 with its usage."""
+    import json
     plain = [p for p in SCRIPTS if not needs_blender(p) and os.path.basename(p) not in LIBRARIES]
     assert len(plain) >= 15, plain
-    procs = {p: subprocess.Popen([sys.executable, p, "--help"], stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE, text=True, cwd=REPO) for p in plain}
-    failed = []
-    for p, proc in procs.items():
-        try:
-            out, err = proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:  # --help ignored: the study itself started
-            proc.kill()
-            out, err = proc.communicate()
-        if proc.returncode != 0 or "usage:" not in out:
-            failed.append(f"{os.path.relpath(p, REPO)}: exit {proc.returncode}\n{err[-600:]}")
+    proc = subprocess.run([sys.executable, "-c", HELP_DRIVER, *plain], capture_output=True,
+                          text=True, cwd=REPO, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    failed = [f"{os.path.relpath(p, REPO)}: {code}" for p, (code, text) in got.items()
+              if code != 0 or "usage:" not in text]
+    assert sorted(got) == sorted(plain)
     assert not failed, "\n".join(failed)
 
 
