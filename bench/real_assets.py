@@ -22,7 +22,7 @@ grids, fits and calibration included):
   1024 points × 128 rays and 8 rays per receiver), then no rays but the bake's buried test;
 - hybrid 2v/N: the engine's hybrid at N samples (N rays per face corner out to 2 voxels of
   its density grid, the grid beyond: what `--method hybrid --samples N` bakes; other near
-  distances in bench/hybrid_study.py);
+  distances in bench/probes/hybrid_study.py);
 - auto: what `--method auto` bakes (its choice per role in the note: counted work against the
   time budget, tested on traced points, docs/DESIGN.md, 'Auto mode');
 - cycles N: Cycles' bake at N samples, when cached (time: the bake call).
