@@ -38,7 +38,6 @@ shared 2-core machine: read them as orders of magnitude.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
@@ -476,7 +475,7 @@ def run_scene(name, args, writer, fh):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="smaller scenes and sample counts")
     ap.add_argument("--scenes", nargs="+", default=None, choices=sorted(cs.SCENES))
     ap.add_argument("--ref-samples", type=int, default=None)

@@ -19,7 +19,6 @@ repository's example scenes (examples/canopy_scenes.py, quick sizes). Every vert
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import os
 import time
@@ -87,7 +86,7 @@ def flatten(objs):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scenes", nargs="*")
     ap.add_argument("--points", type=int, default=6000)
     ap.add_argument("--seeds", type=int, default=3)

@@ -19,7 +19,6 @@ without bent normals, for their own cost); no figure is checked here.
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import math
 import os
@@ -100,7 +99,7 @@ def run(name, V, N, T, role, distance):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="the smaller scene sizes")
     ap.add_argument("--scenes", nargs="*", default=list(SYNTHETIC))
     ap.add_argument("--no-real", action="store_true", help="leave out bench/out/real scenes")

@@ -23,7 +23,6 @@ The machine is shared: the load average is printed with the numbers. Exits non-z
 on stderr) on failure.
 """
 
-import argparse
 import os
 import sys
 import time
@@ -202,7 +201,7 @@ def primitives(ob, method, tau, repeats):
 def main(argv):
     import bpy
 
-    ap = argparse.ArgumentParser(prog="blender_bake_speed.py")
+    ap = harness.parser(__doc__, prog="blender_bake_speed.py")
     ap.add_argument("--vertices", type=int, default=1_000_000)
     ap.add_argument("--method", default="sphere")
     ap.add_argument("--tau", default="1.5", help="a number, or 'auto' to calibrate (traces)")

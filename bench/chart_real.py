@@ -12,7 +12,6 @@ Cycles' (the benchmark's "who wins at equal error").
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
@@ -133,7 +132,7 @@ def table(rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="chart_real.py", description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, prog="chart_real.py")
     ap.add_argument("--csv", default=os.path.join(OUT, "real_assets.csv"))
     ap.add_argument("--png", default=os.path.join(OUT, "chart_real.png"))
     ap.add_argument("--md", help="also write the equal-error table to this markdown file")

@@ -9,7 +9,6 @@ counts for that rung: seconds per unit. Prints the measured constants next to th
 code and the model's prediction against the measured time per rung. Auto never times itself
 while it bakes; it uses the constants in the code, so its choice does not follow the load.
 """
-import argparse
 
 import harness  # noqa: E402  (addon/ and examples/ on sys.path)
 
@@ -24,7 +23,7 @@ UNIT_OF = {"ellipsoid": "shell", "medium": "medium", "grid": "voxel_step",
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scene", default="round_tree")
     ap.add_argument("--quick", action="store_true", help="the scene's quick size")
     ap.add_argument("--samples", type=int, default=64, help="rays per point (the default's)")

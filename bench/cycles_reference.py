@@ -19,7 +19,6 @@ Existing cache files with the same geometry hash are kept unless --force. Uses
 addon/canopy_ao/blender/cycles_check.py's bake_cycles_vertex_ao when that module exists, else the
 minimal implementation below. Exits non-zero with a message on failure.
 """
-import argparse
 import os
 import sys
 import time
@@ -90,7 +89,7 @@ def main(argv):
     from canopy_scenes import SCENES, geometry_hash, make_scene
     from blender_scene import build_blender
 
-    ap = argparse.ArgumentParser(prog="cycles_reference.py")
+    ap = harness.parser(__doc__, prog="cycles_reference.py")
     ap.add_argument("--scene", required=True, choices=sorted(SCENES))
     ap.add_argument("--samples", type=int, nargs="+", default=[256])
     ap.add_argument("--quick", action="store_true")

@@ -25,7 +25,6 @@ the previous solid_opacity occluder law is printed alongside).
 """
 from __future__ import annotations
 
-import argparse
 import math
 import time
 
@@ -184,7 +183,7 @@ def table(title, rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--vertices", type=float, default=1e6)
     ap.add_argument("--counts", default="10,100,1000,10000")
     ap.add_argument("--epsilon", type=float, default=1e-2)

@@ -14,7 +14,6 @@ failure.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -31,7 +30,7 @@ RUNGS = ["sphere", "ellipsoid", "shells", "medium", "grid", "regression", "auto"
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="forest_ground.py")
+    ap = harness.parser(__doc__, prog="forest_ground.py")
     ap.add_argument("--trees", type=int, default=50)
     ap.add_argument("--ground-vertices", type=float, default=1e4)
     ap.add_argument("--side", type=float, default=50.0)

@@ -17,7 +17,6 @@ animation render do. Prints per rung and size, as the median over the frames:
 The machine is shared: the load average is printed with the numbers.
 """
 
-import argparse
 import os
 import statistics
 import sys
@@ -87,7 +86,7 @@ def run(n_vertices, method, frames):
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="live_speed.py")
+    ap = harness.parser(__doc__, prog="live_speed.py")
     ap.add_argument("--vertices", type=int, nargs="+", default=[100_000, 1_000_000])
     ap.add_argument("--methods", nargs="+", default=["sphere", "ellipsoid", "shells", "medium"])
     ap.add_argument("--frames", type=int, default=6)

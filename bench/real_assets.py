@@ -34,7 +34,6 @@ wall-clock on a shared 2-core machine: compare ratios within one run.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import sys
 
@@ -213,7 +212,7 @@ def markdown(rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="real_assets.py", description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, prog="real_assets.py")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES),
                     help="scenes exported to bench/out/real: the listed ones, or held-out "
                          "ones (examples/sapling_scenes.py sap_<preset>_s<seed>, "

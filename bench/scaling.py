@@ -11,7 +11,6 @@ Writes bench/out/scaling.csv and bench/out/scaling.png (log-log).
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
@@ -35,7 +34,7 @@ def timed(fn, repeats=2):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--max", type=float, default=1e7)
     ap.add_argument("--quick", action="store_true", help="stop at 1e6 vertices")
     ap.add_argument("--rays", type=int, default=16)

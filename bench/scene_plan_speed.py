@@ -21,7 +21,6 @@ multipliers), "native" the one _core.ScenePlan.evaluate call per item, forest in
 results of both are compared too.
 """
 
-import argparse
 import os
 import sys
 import time
@@ -105,7 +104,7 @@ def run(plan, items, repeat):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--trees", type=int, default=5)
     ap.add_argument("--leaves", type=int, default=12000)
     ap.add_argument("--repeat", type=int, default=3)

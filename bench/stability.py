@@ -20,7 +20,6 @@ asserts the accepted behaviours only.
 """
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
 import os
 import sys
@@ -382,7 +381,7 @@ def reference(case):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--timeout", type=float, default=30.0)
     ap.add_argument("--out", default=os.path.join(harness.OUT, "stability.md"))
     a = ap.parse_args(argv)

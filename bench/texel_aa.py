@@ -16,7 +16,6 @@ found through BLENDER_USER_SCRIPTS (addons/canopy_ao) or in this repository's ad
 Exits non-zero (message on stderr) on failure.
 """
 
-import argparse
 import os
 import sys
 import tempfile
@@ -32,7 +31,7 @@ DISTANCE = 2.0
 
 
 def _args(argv):
-    p = argparse.ArgumentParser(prog="texel_aa.py")
+    p = harness.parser(__doc__, prog="texel_aa.py")
     p.add_argument("--resolution", type=int, default=64)
     p.add_argument("--samples", default="16,64")
     p.add_argument("--aa", default="1,2,4")

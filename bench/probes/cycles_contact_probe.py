@@ -21,7 +21,6 @@ the add-on builds it), and then the other triangle is moved along its normal so 
 passes at the printed signed gaps from the vertex (positive: the vertex is on the side the
 triangle's normal points to), to show where Cycles' answer turns over and where ours does.
 """
-import argparse
 import os
 import sys
 
@@ -128,7 +127,7 @@ def bake_little(v, tris, k_local, distance):
 
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scene", default="sap_white_birch")
     ap.add_argument("--vertices", type=int, default=3)
     args = ap.parse_args(argv)

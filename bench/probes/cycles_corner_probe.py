@@ -18,7 +18,6 @@ have a corner whose start (Cycles' POSITION bake of the corner) lies less than h
 native raytrace.h 'Origins' from the vertex.
 docs/DESIGN.md, 'Rays against Cycles' samples', says what it found.
 """
-import argparse
 import os
 import sys
 import tempfile
@@ -85,7 +84,7 @@ def twins(v, h):
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="cycles_corner_probe.py")
+    ap = harness.parser(__doc__, prog="cycles_corner_probe.py")
     ap.add_argument("--scene", default="sap_douglas_fir")
     ap.add_argument("--samples", type=int, default=256)
     ap.add_argument("--worst", type=int, default=12)

@@ -28,7 +28,6 @@ Times include the BVH (and the grid, for the hybrid); one run, ratios only.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
@@ -85,7 +84,7 @@ def study(name, voxels, quick=True):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="hybrid_study.py", description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, prog="hybrid_study.py")
     ap.add_argument("--scenes", nargs="+", default=[s for s in SCENES if s.startswith("sap_")],
                     choices=SCENES)
     ap.add_argument("--full", action="store_true", help="full-size exports instead of quick")

@@ -12,7 +12,6 @@ foreach_set, fingerprint them), and check + write (what Live AO does per object 
 The machine is shared: the load average is printed with the numbers.
 """
 
-import argparse
 import hashlib
 import os
 import statistics
@@ -34,7 +33,7 @@ def _addon():
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--vertices", type=int, nargs="+", default=[100_000, 1_000_000])
     ap.add_argument("--rounds", type=int, default=9)
     args = ap.parse_args(argv)

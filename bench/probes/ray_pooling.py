@@ -21,7 +21,6 @@ do better (docs/DESIGN.md, 'Rays against Cycles' samples').
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import math
 import os
@@ -92,7 +91,7 @@ def pooled(tracer, sc, samples, full):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scenes", nargs="*")
     ap.add_argument("--samples", type=int, nargs="*", default=[16, 64])
     args = ap.parse_args()

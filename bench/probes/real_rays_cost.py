@@ -15,7 +15,6 @@ them against each other with hyperfine (Debian's package), e.g.
     hyperfine -r 5 "/usr/bin/python3 bench/probes/real_rays_cost.py sap_white_birch bake" \\
         "/usr/bin/python3 bench/probes/real_rays_cost.py sap_white_birch dealt"
 """
-import argparse
 import os
 import sys
 
@@ -29,7 +28,7 @@ from canopy_ao import _core  # noqa: E402
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("scene")
     ap.add_argument("rule", choices=("bake", "corner", "dealt", "before"))
     ap.add_argument("--samples", type=int, default=256)
