@@ -235,7 +235,15 @@ def main(argv=None):
         ap.error(f"no scene ready ({' '.join(a.scenes or []) or 'none found'}; ready: "
                  f"{' '.join(ready) or 'none'}): scripts/bench.sh --equal-error makes them")
     from canopy_ao import _core  # noqa: F401  (fail here, not in Blender, without the module)
-    env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts())
+    scripts_dir = user_scripts()
+    try:
+        return run(a, picked, dict(os.environ, BLENDER_USER_SCRIPTS=scripts_dir))
+    finally:
+        shutil.rmtree(scripts_dir, ignore_errors=True)
+
+
+def run(a, picked, env):
+    """Every picked scene's rows, timed; prints the table (and writes --md)."""
     results, notes = [], []
     harness.log(f"equal_error: {' '.join(picked)}; {harness.load_note()}")
     for scene in picked:
