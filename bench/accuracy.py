@@ -38,17 +38,15 @@ shared 2-core machine: read them as orders of magnitude.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -57,8 +55,7 @@ from canopy_ao import _core  # noqa: E402
 from canopy_ao import core  # noqa: E402
 from canopy_ao.core.metrics import compare  # noqa: E402
 
-OUT = os.path.join(HERE, "out")
-CACHE = os.path.join(OUT, "cache")
+OUT, CACHE = harness.OUT, harness.CACHE
 REF_SEED = 12345
 # Which tracer made a cached reference: the native tracer's rule for vertex starts (Cycles' bake
 # point, native raytrace.h 'Origins', kTracerRule), so a reference traced by an earlier rule is
@@ -126,19 +123,14 @@ def cache_name(kind, prep, samples):
 def embree_reference(prep, samples):
     """(ao over all vertices, seconds), cached on disk."""
     path = cache_name("embree", prep, samples)
-    if os.path.exists(path):
-        with np.load(path) as z:
-            if (str(z["geometry"]) == prep.hash and float(z["distance"]) == prep.distance
-                    and "tracer" in z.files and str(z["tracer"]) == TRACER_TAG):
-                return z["ao"].astype(np.float32), float(z["seconds"])
+    key = dict(geometry=prep.hash, distance=prep.distance, tracer=TRACER_TAG)
+    z = harness.load_cached(path, **key)
+    if z is not None:
+        return z["ao"].astype(np.float32), float(z["seconds"])
     if not hasattr(_core, "RayTracer"):
         return None, None
-    t0 = time.perf_counter()
-    ao = prep.trace(prep.tracer(), samples, prep.distance, REF_SEED)
-    dt = time.perf_counter() - t0
-    os.makedirs(CACHE, exist_ok=True)
-    np.savez_compressed(path, ao=ao, seconds=dt, samples=samples, distance=prep.distance,
-                        geometry=prep.hash, tracer=TRACER_TAG)
+    ao, dt = harness.timed(lambda: prep.trace(prep.tracer(), samples, prep.distance, REF_SEED))
+    harness.save_cached(path, dict(ao=ao, seconds=dt, samples=samples), **key)
     return ao, dt
 
 
@@ -167,15 +159,7 @@ def cycles_runs(prep):
 
 def timed(fn, repeats, stop_after=2.0):
     """(result, best seconds): repeat only while runs are shorter than stop_after seconds."""
-    best, res = math.inf, None
-    for i in range(max(1, repeats)):
-        t0 = time.perf_counter()
-        res = fn()
-        dt = time.perf_counter() - t0
-        best = min(best, dt)
-        if dt > stop_after:
-            break
-    return res, best
+    return harness.timed(fn, repeats, stop_after)
 
 
 def run_engine(prep, settings, repeats):
@@ -491,7 +475,7 @@ def run_scene(name, args, writer, fh):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="smaller scenes and sample counts")
     ap.add_argument("--scenes", nargs="+", default=None, choices=sorted(cs.SCENES))
     ap.add_argument("--ref-samples", type=int, default=None)

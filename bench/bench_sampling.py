@@ -19,17 +19,15 @@ repository's example scenes (examples/canopy_scenes.py, quick sizes). Every vert
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import os
-import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "addon"))
-sys.path.insert(0, os.path.join(HERE, "..", "examples"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE = harness.HERE
 
 from canopy_ao import _core  # noqa: E402
 import real_scenes  # noqa: E402
@@ -88,7 +86,7 @@ def flatten(objs):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scenes", nargs="*")
     ap.add_argument("--points", type=int, default=6000)
     ap.add_argument("--seeds", type=int, default=3)

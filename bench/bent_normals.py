@@ -19,18 +19,14 @@ without bent normals, for their own cost); no figure is checked here.
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import math
 import os
-import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
-sys.path.insert(0, HERE)
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -103,14 +99,14 @@ def run(name, V, N, T, role, distance):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--quick", action="store_true", help="the smaller scene sizes")
     ap.add_argument("--scenes", nargs="*", default=list(SYNTHETIC))
     ap.add_argument("--no-real", action="store_true", help="leave out bench/out/real scenes")
     args = ap.parse_args(argv)
     sources = [lambda n=n: scene_arrays(n, args.quick) for n in args.scenes]
     if not args.no_real:
-        real = sorted(p for p in glob.glob(os.path.join(HERE, "out", "real", "*_quick.npz"))
+        real = sorted(p for p in glob.glob(os.path.join(harness.REAL, "*_quick.npz"))
                       if "_embree_" not in p and "_cycles_" not in p)
         sources += [lambda p=p: real_arrays(p) for p in real]
     print(f"Mean angle (degrees) to the ray-traced bent normals at {REF_SAMPLES} rays; "

@@ -23,22 +23,20 @@ The machine is shared: the load average is printed with the numbers. Exits non-z
 on stderr) on failure.
 """
 
-import argparse
 import os
 import sys
 import time
 
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(REPO, "examples"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
 
 
 def leaf_mesh(name, n_vertices, seed=0):
     """A crown of random leaf quads (4 vertices each) in an ellipsoid 5 × 5 × 4 m, as a mesh
     built with vertices.add + foreach_set (from_pydata would take minutes at 1M vertices)."""
     import bpy
-    sys.path.insert(0, os.path.join(REPO, "examples"))
     from canopy_scenes import leaf_quads
 
     rng = np.random.default_rng(seed)
@@ -203,7 +201,7 @@ def primitives(ob, method, tau, repeats):
 def main(argv):
     import bpy
 
-    ap = argparse.ArgumentParser(prog="blender_bake_speed.py")
+    ap = harness.parser(__doc__, prog="blender_bake_speed.py")
     ap.add_argument("--vertices", type=int, default=1_000_000)
     ap.add_argument("--method", default="sphere")
     ap.add_argument("--tau", default="1.5", help="a number, or 'auto' to calibrate (traces)")
@@ -211,18 +209,9 @@ def main(argv):
     ap.add_argument("--scene", choices=("leaves", "large_tree"), default="leaves")
     a = ap.parse_args(argv)
 
-    import importlib.util
-    if importlib.util.find_spec("canopy_ao") is None:
-        sys.path.insert(0, os.path.join(REPO, "addon"))
-    import addon_utils
-    if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
-        raise RuntimeError("the canopy_ao add-on did not enable")
-    from canopy_ao import core
+    harness.enable_addon()
     from canopy_ao.blender import job, properties
 
-    ok, msg = core.core_status()
-    if not ok:
-        raise RuntimeError(msg)
     for ob in list(bpy.data.objects):
         bpy.data.objects.remove(ob, do_unlink=True)
     t0 = time.perf_counter()
@@ -232,7 +221,6 @@ def main(argv):
         ob.canopy_ao.tree = "Tree"
         names = [ob.name]
     else:
-        sys.path.insert(0, os.path.join(REPO, "examples"))
         from blender_scene import build_blender
         from canopy_scenes import round_tree
         objs = build_blender(round_tree(0, leaves=max(1, a.vertices // 4)))

@@ -10,7 +10,6 @@ coloured by AO: reference, then the best setting of each family).
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
@@ -19,8 +18,9 @@ from collections import defaultdict
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "out")
+import harness  # noqa: E402  (bench's paths)
+
+HERE, OUT = harness.HERE, harness.OUT
 
 STYLE = {  # family -> (colour, marker)
     "reeves_blau": ("#8c564b", "v"),
@@ -286,7 +286,7 @@ def strips(ao_dir, out_dir, quick, tag="", max_points=25000):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--csv", default=os.path.join(OUT, "results.csv"))
     ap.add_argument("--reference", default="embree", choices=("embree", "cycles"))
     ap.add_argument("--role", default="all")

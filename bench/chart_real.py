@@ -12,15 +12,14 @@ Cycles' (the benchmark's "who wins at equal error").
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-OUT = os.path.join(HERE, "out")
-sys.path.insert(0, HERE)
+import harness  # noqa: E402
+
+HERE, OUT = harness.HERE, harness.OUT
 
 import chart  # noqa: E402
 from chart import pareto  # noqa: E402
@@ -133,7 +132,7 @@ def table(rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="chart_real.py", description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, prog="chart_real.py")
     ap.add_argument("--csv", default=os.path.join(OUT, "real_assets.csv"))
     ap.add_argument("--png", default=os.path.join(OUT, "chart_real.png"))
     ap.add_argument("--md", help="also write the equal-error table to this markdown file")

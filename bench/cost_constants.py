@@ -9,15 +9,10 @@ counts for that rung: seconds per unit. Prints the measured constants next to th
 code and the model's prediction against the measured time per rung. Auto never times itself
 while it bakes; it uses the constants in the code, so its choice does not follow the load.
 """
-import argparse
-import os
-import sys
-import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core, core  # noqa: E402
@@ -28,7 +23,7 @@ UNIT_OF = {"ellipsoid": "shell", "medium": "medium", "grid": "voxel_step",
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scene", default="round_tree")
     ap.add_argument("--quick", action="store_true", help="the scene's quick size")
     ap.add_argument("--samples", type=int, default=64, help="rays per point (the default's)")
@@ -47,12 +42,8 @@ def main():
             plan = core.prepare(items, s)
             if method in ("raytrace",) or plan.tracer is None:
                 plan.tracer = plan.tracer or lighting.build_tracer(items)
-            best = float("inf")
-            for _ in range(args.repeats):
-                t0 = time.perf_counter()
-                for it in items:
-                    core.evaluate_item(plan, it)
-                best = min(best, time.perf_counter() - t0)
+            _, best = harness.timed(lambda: [core.evaluate_item(plan, it) for it in items],
+                                    args.repeats)
             unit, count = cost.work(plan, method, receivers)
             rows.append((method, unit, count, best))
     finally:

@@ -13,13 +13,16 @@ blade tips, the trunk's bottom and top rings). Closed forms for the roots: a pla
 receiver blocks (1 − n·up)/2 of its hemisphere, so AO = (1 + n·up)/2.
 """
 import math
+import os
 import sys
 
-import addon_utils
 import bpy
 import numpy as np
 
-addon_utils.enable("canopy_ao")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402
+
+harness.enable_addon()
 from canopy_ao import _core  # noqa: E402
 from canopy_ao.blender import cycles_check  # noqa: E402
 

@@ -19,19 +19,18 @@ Existing cache files with the same geometry hash are kept unless --force. Uses
 addon/canopy_ao/blender/cycles_check.py's bake_cycles_vertex_ao when that module exists, else the
 minimal implementation below. Exits non-zero with a message on failure.
 """
-import argparse
 import os
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
-CACHE = os.path.join(HERE, "out", "cache")
+CACHE = harness.CACHE
 
 
 def cache_path(scene_name: str, quick: bool, samples: int) -> str:
@@ -90,7 +89,7 @@ def main(argv):
     from canopy_scenes import SCENES, geometry_hash, make_scene
     from blender_scene import build_blender
 
-    ap = argparse.ArgumentParser(prog="cycles_reference.py")
+    ap = harness.parser(__doc__, prog="cycles_reference.py")
     ap.add_argument("--scene", required=True, choices=sorted(SCENES))
     ap.add_argument("--samples", type=int, nargs="+", default=[256])
     ap.add_argument("--quick", action="store_true")

@@ -25,16 +25,12 @@ the previous solid_opacity occluder law is printed alongside).
 """
 from __future__ import annotations
 
-import argparse
 import math
-import os
-import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -187,7 +183,7 @@ def table(title, rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--vertices", type=float, default=1e6)
     ap.add_argument("--counts", default="10,100,1000,10000")
     ap.add_argument("--epsilon", type=float, default=1e-2)

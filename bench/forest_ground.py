@@ -14,7 +14,6 @@ failure.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -22,8 +21,8 @@ import time
 import bpy
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(REPO, "examples"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
 
 import forest_scene as fs  # noqa: E402
 
@@ -31,15 +30,13 @@ RUNGS = ["sphere", "ellipsoid", "shells", "medium", "grid", "regression", "auto"
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="forest_ground.py")
+    ap = harness.parser(__doc__, prog="forest_ground.py")
     ap.add_argument("--trees", type=int, default=50)
     ap.add_argument("--ground-vertices", type=float, default=1e4)
     ap.add_argument("--side", type=float, default=50.0)
     ap.add_argument("--samples", type=int, default=256)
     args = ap.parse_args(argv)
-    import addon_utils
-    if addon_utils.enable("canopy_ao", default_set=True) is None:
-        raise SystemExit("the canopy_ao add-on could not be enabled")
+    harness.enable_addon()
     from canopy_ao.blender import mesh_io, properties
     from canopy_ao.blender.job import run_bake
 

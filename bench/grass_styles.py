@@ -16,15 +16,11 @@ so no grass layer is multiplied on top of them: docs/DESIGN.md, 'The near/far hy
 """
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "addon"))
-sys.path.insert(0, os.path.join(REPO, "examples"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 from canopy_ao import core  # noqa: E402
 import canopy_scenes as cs  # noqa: E402
@@ -105,7 +101,9 @@ def errors(items, ref, eq9=False):
     return out
 
 
-def main():
+def main(argv=None):
+    harness.parser(__doc__, prog="grass_styles.py").parse_args(argv)  # --help; no options
+
     def field(blades):
         f = cs.grass_field(blades=blades, size=SIZE)[0]
         return f.vertices, f.triangles

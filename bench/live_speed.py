@@ -17,7 +17,6 @@ animation render do. Prints per rung and size, as the median over the frames:
 The machine is shared: the load average is printed with the numbers.
 """
 
-import argparse
 import os
 import statistics
 import sys
@@ -25,8 +24,8 @@ import time
 
 import bpy
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
 from blender_bake_speed import leaf_mesh  # noqa: E402
 
 
@@ -87,23 +86,14 @@ def run(n_vertices, method, frames):
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="live_speed.py")
+    ap = harness.parser(__doc__, prog="live_speed.py")
     ap.add_argument("--vertices", type=int, nargs="+", default=[100_000, 1_000_000])
     ap.add_argument("--methods", nargs="+", default=["sphere", "ellipsoid", "shells", "medium"])
     ap.add_argument("--frames", type=int, default=6)
     a = ap.parse_args(argv)
-    import importlib.util
-    if importlib.util.find_spec("canopy_ao") is None:
-        sys.path.insert(0, os.path.join(os.path.dirname(HERE), "addon"))
-    import addon_utils
-    if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
-        raise RuntimeError("the canopy_ao add-on did not enable")
-    from canopy_ao import core
-    ok, msg = core.core_status()
-    if not ok:
-        raise RuntimeError(msg)
-    print(f"live AO per frame, median of {a.frames} frames; load average "
-          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; Blender {bpy.app.version_string}")
+    harness.enable_addon()
+    print(f"live AO per frame, median of {a.frames} frames; {harness.load_note()}; "
+          f"Blender {bpy.app.version_string}")
     for n in a.vertices:
         for m in a.methods:
             run(n, m, a.frames)
@@ -111,7 +101,7 @@ def main(argv):
 
 if __name__ == "__main__":
     try:
-        main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else [])
+        main(harness.blender_args())
     except Exception as exc:  # noqa: BLE001
         import traceback
         traceback.print_exc()
@@ -119,4 +109,4 @@ if __name__ == "__main__":
         sys.stdout.flush()
         os._exit(1)
     sys.stdout.flush()
-    os._exit(0)
+    os._exit(0)  # no teardown: the live session's handlers stay registered

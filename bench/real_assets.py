@@ -22,7 +22,7 @@ grids, fits and calibration included):
   1024 points × 128 rays and 8 rays per receiver), then no rays but the bake's buried test;
 - hybrid 2v/N: the engine's hybrid at N samples (N rays per face corner out to 2 voxels of
   its density grid, the grid beyond: what `--method hybrid --samples N` bakes; other near
-  distances in bench/hybrid_study.py);
+  distances in bench/probes/hybrid_study.py);
 - auto: what `--method auto` bakes (its choice per role in the note: counted work against the
   time budget, tested on traced points, docs/DESIGN.md, 'Auto mode');
 - cycles N: Cycles' bake at N samples, when cached (time: the bake call).
@@ -34,17 +34,12 @@ wall-clock on a shared 2-core machine: compare ratios within one run.
 """
 from __future__ import annotations
 
-import argparse
 import csv
-import os
 import sys
-import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.join(REPO, "addon"))
-sys.path.insert(0, os.path.join(REPO, "examples"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -66,9 +61,8 @@ _WARM = []
 
 
 def timed(fn):
-    t0 = time.perf_counter()
-    r = fn()
-    return r, time.perf_counter() - t0
+    """(result, seconds) of one run (the scenes are large: one run each)."""
+    return harness.timed(fn)
 
 
 def auto_choice(report):
@@ -218,7 +212,7 @@ def markdown(rows):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="real_assets.py", description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, prog="real_assets.py")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES),
                     help="scenes exported to bench/out/real: the listed ones, or held-out "
                          "ones (examples/sapling_scenes.py sap_<preset>_s<seed>, "

@@ -29,7 +29,6 @@ error at both (and at the other vertices).
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import os
 import sys
@@ -37,8 +36,9 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE = harness.HERE
 
 import real_scenes as rs  # noqa: E402
 
@@ -63,7 +63,7 @@ def corner_counts(tracer, n):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scenes", nargs="*")
     ap.add_argument("--samples", type=int, nargs="*", default=[16, 64, 256])
     ap.add_argument("--seeds", type=int, default=2)

@@ -15,17 +15,15 @@ from __future__ import annotations
 
 import json
 import os
-import sys
-import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
 
-REAL = os.path.join(HERE, "out", "real")
+REAL = harness.REAL
 REF_SEED = 12345
 BURIED_FRACTION = 0.01   # of the object's bbox diagonal
 BURIED_RAYS = 32
@@ -125,12 +123,7 @@ def load(scene, quick=True, out_dir=REAL):
     return RealScene(path)
 
 
-def tracer_tag():
-    """Which ray tracer made a reference: the native tracer's rule for vertex starts (Cycles'
-    bake point, native raytrace.h 'Origins', kTracerRule), so a reference traced by an earlier
-    rule is traced again."""
-    from canopy_ao import _core
-    return _core.TRACER_RULE
+tracer_tag = harness.tracer_tag  # which tracer made a reference (tests/python/test_raytrace.py)
 
 
 def scene_tracer(sc: RealScene):
@@ -158,17 +151,13 @@ def trace_vertices(tracer, sc, samples, distance, seed, rows=slice(None), per_co
 def reference(sc: RealScene, samples=1024, tracer=None):
     """(Embree AO over all vertices at ``samples`` rays, seconds), cached beside the scene."""
     path = sc.path[:-4] + f"_embree_{samples}.npz"
-    tag = tracer_tag()
-    if os.path.exists(path):
-        with np.load(path) as z:
-            if str(z["geometry"]) == sc.geometry and str(z["tracer"]) == tag:
-                return z["ao"].astype(np.float32), float(z["seconds"])
-    t0 = time.perf_counter()
-    tracer = tracer or scene_tracer(sc)
-    ao = trace_vertices(tracer, sc, samples, sc.distance, REF_SEED)
-    dt = time.perf_counter() - t0
-    np.savez_compressed(path, ao=ao, seconds=dt, samples=samples, geometry=sc.geometry,
-                        tracer=tag)
+    key = dict(geometry=sc.geometry, tracer=harness.tracer_tag())
+    z = harness.load_cached(path, **key)
+    if z is not None:
+        return z["ao"].astype(np.float32), float(z["seconds"])
+    ao, dt = harness.timed(lambda: trace_vertices(tracer or scene_tracer(sc), sc, samples,
+                                                  sc.distance, REF_SEED))
+    harness.save_cached(path, dict(ao=ao, seconds=dt, samples=samples), **key)
     return ao, dt
 
 

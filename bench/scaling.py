@@ -11,33 +11,30 @@ Writes bench/out/scaling.csv and bench/out/scaling.png (log-log).
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
 import canopy_scenes as cs  # noqa: E402
 from canopy_ao import _core, core  # noqa: E402
 
-import accuracy  # noqa: E402  (bench/, the script's own folder)
 
-OUT = os.path.join(HERE, "out")
+OUT = harness.OUT
 
 
 def timed(fn, repeats=2):
-    return accuracy.timed(fn, repeats, stop_after=1.0)
+    return harness.timed(fn, repeats, stop_after=1.0)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--max", type=float, default=1e7)
     ap.add_argument("--quick", action="store_true", help="stop at 1e6 vertices")
     ap.add_argument("--rays", type=int, default=16)

@@ -21,17 +21,16 @@ multipliers), "native" the one _core.ScenePlan.evaluate call per item, forest in
 results of both are compared too.
 """
 
-import argparse
 import os
 import sys
 import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
-for sub in ("addon", "examples", os.path.join("tests", "python")):
-    sys.path.insert(0, os.path.join(ROOT, sub))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, ROOT = harness.HERE, harness.REPO
+sys.path.insert(0, os.path.join(ROOT, "tests", "python"))  # lighting_reference, the Python path
 
 import canopy_scenes  # noqa: E402
 import lighting_reference  # noqa: E402
@@ -106,7 +105,7 @@ def run(plan, items, repeat):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--trees", type=int, default=5)
     ap.add_argument("--leaves", type=int, default=12000)
     ap.add_argument("--repeat", type=int, default=3)

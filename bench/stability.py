@@ -20,16 +20,14 @@ asserts the accepted behaviours only.
 """
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
 import os
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
@@ -383,9 +381,9 @@ def reference(case):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--timeout", type=float, default=30.0)
-    ap.add_argument("--out", default=os.path.join(HERE, "out", "stability.md"))
+    ap.add_argument("--out", default=os.path.join(harness.OUT, "stability.md"))
     a = ap.parse_args(argv)
     methods = list(METHODS)
     lines = ["# Canopy AO — stability study", "",

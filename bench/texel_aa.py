@@ -16,7 +16,6 @@ found through BLENDER_USER_SCRIPTS (addons/canopy_ao) or in this repository's ad
 Exits non-zero (message on stderr) on failure.
 """
 
-import argparse
 import os
 import sys
 import tempfile
@@ -24,12 +23,15 @@ import time
 
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+REPO = harness.REPO
 DISTANCE = 2.0
 
 
 def _args(argv):
-    p = argparse.ArgumentParser(prog="texel_aa.py")
+    p = harness.parser(__doc__, prog="texel_aa.py")
     p.add_argument("--resolution", type=int, default=64)
     p.add_argument("--samples", default="16,64")
     p.add_argument("--aa", default="1,2,4")
@@ -122,11 +124,8 @@ def ours(res, samples, aa, image_dir):
 
 
 def main(argv):
-    import addon_utils
     import bpy
-    if not os.environ.get("BLENDER_USER_SCRIPTS"):
-        sys.path.insert(0, os.path.join(REPO, "addon"))
-    addon_utils.enable("canopy_ao", default_set=True)
+    harness.enable_addon()
     from canopy_ao.blender import cycles_check
     a = _args(argv)
     res = a.resolution

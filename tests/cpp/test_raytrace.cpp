@@ -688,7 +688,7 @@ TEST(RayTracer, BadInputThrowsInvalidArgument) {
 }
 
 // === Cycles' bake point (raytrace.h, "Origins"): expected values are Cycles' own vertex bakes
-// (Blender 3.4, 1024 samples; bench/cycles_contact_probe.py and bench/cycles_contact.py).
+// (Blender 3.4, 1024 samples; bench/probes/cycles_contact_probe.py and bench/cycles_contact.py).
 
 namespace {
 

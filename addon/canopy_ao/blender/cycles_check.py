@@ -114,7 +114,7 @@ def _check_bakeable(context, objects):
 
 def _run_bake(target, use_clear=True, bake_type="AO"):
     """One Cycles bake of the selected objects (margin 0: we want only covered texels); AO
-    unless bake_type names another pass (bench/cycles_corner_probe.py bakes POSITION)."""
+    unless bake_type names another pass (bench/probes/cycles_corner_probe.py bakes POSITION)."""
     try:
         result = bpy.ops.object.bake(type=bake_type, target=target, margin=0,
                                      use_clear=use_clear, use_selected_to_active=False,

@@ -74,7 +74,7 @@
 // triangle's boundary (a barycentric below 1e-5, Cycles' own floor: a conservative texel's
 // closest point, on an edge or a vertex such as a UV sphere's pole) first moves towards the
 // centroid by the bake reach, as a vertex's corner does, so no face meeting there stops it. Checked against Cycles
-// (bench/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
+// (bench/probes/cycles_contact_probe.py, bench/cycles_contact.py, tests/blender/test_bake_point.py;
 // 1024 samples): a vertex of a branch piece lying 25–90 µm from another piece's face, an
 // isolated square tube (1.0 where a start inside a face without the lift gives 0.85–0.89), a
 // trunk's capped rim in the ground (0.130 against 0.129).

@@ -1,6 +1,8 @@
-"""Ray pooling, measured and not kept: the exact rung's far field shared over mesh neighbours.
+"""Probe, answered: pooling the far field over mesh neighbours costs more than twice the samples, which do better; not built.
 
-    /usr/bin/python3 bench/ray_pooling.py [--scenes NAME ...] [--samples 16 64]
+Ray pooling, measured and not kept: the exact rung's far field shared over mesh neighbours.
+
+    /usr/bin/python3 bench/probes/ray_pooling.py [--scenes NAME ...] [--samples 16 64]
 
 On the Sapling exports with a 1024-sample Cycles bake (as bench/real_rays.py): each vertex keeps
 the fraction of its own rays open to R_i, the reach of its ring (vertices within two mesh edges
@@ -19,7 +21,6 @@ do better (docs/DESIGN.md, 'Rays against Cycles' samples').
 """
 from __future__ import annotations
 
-import argparse
 import glob
 import math
 import os
@@ -28,8 +29,8 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import real_scenes as rs  # noqa: E402
 
@@ -90,7 +91,7 @@ def pooled(tracer, sc, samples, full):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scenes", nargs="*")
     ap.add_argument("--samples", type=int, nargs="*", default=[16, 64])
     args = ap.parse_args()

@@ -1,7 +1,9 @@
-"""Fewer rays for the same error? Rays dealt by each vertex's estimated variance, against the
+"""Probe, answered: dealing rays by each vertex's estimated variance is 2-7 % worse than the even deal at equal rays; not built.
+
+Fewer rays for the same error? Rays dealt by each vertex's estimated variance, against the
 exact rung's even deal, on a Sapling export (issue #39 item 1; why it was not built).
 
-    /usr/bin/python3.11 bench/ray_allocation.py bench/out/real/sap_callistemon.npz \
+    /usr/bin/python3.11 bench/probes/ray_allocation.py bench/out/real/sap_callistemon.npz \
         [--samples 16 64] [--pilot 0.25 0.5]
 
 The export comes from examples/sapling_scenes.py (bench/README.md); the reference is Embree at
@@ -39,8 +41,8 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402,F401  (addon/, examples/ and bench/ on sys.path)
 
 import real_scenes as rs  # noqa: E402
 from canopy_ao.core import ray_budget  # noqa: E402

@@ -1,6 +1,8 @@
-"""Why the near/far hybrid does or does not reach 64 plain rays' error at half their time.
+"""Probe, answered: the near/far hybrid cannot reach 64 plain rays' error at half their time on real trees (the far field's floor; bench/results/hybrid_study.txt, docs/DESIGN.md).
 
-    /usr/bin/python3 bench/hybrid_study.py [--scenes sap_callistemon ...] [--voxels 1 2 4 8 16]
+Why the near/far hybrid does or does not reach 64 plain rays' error at half their time.
+
+    /usr/bin/python3 bench/probes/hybrid_study.py [--scenes sap_callistemon ...] [--voxels 1 2 4 8 16]
                                            [--full]
 
 On the real-generator scenes (bench/out/real, examples/sapling_scenes.py; Embree 1024 rays as
@@ -26,13 +28,11 @@ Times include the BVH (and the grid, for the hybrid); one run, ratios only.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "addon"))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import numpy as np  # noqa: E402
 
@@ -84,7 +84,7 @@ def study(name, voxels, quick=True):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="hybrid_study.py", description=__doc__.split("\n\n")[0])
+    ap = harness.parser(__doc__, prog="hybrid_study.py")
     ap.add_argument("--scenes", nargs="+", default=[s for s in SCENES if s.startswith("sap_")],
                     choices=SCENES)
     ap.add_argument("--full", action="store_true", help="full-size exports instead of quick")

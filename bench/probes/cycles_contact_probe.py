@@ -1,7 +1,9 @@
-"""Where our rays and Cycles' disagree on a real tree: the smallest scene that shows it, in Blender.
+"""Probe, answered: Cycles starts a vertex's rays 1e-4 × max(1, largest |coordinate|) towards each face corner's centroid (its bake point), which the tracer now does (native raytrace.h, 'Origins').
+
+Where our rays and Cycles' disagree on a real tree: the smallest scene that shows it, in Blender.
 
     BLENDER_USER_SCRIPTS=<dir with addons/canopy_ao> blender -b --factory-startup \\
-        --python bench/cycles_contact_probe.py -- [--scene sap_white_birch] [--vertices 3]
+        --python bench/probes/cycles_contact_probe.py -- [--scene sap_white_birch] [--vertices 3]
 
 Needs the scene's export and its 1024-sample Cycles bake in bench/out/real (bench/README.md,
 "Real trees": examples/sapling_scenes.py, then bench/cycles_reference.py). docs/DESIGN.md,
@@ -19,12 +21,11 @@ the add-on builds it), and then the other triangle is moved along its normal so 
 passes at the printed signed gaps from the vertex (positive: the vertex is on the side the
 triangle's normal points to), to show where Cycles' answer turns over and where ours does.
 """
-import argparse
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(os.path.dirname(HERE), "addon"))
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import addon_utils  # noqa: E402
 import bpy  # noqa: E402
@@ -34,7 +35,7 @@ addon_utils.enable("canopy_ao")
 from canopy_ao import _core  # noqa: E402
 from canopy_ao.blender import cycles_check  # noqa: E402
 
-REAL = os.path.join(HERE, "out", "real")
+REAL = harness.REAL
 CONTACT = 1e-4  # of the AO distance (bench/real_rays.py)
 GAPS_UM = (-300, -150, -75, 0, 75, 150, 300)  # signed gaps to try, micrometres
 
@@ -126,7 +127,7 @@ def bake_little(v, tris, k_local, distance):
 
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("--scene", default="sap_white_birch")
     ap.add_argument("--vertices", type=int, default=3)
     args = ap.parse_args(argv)

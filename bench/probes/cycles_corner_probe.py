@@ -1,7 +1,9 @@
-"""Cycles' AO per face corner at the vertices where our rays and Cycles' vertex bake disagree most.
+"""Probe, answered: where ours and Cycles' vertex bake still differ on the Douglas fir, Cycles' own face corners differ (its twin rings; docs/DESIGN.md, 'Rays against Cycles' samples').
+
+Cycles' AO per face corner at the vertices where our rays and Cycles' vertex bake disagree most.
 
     BLENDER_USER_SCRIPTS=<dir with addons/canopy_ao> blender -b --factory-startup \\
-        --python bench/cycles_corner_probe.py -- [--scene sap_douglas_fir] [--samples 256]
+        --python bench/probes/cycles_corner_probe.py -- [--scene sap_douglas_fir] [--samples 256]
         [--worst 12] [--gap 0.05]
 
 Needs the scene's export and its 1024-sample Cycles bake in bench/out/real (bench/README.md,
@@ -16,16 +18,12 @@ have a corner whose start (Cycles' POSITION bake of the corner) lies less than h
 native raytrace.h 'Origins' from the vertex.
 docs/DESIGN.md, 'Rays against Cycles' samples', says what it found.
 """
-import argparse
 import os
 import sys
 import tempfile
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "addon"))
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import addon_utils  # noqa: E402
 import bpy  # noqa: E402
@@ -86,7 +84,7 @@ def twins(v, h):
 
 
 def main(argv):
-    ap = argparse.ArgumentParser(prog="cycles_corner_probe.py")
+    ap = harness.parser(__doc__, prog="cycles_corner_probe.py")
     ap.add_argument("--scene", default="sap_douglas_fir")
     ap.add_argument("--samples", type=int, default=256)
     ap.add_argument("--worst", type=int, default=12)

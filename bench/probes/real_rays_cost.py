@@ -1,6 +1,8 @@
-"""What Cycles' bake point costs on a real tree: one exact-rung trace of every vertex.
+"""Probe, answered: Cycles' rays (S at every face corner) cost 1.5–5× S per vertex, the mean corners per vertex (white birch: 1.95× the CPU time, timed with hyperfine).
 
-    /usr/bin/python3 bench/real_rays_cost.py SCENE bake|corner|dealt|before [--samples 256]
+What Cycles' bake point costs on a real tree: one exact-rung trace of every vertex.
+
+    /usr/bin/python3 bench/probes/real_rays_cost.py SCENE bake|corner|dealt|before [--samples 256]
 
 SCENE is a Sapling export in bench/out/real (bench/real_scenes.py). `bake` traces as the add-on
 does (vertex normals: each vertex at Cycles' bake point, a ROBUST scene, Cycles' rays at
@@ -10,15 +12,14 @@ tracer with `--samples` rays at every face corner (Cycles' deal, the add-on's ru
 the rays), `before` without normals (the rule before the bake point). Time
 them against each other with hyperfine (Debian's package), e.g.
 
-    hyperfine -r 5 "/usr/bin/python3 bench/real_rays_cost.py sap_white_birch bake" \\
-        "/usr/bin/python3 bench/real_rays_cost.py sap_white_birch dealt"
+    hyperfine -r 5 "/usr/bin/python3 bench/probes/real_rays_cost.py sap_white_birch bake" \\
+        "/usr/bin/python3 bench/probes/real_rays_cost.py sap_white_birch dealt"
 """
-import argparse
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
+import harness  # noqa: E402  (addon/, examples/ and bench/ on sys.path)
 
 import numpy as np  # noqa: E402
 
@@ -27,7 +28,7 @@ from canopy_ao import _core  # noqa: E402
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = harness.parser(__doc__)
     ap.add_argument("scene")
     ap.add_argument("rule", choices=("bake", "corner", "dealt", "before"))
     ap.add_argument("--samples", type=int, default=256)
