@@ -86,6 +86,24 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
         _assert_equal({n: _ao(n) for n in NAMES}, now)
 
 
+def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated):
+    """The swaying leaves are written into the mesh this frame evaluated (no second
+    evaluation), the still ground into its original, tagged; both must be what is drawn, and
+    the original keeps the frame's AO (a save, a stop)."""
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    first = {n: _ao(n) for n in NAMES}
+    for frame in (7, 4):
+        animated.frame_set(frame)
+        for n in NAMES:
+            np.testing.assert_array_equal(_evaluated_ao(animated.objects[n]), _ao(n),
+                                          err_msg=n)
+        assert np.abs(_ao("Leaves") - first["Leaves"]).max() > 0.02
+        assert np.abs(_ao("Ground") - first["Ground"]).max() > 0.005
+    live.stop(animated)
+    animated.frame_set(7)  # stopped: the attribute keeps frame 4's AO
+    np.testing.assert_array_equal(_evaluated_ao(animated.objects["Leaves"]), _ao("Leaves"))
+
+
 def test_live_keeps_the_first_bakes_calibrated_tau(animated):
     _j, rep = run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", tau=None, live=True))
     assert rep["calibration"]  # τ was calibrated at frame 1 ...

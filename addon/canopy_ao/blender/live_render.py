@@ -16,6 +16,9 @@ viewport last evaluated. So:
 
 import sys
 
+import bpy
+import numpy as np
+
 from . import mesh_io
 
 _WARNED = set()  # scenes told about keyed targets in an engine that may keep their AO
@@ -65,3 +68,33 @@ def write_frame(scene, depsgraph, objs, attribute, aos):
               "render's copy, and nothing keyed changes their geometry, so "
               f"{'Cycles with Persistent Data' if engine == 'CYCLES' else engine} keeps its "
               "first frame's AO", file=sys.stderr, flush=True)
+
+
+def geometry_updated(depsgraph):
+    """Names of the objects whose geometry this depsgraph evaluated at its last update (in a
+    frame_change_post handler: this frame's)."""
+    return {u.id.original.name for u in depsgraph.updates
+            if u.is_updated_geometry and isinstance(u.id, bpy.types.Object)}
+
+
+def write_viewport(depsgraph, objs, attribute, aos, last):
+    """Write each target's AO {name: float32 (V,)} where the viewport draws it, evaluating
+    nothing again where that can be avoided (docs/DESIGN.md, 'Live and per-frame AO'). The
+    caller has checked every target's ownership. last: {name: the AO last written}, updated.
+
+    A target whose geometry this frame evaluated (a deform, a shape key, an armature) has a
+    new evaluated mesh that nothing has drawn yet: its attribute is written there, untagged,
+    and in the original untagged too (what a save keeps and a stop leaves). Tagging it instead
+    makes Blender evaluate it a second time in this frame (its modifiers again: as long as
+    Blender's own frame). A target not evaluated this frame (a still ground) keeps its drawn
+    copy, so it is written and tagged as before, and only when its AO changed."""
+    fresh = geometry_updated(depsgraph)
+    for obj in objs:
+        ao = aos[obj.name]
+        if obj.name in fresh:
+            mesh_io.write_evaluated_ao(
+                mesh_io.evaluated_ao_attribute(obj, depsgraph, attribute), ao)
+            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True, tag=False)
+        elif obj.name not in last or not np.array_equal(last[obj.name], ao):
+            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True)
+        last[obj.name] = ao
