@@ -117,3 +117,35 @@ def test_a_changed_vertex_count_is_refused():
     pos["Leaves"], nor["Leaves"] = pos["Leaves"][:-4], nor["Leaves"][:-4]
     with pytest.raises(CanopyAOError, match="Leaves: .*topology changed"):
         live.frame_items(live.template_items(its), pos, nor)
+
+
+def _regression_frame(first, sway):
+    frame = scene_items(sway)
+    return frame, live.refit(first, live.frame_items(
+        live.template_items(frame, "regression"), {i.name: i.positions for i in frame},
+        {i.name: i.normals for i in frame}))
+
+
+def test_the_ray_free_rung_runs_live_its_fit_kept_its_features_moved():
+    """A regression frame: the first bake's fitted models, the frame's grid and leaf tables.
+    At the first bake's own positions it is that bake bit for bit; swayed, it follows the
+    crown and agrees with a full regression bake of that frame (its own calibration rays) as
+    closely as two calibrations of one scene agree."""
+    settings = core.BakeSettings(method="regression", tau=1.7)
+    first = core.prepare(scene_items(0.0), settings)
+    still, same = _regression_frame(first, 0.0)
+    assert same.regression is not first.regression
+    assert same.regression._models is first.regression._models  # the fit is the first bake's
+    for it in still:
+        np.testing.assert_array_equal(
+            core.evaluate_receivers(same, it, it.positions, it.normals, vertices=slice(None)),
+            core.evaluate_receivers(first, it, it.positions, it.normals, vertices=slice(None)),
+            err_msg=it.name)
+    frame, plan = _regression_frame(first, 0.15)
+    full = core.prepare(scene_items(0.15), settings)
+    reseeded = core.prepare(scene_items(0.15), core.BakeSettings(method="regression", tau=1.7,
+                                                                 seed=5))
+    got, want, was = leaves_ao(plan, frame), leaves_ao(full, frame), leaves_ao(first, frame)
+    assert np.abs(got - was).max() > 0.02  # the features followed the leaves
+    seeds = np.abs(leaves_ao(reseeded, frame) - want).mean()
+    assert np.abs(got - want).mean() <= max(2 * seeds, 0.01)

@@ -50,7 +50,7 @@ class Session:
         core_live.check_method(job.plan.method, job.settings.method == "auto")
         self.scene_name = job.scene.name
         self.plan = job.plan
-        self.template = core_live.template_items(job.items)
+        self.template = core_live.template_items(job.items, job.plan.method)
         self.targets = [t.item.name for t in job.targets]
         self.attribute = job.opts["attribute"]
         self.frames = 0

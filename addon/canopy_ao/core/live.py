@@ -22,9 +22,14 @@ from .native import CanopyAOError, refusals_are_user_errors
 from .scene import Plan, SceneItem, split_trees
 
 # The rungs that refit and evaluate fast enough per frame: the analytic proxy models (the
-# Reeves-Blau baseline is analytic too). The density grid and the rays rebuild a grid or a BVH
-# over every triangle each frame, which is a full bake, not a live update.
-LIVE_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau")
+# Reeves-Blau baseline is analytic too) and the ray-free rung, whose fit to its calibration
+# rays is the first bake's and whose features are recomputed per frame (no ray). The density
+# grid and the rays rebuild a grid or a BVH over every triangle and trace each frame, which
+# is a full bake, not a live update.
+LIVE_METHODS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "regression")
+# Roles whose triangles a frame needs: grass (its blades), and for the ray-free rung every
+# occluder (its density grid) and leaf table (regression.LEAF_TABLE_ROLES).
+TRIANGLE_ROLES = {"regression": ("GRASS", "CANOPY", "TRUNK")}
 
 
 def check_method(method: str, by_auto: bool = False) -> None:
@@ -33,7 +38,7 @@ def check_method(method: str, by_auto: bool = False) -> None:
     if method not in LIVE_METHODS:
         which = f"auto chose the {method} rung, which" if by_auto else f"the {method} rung"
         raise CanopyAOError(
-            f"live and per-frame AO run the analytic rungs only ({', '.join(LIVE_METHODS)}); "
+            f"live and per-frame AO run the analytic rungs only, or the ray-free one ({', '.join(LIVE_METHODS)}); "
             f"{which} rebuilds its grid or ray tracer from every triangle each frame: choose "
             "one of those methods (or bake single frames)")
 
@@ -57,20 +62,26 @@ def frame_items(template, positions, normals) -> list:
 
 @refusals_are_user_errors
 def refit(base: Plan, items) -> Plan:
-    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted."""
+    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted;
+    the ray-free rung's features moved to the frame, its fit kept (RegressionRung.at_frame)."""
     check_method(base.method)
     plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried)
-    proxies.fit_scene(plan, split_trees(items))
+    parts = split_trees(items)
+    proxies.fit_scene(plan, parts)
+    if base.method == "regression" and base.regression is not None:
+        plan.regression = base.regression.at_frame(parts, items)
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     return plan
 
 
-def template_items(items) -> list:
-    """The first bake's items as a frame's template: positions kept only for their count."""
+def template_items(items, method=None) -> list:
+    """The first bake's items as a frame's template: positions kept only for their count,
+    triangles where ``method``'s frames need them (TRIANGLE_ROLES)."""
+    keep = TRIANGLE_ROLES.get(method, ("GRASS",))
     return [SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
-                      it.triangles if it.role == "GRASS" else np.zeros((0, 3), np.int32),
+                      it.triangles if it.role in keep else np.zeros((0, 3), np.int32),
                       tree_source="set", tree_labels=it.tree_labels, tree_names=it.tree_names,
                       tree_why=it.tree_why) for it in items]
