@@ -1,18 +1,26 @@
 """Per-frame cost of live AO on an animated tree, and the frame rate it allows (bench/README.md).
 
     blender -b --factory-startup --python bench/live_speed.py -- \
-        [--vertices 100000 1000000] [--methods sphere ellipsoid shells medium] [--frames 6]
+        [--vertices 100000 1000000] [--methods sphere ellipsoid shells medium regression]
+        [--trees crown sapling] [--frames 6]
 
-Builds a crown of leaf quads (bench/blender_bake_speed.py's leaf mesh) swaying in the wind (a
-Simple Deform bend whose angle is keyed over the frames) above a ground plane, starts live AO
-with each rung and a given τ, then steps the frames with scene.frame_set, as playback and an
-animation render do. Prints per rung and size, as the median over the frames:
+Builds a tree swaying in the wind (a Simple Deform bend whose angle is keyed over the frames)
+above a ground plane, starts live AO with each rung and a given τ, then steps the frames with
+scene.frame_set, as playback and an animation render do. The trees (--trees):
+- crown: a crown of leaf quads (bench/blender_bake_speed.py's leaf mesh) alone;
+- sapling: a Sapling Tree Gen quaking aspen (examples/sapling_scenes.py's sapling_tree, seed 1),
+  its branches as the TRUNK mesh and its leaves as the CANOPY one, the leaf count scaled so the
+  two hold the given vertices; the one bend, about the trunk's base, sways both.
+Prints per tree, rung and size, as the median over the frames:
 
 - live: the handler's own work per frame (read the evaluated meshes, refit, evaluate, write
   the attribute), split into those stages;
 - frame: the whole frame_set with live AO on (Blender's deform, our handler, and the second
   evaluation the attribute write causes), and the frame rate it allows;
-- blender only: the same frame_set with live AO off (the deform alone).
+- blender only: the same frame_set with live AO off (the deform alone);
+- with/without: the whole frame with live AO over the frame without (issue #39 asks ≤ 2).
+  Headless, nothing draws, so Blender's own frame computes no vertex normals; live AO reads
+  them (a viewport's draw computes the same ones, which live AO then shares).
 
 The machine is shared: the load average is printed with the numbers.
 """
@@ -50,13 +58,57 @@ def animated_tree(n_vertices):
     return scene, [leaves.name, ground.name]
 
 
+def _wind(obj, origin):
+    """A Simple Deform bend of obj about ``origin`` whose angle sways over frames 1-50."""
+    wind = obj.modifiers.new("Wind", 'SIMPLE_DEFORM')
+    wind.deform_method, wind.deform_axis, wind.origin = 'BEND', 'Y', origin
+    for frame, angle in ((1, 0.0), (25, 0.35), (50, -0.35)):
+        wind.angle = angle
+        wind.keyframe_insert("angle", frame=frame)
+
+
+def sapling_tree(n_vertices, preset="quaking_aspen"):
+    """A Sapling tree (branches TRUNK, leaves CANOPY, tree "Tree") of about n_vertices, swayed
+    by one keyed bend about its base, and a Ground plane under it."""
+    import addon_utils
+    sys.path.insert(0, os.path.join(os.path.dirname(HERE), "examples"))
+    from sapling_scenes import sapling_tree as make
+    for ob in list(bpy.data.objects):
+        bpy.data.objects.remove(ob, do_unlink=True)
+    addon_utils.enable("add_curve_sapling", default_set=False)
+    scene = bpy.context.scene
+    col = scene.collection
+    b, l = make(preset, 1, (0, 0), "probe", 1.0, col)  # leaves per unit of leaf factor
+    per_factor, trunk = len(l.data.vertices), len(b.data.vertices)
+    for ob in (b, l):
+        bpy.data.objects.remove(ob, do_unlink=True)
+    factor = max(1.0, (n_vertices - trunk) / per_factor)
+    branches, leaves = make(preset, 1, (0, 0), "Tree", factor, col)
+    base = bpy.data.objects.new("Tree base", None)
+    col.objects.link(base)
+    for ob, role in ((branches, 'TRUNK'), (leaves, 'CANOPY')):
+        ob.canopy_ao.role, ob.canopy_ao.tree = role, "Tree"
+        _wind(ob, base)
+    size = 4.0 * max(leaves.dimensions.x, leaves.dimensions.y, 1.0)
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=100, y_subdivisions=100, size=size)
+    ground = bpy.context.object
+    ground.name = "Ground"
+    ground.canopy_ao.role = 'GROUND'
+    scene.frame_set(1)
+    return scene, [branches.name, leaves.name, ground.name]
+
+
+TREES = {"crown": animated_tree, "sapling": sapling_tree}
+
+
 def _median(xs):
     return statistics.median(xs) if xs else float("nan")
 
 
-def run(n_vertices, method, frames):
+def run(n_vertices, method, frames, tree="crown"):
     from canopy_ao.blender import job, live, properties
-    scene, names = animated_tree(n_vertices)
+    scene, names = TREES[tree](n_vertices)
+    n_vertices = sum(len(scene.objects[n].data.vertices) for n in names[:-1])  # the tree's
     opts = dict(properties.scene_options(scene), method=method, tau=1.5, distance=0.0,
                 show_proxies=False, live=True)
     t0 = time.perf_counter()
@@ -79,17 +131,20 @@ def run(n_vertices, method, frames):
         blender_only.append(time.perf_counter() - t0)
     ms = {k: 1000.0 * _median(v) for k, v in stages.items()}
     frame_ms = 1000.0 * _median(totals)
-    print(f"{n_vertices:>9,} vertices  {method:<9}  live {ms['total']:7.1f} ms "
+    alone_ms = 1000.0 * _median(blender_only)
+    print(f"{tree:<7} {n_vertices:>9,} vertices  {method:<10}  live {ms['total']:7.1f} ms "
           f"(read {ms['read']:.1f}, fit {ms['fit']:.1f}, evaluate {ms['evaluate']:.1f}, "
           f"write {ms['write']:.1f})  frame {frame_ms:7.1f} ms = {1000.0 / frame_ms:5.1f} fps  "
-          f"blender only {1000.0 * _median(blender_only):6.1f} ms  (first bake {first:.2f} s)",
-          flush=True)
+          f"blender only {alone_ms:6.1f} ms  with/without {frame_ms / alone_ms:5.2f}  "
+          f"(first bake {first:.2f} s)", flush=True)
 
 
 def main(argv):
     ap = argparse.ArgumentParser(prog="live_speed.py")
     ap.add_argument("--vertices", type=int, nargs="+", default=[100_000, 1_000_000])
-    ap.add_argument("--methods", nargs="+", default=["sphere", "ellipsoid", "shells", "medium"])
+    ap.add_argument("--methods", nargs="+",
+                    default=["sphere", "ellipsoid", "shells", "medium", "regression"])
+    ap.add_argument("--trees", nargs="+", choices=sorted(TREES), default=["crown", "sapling"])
     ap.add_argument("--frames", type=int, default=6)
     a = ap.parse_args(argv)
     import importlib.util
@@ -104,9 +159,10 @@ def main(argv):
         raise RuntimeError(msg)
     print(f"live AO per frame, median of {a.frames} frames; load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; Blender {bpy.app.version_string}")
-    for n in a.vertices:
-        for m in a.methods:
-            run(n, m, a.frames)
+    for tree in a.trees:
+        for n in a.vertices:
+            for m in a.methods:
+                run(n, m, a.frames, tree)
 
 
 if __name__ == "__main__":
