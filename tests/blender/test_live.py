@@ -104,6 +104,26 @@ def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated):
     np.testing.assert_array_equal(_evaluated_ao(animated.objects["Leaves"]), _ao("Leaves"))
 
 
+def test_a_target_whose_modifier_drops_the_attribute_keeps_its_original_written(animated):
+    """A geometry-nodes modifier removing the AO attribute from the evaluated leaves: nothing
+    there to write, so live AO writes (and tags) the original, and keeps running."""
+    leaves = animated.objects["Leaves"]
+    ng = bpy.data.node_groups.new("Drop AO", 'GeometryNodeTree')
+    ng.inputs.new('NodeSocketGeometry', "Geometry")
+    ng.outputs.new('NodeSocketGeometry', "Geometry")
+    gin, gout = ng.nodes.new('NodeGroupInput'), ng.nodes.new('NodeGroupOutput')
+    drop = ng.nodes.new('GeometryNodeRemoveAttribute')
+    drop.inputs["Name"].default_value = "CanopyAO"
+    ng.links.new(gin.outputs[0], drop.inputs[0])
+    ng.links.new(drop.outputs[0], gout.inputs[0])
+    leaves.modifiers.new("Drop", 'NODES').node_group = ng
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    first = _ao("Leaves")
+    animated.frame_set(7)
+    assert animated.canopy_ao.live and live.session_of(animated).frames == 1
+    assert np.abs(_ao("Leaves") - first).max() > 0.02
+
+
 def test_the_ray_free_rung_runs_live_as_close_to_rays_as_its_static_bake(animated):
     """The regression rung live (its fit from frame 1's calibration rays, its features from
     each frame): on the swayed crown its error against that frame's rays stays within 0.01 of

@@ -1,5 +1,6 @@
-"""Live AO inside a render (F12, Ctrl+F12, ``blender -b … -a``): how a frame's AO reaches what
-the render draws (docs/DESIGN.md, 'Live and per-frame AO').
+"""Live AO inside a render (F12, Ctrl+F12, ``blender -b … -a``) and in the viewport
+(write_viewport): how a frame's AO reaches what is drawn (docs/DESIGN.md, 'Live and per-frame
+AO').
 
 A render's depsgraph animates its own copies of the data and never the originals. A tag on an
 original makes it copy that original again (and, for a mesh, its shape keys and its object):
@@ -77,6 +78,15 @@ def geometry_updated(depsgraph):
             if u.is_updated_geometry and isinstance(u.id, bpy.types.Object)}
 
 
+def _drawn_attribute(obj, depsgraph, attribute):
+    """The attribute of obj's evaluated mesh, None where there is none to write (a modifier
+    drops it: the original is then written and tagged, as for a still target)."""
+    try:
+        return mesh_io.evaluated_ao_attribute(obj, depsgraph, attribute)
+    except mesh_io.MeshIOError:
+        return None
+
+
 def write_viewport(depsgraph, objs, attribute, aos, last):
     """Write each target's AO {name: float32 (V,)} where the viewport draws it, evaluating
     nothing again where that can be avoided (docs/DESIGN.md, 'Live and per-frame AO'). The
@@ -87,13 +97,13 @@ def write_viewport(depsgraph, objs, attribute, aos, last):
     and in the original untagged too (what a save keeps and a stop leaves). Tagging it instead
     makes Blender evaluate it a second time in this frame (its modifiers again: as long as
     Blender's own frame). A target not evaluated this frame (a still ground) keeps its drawn
-    copy, so it is written and tagged as before, and only when its AO changed."""
+    copy, so its original is written and tagged, and only when its AO changed."""
     fresh = geometry_updated(depsgraph)
     for obj in objs:
         ao = aos[obj.name]
-        if obj.name in fresh:
-            mesh_io.write_evaluated_ao(
-                mesh_io.evaluated_ao_attribute(obj, depsgraph, attribute), ao)
+        attr = _drawn_attribute(obj, depsgraph, attribute) if obj.name in fresh else None
+        if attr is not None:
+            mesh_io.write_evaluated_ao(attr, ao)
             mesh_io.write_ao_attribute(obj, attribute, ao, checked=True, tag=False)
         elif obj.name not in last or not np.array_equal(last[obj.name], ao):
             mesh_io.write_ao_attribute(obj, attribute, ao, checked=True)
