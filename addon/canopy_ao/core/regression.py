@@ -303,8 +303,10 @@ def _geometry(items, occ, meshes, resolution, directions, before=None):
     scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
     frames = {}
     for tree in sorted({it.tree for it in items if it.tree}):
-        pts = [it.positions for it in items if it.tree == tree and it.role in ("CANOPY", "TRUNK")]
-        frames[tree] = tree_frame(np.concatenate(pts)) if pts else scene_frame
+        own = [it for it in items if it.tree == tree and it.role in ("CANOPY", "TRUNK")]
+        same = len(own) == len(occ) and all(a is b for a, b in zip(own, occ))  # one tree
+        frames[tree] = tree_frame(np.concatenate([it.positions for it in own])) \
+            if own and not same else scene_frame
     return features, leaves, scene_frame, frames
 
 
