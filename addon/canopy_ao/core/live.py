@@ -5,9 +5,10 @@ Hegeman et al. evaluate their canopy shells per frame for trees moving in the wi
 fit and an analytic evaluation cost little. Here a frame keeps from the first bake everything
 that does not move: the rung, τ (scene and per tree, from its calibration), every item's role
 and tree (and the tree labels of a mesh holding several), the triangles (the topology of a
-deformed mesh does not change; only grass blades need them) and the leaves' partition into
-k-means shells. It redoes what moves: the fits (sphere, ellipsoid, each shell to its own
-leaves, trunks, grass heights) and the evaluation. For the one-proxy rungs a frame's AO is
+deformed mesh does not change; grass blades and the ray-free rung's grid need them), the
+leaves' partition into k-means shells and the ray-free rung's fitted models. It redoes what
+moves: the fits (sphere, ellipsoid, each shell to its own leaves, trunks, grass heights), the
+ray-free rung's features and the evaluation. For the one-proxy rungs a frame's AO is
 therefore the AO of a full bake of that frame with the same rung and τ; for shells and the
 medium it is that bake with the first frame's partition (clustering every frame afresh flips
 leaves between shells: up to 0.6 AO from one frame to the next on the test tree).
@@ -38,7 +39,8 @@ def check_method(method: str, by_auto: bool = False) -> None:
     if method not in LIVE_METHODS:
         which = f"auto chose the {method} rung, which" if by_auto else f"the {method} rung"
         raise CanopyAOError(
-            f"live and per-frame AO run the analytic rungs only, or the ray-free one ({', '.join(LIVE_METHODS)}); "
+            "live and per-frame AO run the analytic rungs only, or the ray-free one "
+            f"({', '.join(LIVE_METHODS)}); "
             f"{which} rebuilds its grid or ray tracer from every triangle each frame: choose "
             "one of those methods (or bake single frames)")
 
