@@ -251,6 +251,24 @@ def test_a_frame_range_bake_matches_per_frame_full_bakes_and_is_read_back(animat
     assert not [g for g in bpy.data.node_groups if g.get(frames.GROUP_TAG)]
 
 
+def test_a_frame_range_bake_of_the_ray_free_rung_caches_what_live_shows(animated):
+    """Both fit the ray-free rung on the first frame's rays and move its features after."""
+    rep = frames.FrameBake(bpy.context, list(NAMES), opts(method="regression"), 1, 5).run()
+    assert rep["frames"] == [1, 5]
+    cached = {}
+    for n in NAMES:
+        attr = animated.objects[n].data.attributes["CanopyAO_5"]
+        cached[n] = np.empty(len(attr.data), np.float32)
+        attr.data.foreach_get("value", cached[n])
+    assert bpy.ops.canopy_ao.clear_frames() == {'FINISHED'}
+    animated.frame_set(1)
+    run_bake(bpy.context, list(NAMES), opts(method="regression", live=True))
+    at1 = _ao("Leaves")
+    animated.frame_set(5)
+    assert np.abs(_ao("Leaves") - at1).max() > 0.02
+    _assert_equal({n: _ao(n) for n in NAMES}, cached)
+
+
 def test_a_cancelled_frame_range_bake_leaves_nothing_behind(animated):
     before = {n: sorted(a.name for a in animated.objects[n].data.attributes) for n in NAMES}
     groups = len(bpy.data.node_groups)
