@@ -18,8 +18,7 @@ chosen by 5-fold cross-validation on the sample (ties to the larger λ); the pie
 (LeafTable) only where they cut that CV error by more than PIECES_GAIN (_fit). Buried sample points
 (every ray stops within ``BURIED_FRACTION`` of the object's size: a leaf base inside its branch)
 are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
-predicts them like any vertex.
-"""
+predicts them like any vertex."""
 from __future__ import annotations
 
 import copy
@@ -133,6 +132,8 @@ class RegressionRung:
     meshes: the unsplit items when ``items`` are split per tree (scene.parts), for the leaf
     tables (LeafTable) by item name; None = the items themselves."""
 
+    _bounded = False  # a live frame's copy holds its features to the sample's range
+
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
                  directions=24, seed=0, tracer=None, ids=None, meshes=None):
         _core = native.require()
@@ -232,16 +233,14 @@ class RegressionRung:
                                         calibration=t_cal - t_tracer, fit=t_fit - t_cal))
 
     def at_frame(self, items, meshes=None):
-        """A copy of this rung on a frame of its meshes deformed (live AO): the geometry it
-        reads (_geometry) from the frame's items and meshes, its fitted models kept."""
+        """A copy on a frame of the same meshes deformed (live AO): _geometry redone, fit kept."""
         out = copy.copy(self)
         items = [it for it in items if it.role != "IGNORE"]
-        occ = [it for it in items if it.role in OCCLUDER_ROLES]
-        if not occ:
-            raise CanopyAOError("method 'regression' needs a CANOPY, TRUNK or GRASS object")
+        occ = [it for it in items if it.role in OCCLUDER_ROLES]  # the first frame's: not none
         out._features, out._leaves, out._scene_frame, out._frames = _geometry(
             items, occ, meshes, self.report["resolution"], self.report["directions"],
             self._leaves)
+        out._bounded = True  # features held to the first frame's sample (Model.predict)
         return out
 
     def _compute(self, tree, p, n, name=None, own=None, pieces=True):
@@ -266,7 +265,8 @@ class RegressionRung:
         model = self._models.get((tree, role))
         if model is None:  # an item the sample did not see: its role's fit, else any
             model = next((m for (t, r), m in self._models.items() if r == role), self._fallback)
-        return model.predict(self._compute(tree, p, n, name, own, pieces=model.pieces))
+        return model.predict(self._compute(tree, p, n, name, own, pieces=model.pieces),
+                             bounded=self._bounded)
 
 
 class OpenSky:
@@ -288,7 +288,7 @@ class OpenSky:
 def _geometry(items, occ, meshes, resolution, directions, before=None):
     """(OcclusionFeatures over the occluders' density grid, {mesh: LeafTable or None} of the
     CANOPY and TRUNK meshes (meshes: unsplit items; a name seen twice gets none; before: an
-    earlier frame's tables, pieces kept), the scene's tree frame, {tree: its frame})."""
+    earlier frame's, pieces kept), the scene's tree frame, {tree: its frame})."""
     _core = native.require()
     grid = _core.DensityGrid(*_merged(occ), resolution=resolution)
     features = _core.OcclusionFeatures(grid, directions=directions)

@@ -58,6 +58,8 @@ class Model:
 
     def __init__(self, feats, target):
         self.mean = feats.mean(0).astype(np.float32)
+        # The sample's range per feature: a live frame's features are held to it (predict).
+        self.lo, self.hi = feats.min(0).astype(np.float32), feats.max(0).astype(np.float32)
         sd = feats.std(0)
         self.scale = np.where(sd > 1e-6, sd, 1.0).astype(np.float32)
         w, self.lam, self.cv_mae = ridge(self.expand(feats), target)
@@ -76,8 +78,14 @@ class Model:
         zg = ((f[:, 1] - self.mean[1]) / self.scale[1])[:, None]  # the grid AO, standardised
         return np.concatenate([z, z * z, z * zg], axis=1)
 
-    def predict(self, feats):
+    def predict(self, feats, bounded=False):
+        """AO of feature rows. bounded: each feature held to the calibration sample's range
+        first (a live frame: the first frame's sample can hold a feature all but constant, a
+        ground point's shape feature under an unbent crown, which a swayed crown then moves
+        thousands of standard deviations, and the fit extrapolates to nonsense)."""
         f = np.ascontiguousarray(feats, np.float32)
+        if bounded:
+            f = np.clip(f, self.lo, self.hi)
         if f.shape[1] == NATIVE:
             return np.asarray(native.require().predict_features(f, self.mean, self.scale,
                                                                 self.weights))
