@@ -2,7 +2,7 @@
 
     blender -b --factory-startup --python bench/live_speed.py -- \
         [--vertices 100000 1000000] [--methods sphere ellipsoid shells medium regression]
-        [--trees crown sapling] [--frames 6]
+        [--trees crown sapling] [--frames 6] [--accuracy]
 
 Builds a tree swaying in the wind (a Simple Deform bend whose angle is keyed over the frames)
 above a ground plane, starts live AO with each rung and a given τ, then steps the frames with
@@ -21,6 +21,8 @@ Prints per tree, rung and size, as the median over the frames:
 - with/without: the whole frame with live AO over the frame without (issue #39 asks ≤ 2).
   Headless, nothing draws, so Blender's own frame computes no vertex normals; live AO reads
   them (a viewport's draw computes the same ones, which live AO then shares).
+With --accuracy, also the mean absolute error at the last frame of live AO and of a static
+bake of the same rung at that frame, each against a ray-traced bake of that frame.
 
 The machine is shared: the load average is printed with the numbers.
 """
@@ -105,7 +107,24 @@ def _median(xs):
     return statistics.median(xs) if xs else float("nan")
 
 
-def run(n_vertices, method, frames, tree="crown"):
+def _accuracy(scene, names, opts, frame, live_ao):
+    """(MAE of live AO at ``frame``, MAE of a static bake of the same rung there), each against
+    that frame's rays, over every vertex of the targets (live_ao: {name: AO})."""
+    import numpy as np
+    from canopy_ao.blender import job, mesh_io
+    scene.frame_set(frame)
+
+    def bake(**kw):
+        job.run_bake(bpy.context, names, dict(opts, live=False, overwrite=True, **kw))
+        return np.concatenate([mesh_io.read_ao_attribute(scene.objects[n], kw["attribute"])
+                               for n in names])
+    rays = bake(method="raytrace", attribute="Rays")
+    static = bake(attribute="Static")
+    live_all = np.concatenate([live_ao[n] for n in names])
+    return float(np.abs(live_all - rays).mean()), float(np.abs(static - rays).mean())
+
+
+def run(n_vertices, method, frames, tree="crown", accuracy=False):
     from canopy_ao.blender import job, live, properties
     scene, names = TREES[tree](n_vertices)
     n_vertices = sum(len(scene.objects[n].data.vertices) for n in names[:-1])  # the tree's
@@ -123,6 +142,10 @@ def run(n_vertices, method, frames, tree="crown"):
         for k, v in session.timings.items():
             stages.setdefault(k, []).append(v)
     assert session.frames == frames, "the handler did not run on every frame"
+    if accuracy:
+        from canopy_ao.blender import mesh_io
+        live_ao = {n: mesh_io.read_ao_attribute(scene.objects[n], opts["attribute"])
+                   for n in names}
     live.stop(scene)
     blender_only = []
     for f in range(2 + frames, 2 + 2 * frames):
@@ -137,6 +160,11 @@ def run(n_vertices, method, frames, tree="crown"):
           f"write {ms['write']:.1f})  frame {frame_ms:7.1f} ms = {1000.0 / frame_ms:5.1f} fps  "
           f"blender only {alone_ms:6.1f} ms  with/without {frame_ms / alone_ms:5.2f}  "
           f"(first bake {first:.2f} s)", flush=True)
+    if accuracy:
+        got, static = _accuracy(scene, names, opts, 1 + frames, live_ao)
+        print(f"{'':<7} {'':>9}           {method:<10}  MAE against frame {1 + frames}'s rays: "
+              f"live {got:.4f}, static bake {static:.4f} (live - static {got - static:+.4f})",
+              flush=True)
 
 
 def main(argv):
@@ -146,6 +174,9 @@ def main(argv):
                     default=["sphere", "ellipsoid", "shells", "medium", "regression"])
     ap.add_argument("--trees", nargs="+", choices=sorted(TREES), default=["crown", "sapling"])
     ap.add_argument("--frames", type=int, default=6)
+    ap.add_argument("--accuracy", action="store_true",
+                    help="also the live AO's error at the last frame against that frame's "
+                         "rays, beside a static bake's of the same rung there")
     a = ap.parse_args(argv)
     import importlib.util
     if importlib.util.find_spec("canopy_ao") is None:
@@ -162,7 +193,7 @@ def main(argv):
     for tree in a.trees:
         for n in a.vertices:
             for m in a.methods:
-                run(n, m, a.frames, tree)
+                run(n, m, a.frames, tree, a.accuracy)
 
 
 if __name__ == "__main__":
