@@ -86,6 +86,64 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
         _assert_equal({n: _ao(n) for n in NAMES}, now)
 
 
+def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated):
+    """The swaying leaves are written into the mesh this frame evaluated (no second
+    evaluation), the still ground into its original, tagged; both must be what is drawn, and
+    the original keeps the frame's AO (a save, a stop)."""
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    first = {n: _ao(n) for n in NAMES}
+    for frame in (7, 4):
+        animated.frame_set(frame)
+        for n in NAMES:
+            np.testing.assert_array_equal(_evaluated_ao(animated.objects[n]), _ao(n),
+                                          err_msg=n)
+        assert np.abs(_ao("Leaves") - first["Leaves"]).max() > 0.02
+        assert np.abs(_ao("Ground") - first["Ground"]).max() > 0.005
+    live.stop(animated)
+    animated.frame_set(7)  # stopped: the attribute keeps frame 4's AO
+    np.testing.assert_array_equal(_evaluated_ao(animated.objects["Leaves"]), _ao("Leaves"))
+
+
+def test_a_target_whose_modifier_drops_the_attribute_keeps_its_original_written(animated):
+    """A geometry-nodes modifier removing the AO attribute from the evaluated leaves: nothing
+    there to write, so live AO writes (and tags) the original, and keeps running."""
+    leaves = animated.objects["Leaves"]
+    ng = bpy.data.node_groups.new("Drop AO", 'GeometryNodeTree')
+    ng.inputs.new('NodeSocketGeometry', "Geometry")
+    ng.outputs.new('NodeSocketGeometry', "Geometry")
+    gin, gout = ng.nodes.new('NodeGroupInput'), ng.nodes.new('NodeGroupOutput')
+    drop = ng.nodes.new('GeometryNodeRemoveAttribute')
+    drop.inputs["Name"].default_value = "CanopyAO"
+    ng.links.new(gin.outputs[0], drop.inputs[0])
+    ng.links.new(drop.outputs[0], gout.inputs[0])
+    leaves.modifiers.new("Drop", 'NODES').node_group = ng
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    first = _ao("Leaves")
+    animated.frame_set(7)
+    assert animated.canopy_ao.live and live.session_of(animated).frames == 1
+    assert np.abs(_ao("Leaves") - first).max() > 0.02
+
+
+def test_the_ray_free_rung_runs_live_as_close_to_rays_as_its_static_bake(animated):
+    """The regression rung live (its fit from frame 1's calibration rays, its features from
+    each frame): on the swayed crown its error against that frame's rays stays within 0.01 of
+    a static regression bake of that frame (calibrated on that frame's own rays)."""
+    _j, rep = run_bake(bpy.context, list(NAMES), opts(method="regression", live=True))
+    assert rep["method"] == "regression" and live.session_of(animated) is not None
+    first = {n: _ao(n) for n in NAMES}
+    animated.frame_set(7)
+    assert live.session_of(animated).frames == 1
+    now = {n: _ao(n) for n in NAMES}
+    assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
+    rays = _full("raytrace", rep["tau"], attribute="Rays")
+    static = _full("regression", rep["tau"], attribute="Static")
+
+    def mae(got):
+        return np.mean(np.concatenate([np.abs(got[n] - rays[n]) for n in NAMES]))
+    assert mae(now) <= mae(static) + 0.01, (mae(now), mae(static))  # 0.042, 0.040 here
+    assert mae(now) < mae(first)  # closer than frame 1's AO left in place (0.045)
+
+
 def test_live_keeps_the_first_bakes_calibrated_tau(animated):
     _j, rep = run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", tau=None, live=True))
     assert rep["calibration"]  # τ was calibrated at frame 1 ...
@@ -191,6 +249,24 @@ def test_a_frame_range_bake_matches_per_frame_full_bakes_and_is_read_back(animat
     assert not any(a.name.startswith("CanopyAO_") for a in leaves.data.attributes)
     assert leaves.modifiers.get(frames.MODIFIER) is None
     assert not [g for g in bpy.data.node_groups if g.get(frames.GROUP_TAG)]
+
+
+def test_a_frame_range_bake_of_the_ray_free_rung_caches_what_live_shows(animated):
+    """Both fit the ray-free rung on the first frame's rays and move its features after."""
+    rep = frames.FrameBake(bpy.context, list(NAMES), opts(method="regression"), 1, 5).run()
+    assert rep["frames"] == [1, 5]
+    cached = {}
+    for n in NAMES:
+        attr = animated.objects[n].data.attributes["CanopyAO_5"]
+        cached[n] = np.empty(len(attr.data), np.float32)
+        attr.data.foreach_get("value", cached[n])
+    assert bpy.ops.canopy_ao.clear_frames() == {'FINISHED'}
+    animated.frame_set(1)
+    run_bake(bpy.context, list(NAMES), opts(method="regression", live=True))
+    at1 = _ao("Leaves")
+    animated.frame_set(5)
+    assert np.abs(_ao("Leaves") - at1).max() > 0.02
+    _assert_equal({n: _ao(n) for n in NAMES}, cached)
 
 
 def test_a_cancelled_frame_range_bake_leaves_nothing_behind(animated):

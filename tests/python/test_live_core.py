@@ -117,3 +117,55 @@ def test_a_changed_vertex_count_is_refused():
     pos["Leaves"], nor["Leaves"] = pos["Leaves"][:-4], nor["Leaves"][:-4]
     with pytest.raises(CanopyAOError, match="Leaves: .*topology changed"):
         live.frame_items(live.template_items(its), pos, nor)
+
+
+def _regression_frame(first, sway):
+    frame = scene_items(sway)
+    return frame, live.refit(first, live.frame_items(
+        live.template_items(frame, "regression"), {i.name: i.positions for i in frame},
+        {i.name: i.normals for i in frame}))
+
+
+def test_the_ray_free_rung_runs_live_its_fit_kept_its_features_moved():
+    """A regression frame: the first bake's fitted models, the frame's grid and leaf tables.
+    At the first bake's own positions it is that bake (but for features held to the sample's
+    range: test_a_frame_holds_the_features_to_the_calibration_sample); swayed, it follows the
+    crown and agrees with a full regression bake of that frame (its own calibration rays) as
+    closely as two calibrations of one scene agree."""
+    settings = core.BakeSettings(method="regression", tau=1.7)
+    first = core.prepare(scene_items(0.0), settings)
+    still, same = _regression_frame(first, 0.0)
+    assert same.regression is not first.regression
+    assert same.regression._models is first.regression._models  # the fit is the first bake's
+    for it in still:
+        got = core.evaluate_receivers(same, it, it.positions, it.normals, vertices=slice(None))
+        want = core.evaluate_receivers(first, it, it.positions, it.normals, vertices=slice(None))
+        # equal but where a vertex's features leave the sample's range (held to it in a frame)
+        assert np.mean(got == want) >= 0.95 and np.abs(got - want).mean() < 0.005, it.name
+    frame, plan = _regression_frame(first, 0.15)
+    full = core.prepare(scene_items(0.15), settings)
+    reseeded = core.prepare(scene_items(0.15), core.BakeSettings(method="regression", tau=1.7,
+                                                                 seed=5))
+    got, want, was = leaves_ao(plan, frame), leaves_ao(full, frame), leaves_ao(first, frame)
+    assert np.abs(got - was).max() > 0.02  # the features followed the leaves
+    seeds = np.abs(leaves_ao(reseeded, frame) - want).mean()
+    assert np.abs(got - want).mean() <= max(2 * seeds, 0.01)
+
+
+def test_a_frame_holds_the_features_to_the_calibration_sample():
+    """A feature all but constant in the first frame's sample (a ground point's shape feature
+    under an unbent crown) that a later frame moves far outside it: held to the sample's range,
+    the fit predicts as at the range's edge instead of extrapolating thousands of standard
+    deviations (the swayed benchmark crown's ground went from AO 0.98 to 0.32)."""
+    from canopy_ao.core.regression_fit import NATIVE, Model
+    rng = np.random.default_rng(3)
+    F = rng.normal(size=(400, NATIVE)).astype(np.float32)
+    F[:, 8] = 1.0 + 1e-5 * rng.normal(size=400)
+    y = np.clip(0.5 + 0.1 * F[:, 0] + 0.05 * F[:, 8], 0, 1)
+    m = Model(F, y)
+    far = F[:50].copy()
+    far[:, 8] = 50.0
+    near = m.predict(F[:50])
+    assert np.abs(m.predict(far, bounded=True) - near).max() < 0.02
+    assert np.abs(m.predict(far) - near).max() > 0.2  # what the bound prevents
+    np.testing.assert_array_equal(m.predict(F[:50], bounded=True), near)  # inside: unchanged

@@ -1,13 +1,14 @@
 """Live AO: the bake re-evaluated on every frame change (viewport playback, F12 and headless
-animation renders) for the analytic rungs (docs/DESIGN.md, 'Live and per-frame AO').
+animation renders) for the analytic and ray-free rungs (docs/DESIGN.md, 'Live and per-frame
+AO').
 
 A live bake is a normal bake (BakeJob) with the option ``live``: its commit starts a Session
 (live_session.py) that keeps the plan's rung and τ and each item's role and tree; the persistent
 frame_change_post handler then reads the frame's evaluated meshes from the depsgraph it is
 given (the render's own during a render), refits the proxies (core/live.py), evaluates the
-targets and writes their attribute under mesh_io's ownership rules. Blender's frame update
-re-evaluates once more when a frame_change_post handler tagged data, so the frame renders
-with its own AO.
+targets and writes their attribute under mesh_io's ownership rules, where the frame draws it
+(live_render.py: into the meshes this frame evaluated, untagged, so Blender evaluates the frame
+once; a still target's original, tagged).
 
 What survives what:
 - undo, redo and loading a file drop the sessions (they hold object names and arrays, never

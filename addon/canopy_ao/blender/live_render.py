@@ -1,5 +1,6 @@
-"""Live AO inside a render (F12, Ctrl+F12, ``blender -b … -a``): how a frame's AO reaches what
-the render draws (docs/DESIGN.md, 'Live and per-frame AO').
+"""Live AO inside a render (F12, Ctrl+F12, ``blender -b … -a``) and in the viewport
+(write_viewport): how a frame's AO reaches what is drawn (docs/DESIGN.md, 'Live and per-frame
+AO').
 
 A render's depsgraph animates its own copies of the data and never the originals. A tag on an
 original makes it copy that original again (and, for a mesh, its shape keys and its object):
@@ -15,6 +16,9 @@ viewport last evaluated. So:
 """
 
 import sys
+
+import bpy
+import numpy as np
 
 from . import mesh_io
 
@@ -65,3 +69,42 @@ def write_frame(scene, depsgraph, objs, attribute, aos):
               "render's copy, and nothing keyed changes their geometry, so "
               f"{'Cycles with Persistent Data' if engine == 'CYCLES' else engine} keeps its "
               "first frame's AO", file=sys.stderr, flush=True)
+
+
+def geometry_updated(depsgraph):
+    """Names of the objects whose geometry this depsgraph evaluated at its last update (in a
+    frame_change_post handler: this frame's)."""
+    return {u.id.original.name for u in depsgraph.updates
+            if u.is_updated_geometry and isinstance(u.id, bpy.types.Object)}
+
+
+def _drawn_attribute(obj, depsgraph, attribute):
+    """The attribute of obj's evaluated mesh, None where there is none to write (a modifier
+    drops it: the original is then written and tagged, as for a still target)."""
+    try:
+        return mesh_io.evaluated_ao_attribute(obj, depsgraph, attribute)
+    except mesh_io.MeshIOError:
+        return None
+
+
+def write_viewport(depsgraph, objs, attribute, aos, last):
+    """Write each target's AO {name: float32 (V,)} where the viewport draws it, evaluating
+    nothing again where that can be avoided (docs/DESIGN.md, 'Live and per-frame AO'). The
+    caller has checked every target's ownership. last: {name: the AO last written}, updated.
+
+    A target whose geometry this frame evaluated (a deform, a shape key, an armature) has a
+    new evaluated mesh that nothing has drawn yet: its attribute is written there, untagged,
+    and in the original untagged too (what a save keeps and a stop leaves). Tagging it instead
+    makes Blender evaluate it a second time in this frame (its modifiers again: as long as
+    Blender's own frame). A target not evaluated this frame (a still ground) keeps its drawn
+    copy, so its original is written and tagged, and only when its AO changed."""
+    fresh = geometry_updated(depsgraph)
+    for obj in objs:
+        ao = aos[obj.name]
+        attr = _drawn_attribute(obj, depsgraph, attribute) if obj.name in fresh else None
+        if attr is not None:
+            mesh_io.write_evaluated_ao(attr, ao)
+            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True, tag=False)
+        elif obj.name not in last or not np.array_equal(last[obj.name], ao):
+            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True)
+        last[obj.name] = ao

@@ -51,11 +51,12 @@ class Session:
         core_live.check_method(job.plan.method, core.rung(job.settings.method).chooses)
         self.scene_name = job.scene.name
         self.plan = job.plan
-        self.template = core_live.template_items(job.items)
+        self.template = core_live.template_items(job.items, job.plan.method)
         self.targets = [t.item.name for t in job.targets]
         self.attribute = job.opts["attribute"]
         self.frames = 0
         self.timings = {}  # the last frame's seconds per stage
+        self.written = {}  # {target name: the AO last written in the viewport}
         self.shell_trees = sorted(job.plan.shell_labels)
         self.record = json.dumps({
             "objects": self.targets, "tau_by_tree": dict(job.plan.tau_by_tree),
@@ -76,8 +77,7 @@ class Session:
         if is_render(depsgraph):
             live_render.write_frame(scene, depsgraph, objs, self.attribute, aos)
         else:
-            for obj in objs:
-                mesh_io.write_ao_attribute(obj, self.attribute, aos[obj.name], checked=True)
+            live_render.write_viewport(depsgraph, objs, self.attribute, aos, self.written)
         tm["write"] = time.perf_counter() - t0
         tm["total"] += tm["write"]
         self.timings = tm
@@ -95,7 +95,8 @@ class Session:
             if obj is None:
                 raise CanopyAOError(f"{it.name} is no longer in scene '{scene.name}'")
             pos[it.name], nor[it.name], _t = mesh_io.evaluated_arrays(
-                obj, depsgraph, same_count=it.name in self.targets, triangles=False)
+                obj, depsgraph, same_count=it.name in self.targets, triangles=False,
+                shared=True)
         items = core_live.frame_items(self.template, pos, nor)
         t1 = time.perf_counter()
         tm["read"] = t1 - t0

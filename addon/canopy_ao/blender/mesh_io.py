@@ -48,7 +48,7 @@ def _lap(timings, key, t0):
 
 
 def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=None,
-                     polygons=None):
+                     polygons=None, shared=False):
     """World-space arrays of an object's evaluated mesh (modifiers applied).
 
     Returns (positions float32 (V, 3), normals float32 (V, 3) unit, triangles int32 (F, 3)).
@@ -61,6 +61,10 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     "normals", "triangles", "transform").
     polygons: a list to which each triangle's face index, int32 (F,), is appended (with
     triangles; the ray tracer's bake points count one corner per face).
+    shared: read the evaluated object's own mesh, not a to_mesh() copy (live AO's read each
+    frame): no copy, and its vertex normals are computed once for this evaluation, cached
+    where the viewport's draw finds them (a copy computes them again: 10 ms per 100k
+    vertices). Not in edit mode, whose evaluated mesh is the cage's.
     """
     t = time.perf_counter()
     # The evaluated object's matrix: a render's depsgraph animates its own copies and leaves
@@ -70,6 +74,8 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     ob_eval = None
     if evaluated_is_original(obj):
         mesh = obj.data
+    elif shared and not obj.data.is_editmode and isinstance(evaluated.data, bpy.types.Mesh):
+        mesh = evaluated.data
     else:
         ob_eval = evaluated
         mesh = ob_eval.to_mesh()
@@ -180,12 +186,14 @@ def _point_attribute(obj, name, values, data_type, overwrite, checked=False):
     return attr, values
 
 
-def write_ao_attribute(obj, name, ao, overwrite=False, checked=False):
+def write_ao_attribute(obj, name, ao, overwrite=False, checked=False, tag=True):
     """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
 
     Replaces an attribute exactly as Canopy AO wrote it (or any, with overwrite); refuses
     otherwise. checked: the caller ran check_attribute on it just before (Live AO checks every
     target before it writes any), so its content is not read and fingerprinted twice.
+    tag=False: no depsgraph tag, so nothing is evaluated again (live AO wrote this frame's
+    evaluated copy too, live_render.write_viewport; the original keeps it for a save).
     """
     attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite, checked)
     mesh = obj.data
@@ -193,7 +201,8 @@ def write_ao_attribute(obj, name, ao, overwrite=False, checked=False):
     attr.data.foreach_set("color", rgba)
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
-    mesh.update_tag()
+    if tag:
+        mesh.update_tag()
     mark_owned(obj, name, rgba)
     return attr
 

@@ -19,9 +19,11 @@ class LeafTable:
 
     COUNT = 4
 
-    def __init__(self, positions, triangles):
+    def __init__(self, positions, triangles, labels=None):
+        """labels: an earlier table's (the same mesh, deformed: live AO), so the pieces are
+        not searched again; only their centroids and sizes move."""
         P = np.asarray(positions, np.float64)
-        lab = connected_components(len(P), triangles)
+        lab = connected_components(len(P), triangles) if labels is None else labels
         cnt = np.maximum(np.bincount(lab), 1).astype(np.float64)
         self.centroid = np.stack([np.bincount(lab, P[:, a]) for a in range(3)], 1) / cnt[:, None]
         d = np.linalg.norm(P - self.centroid[lab], axis=1)

@@ -5,9 +5,10 @@ Hegeman et al. evaluate their canopy shells per frame for trees moving in the wi
 fit and an analytic evaluation cost little. Here a frame keeps from the first bake everything
 that does not move: the rung, τ (scene and per tree, from its calibration), every item's role
 and tree (and the tree labels of a mesh holding several), the triangles (the topology of a
-deformed mesh does not change; only grass blades need them) and the leaves' partition into
-k-means shells. It redoes what moves: the fits (sphere, ellipsoid, each shell to its own
-leaves, trunks, grass heights) and the evaluation. For the one-proxy rungs a frame's AO is
+deformed mesh does not change; grass blades and the ray-free rung's grid need them), the
+leaves' partition into k-means shells and the ray-free rung's fitted models. It redoes what
+moves: the fits (sphere, ellipsoid, each shell to its own leaves, trunks, grass heights), the
+ray-free rung's features and the evaluation. For the one-proxy rungs a frame's AO is
 therefore the AO of a full bake of that frame with the same rung and τ; for shells and the
 medium it is that bake with the first frame's partition (clustering every frame afresh flips
 leaves between shells: up to 0.6 AO from one frame to the next on the test tree).
@@ -26,8 +27,10 @@ from .scene import Plan, SceneItem, split_trees
 
 def live_methods() -> tuple:
     """The rungs that refit and evaluate fast enough per frame (Rung.live): the analytic proxy
-    models (the Reeves-Blau baseline is analytic too). The density grid and the rays rebuild a
-    grid or a BVH over every triangle each frame, which is a full bake, not a live update."""
+    models (the Reeves-Blau baseline is analytic too) and the ray-free rung, whose fit to its
+    calibration rays is the first bake's and whose features are recomputed per frame (no ray).
+    The density grid and the rays rebuild a grid or a BVH over every triangle and trace each
+    frame, which is a full bake, not a live update."""
     return tuple(r.name for r in rungs.ladder() if r.live)
 
 
@@ -37,7 +40,8 @@ def check_method(method: str, by_auto: bool = False) -> None:
     if not rungs.get(method).live:
         which = f"auto chose the {method} rung, which" if by_auto else f"the {method} rung"
         raise CanopyAOError(
-            f"live and per-frame AO run the analytic rungs only ({', '.join(live_methods())}); "
+            "live and per-frame AO run the analytic rungs only, or the ray-free one "
+            f"({', '.join(live_methods())}); "
             f"{which} rebuilds its grid or ray tracer from every triangle each frame: choose "
             "one of those methods (or bake single frames)")
 
@@ -61,20 +65,26 @@ def frame_items(template, positions, normals) -> list:
 
 @refusals_are_user_errors
 def refit(base: Plan, items) -> Plan:
-    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted."""
+    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted;
+    the ray-free rung's features moved to the frame, its fit kept (RegressionRung.at_frame)."""
     check_method(base.method)
     plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried)
-    proxies.fit_scene(plan, split_trees(items))
+    parts = split_trees(items)
+    proxies.fit_scene(plan, parts)
+    if base.regression is not None and rungs.get(base.method).needs_regression:
+        plan.regression = base.regression.at_frame(parts, items)
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     return plan
 
 
-def template_items(items) -> list:
-    """The first bake's items as a frame's template: positions kept only for their count."""
+def template_items(items, method=None) -> list:
+    """The first bake's items as a frame's template: positions kept only for their count,
+    triangles where ``method``'s frames need them (Rung.frame_triangle_roles)."""
+    keep = rungs.get(method).frame_triangle_roles if method else ("GRASS",)
     return [SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
-                      it.triangles if it.role == "GRASS" else np.zeros((0, 3), np.int32),
+                      it.triangles if it.role in keep else np.zeros((0, 3), np.int32),
                       tree_source="set", tree_labels=it.tree_labels, tree_names=it.tree_names,
                       tree_why=it.tree_why) for it in items]

@@ -18,10 +18,10 @@ chosen by 5-fold cross-validation on the sample (ties to the larger λ); the pie
 (LeafTable) only where they cut that CV error by more than PIECES_GAIN (_fit). Buried sample points
 (every ray stops within ``buried.BURIED_SCALE`` of the object's size: a leaf base inside its branch)
 are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
-predicts them like any vertex.
-"""
+predicts them like any vertex."""
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -31,13 +31,12 @@ from . import card_area, native
 from .leaf_features import LeafTable
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
-from .regression_fit import NATIVE, Model
+from .regression_fit import NATIVE, PIECES_GAIN, fit_group as _fit  # noqa: F401 (tests)
 from .scene import RECEIVER_ROLES, ray_length
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
 # Meshes whose connected pieces (a leaf card, a branch tube) give a receiver piece features.
 LEAF_TABLE_ROLES = ("CANOPY", "TRUNK")
-PIECES_GAIN = 0.02       # the piece columns must cut a fit's CV MAE by more than this (_fit)
 # Buried: the one test (buried.py) with twice auto's rays: with 16 rays more of the darkest
 # unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046.
 BURIED_RAYS = 2 * _buried.BURIED_RAYS
@@ -120,6 +119,8 @@ class RegressionRung:
     meshes: the unsplit items when ``items`` are split per tree (scene.parts), for the leaf
     tables (LeafTable) by item name; None = the items themselves."""
 
+    _bounded = False  # a live frame's copy holds its features to the sample's range
+
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
                  directions=24, seed=0, tracer=None, ids=None, meshes=None):
         _core = native.require()
@@ -131,28 +132,9 @@ class RegressionRung:
         receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
         n_recv = sum(len(it.positions) for it in receivers)
         points, samples = calibration_size(n_recv, points, samples)
-        grid = _core.DensityGrid(*merged([card_area.counted_item(it) for it in occ]),
-                                 resolution=resolution)  # cards by their opaque area
-        self._features = _core.OcclusionFeatures(grid, directions=directions)
+        self._features, self._leaves, self._scene_frame, self._frames = _geometry(
+            items, occ, meshes, resolution, directions)
         t_grid = time.perf_counter()
-
-        # Piece tables of the CANOPY and TRUNK meshes, by name over the whole mesh (meshes: the
-        # unsplit items of a scene whose items are split per tree; a name seen twice gets none).
-        whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
-        self._leaves = {}
-        for it in whole:
-            if it.role in LEAF_TABLE_ROLES:
-                self._leaves[it.name] = None if it.name in self._leaves else LeafTable(
-                    it.positions, it.triangles)
-        t_leaves = time.perf_counter()
-
-        # Frames: one per tree (its leaves and branches), the occluders' for everything else.
-        self._scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
-        self._frames = {}
-        for tree in sorted({it.tree for it in items if it.tree}):
-            pts = [it.positions for it in items
-                   if it.tree == tree and it.role in ("CANOPY", "TRUNK")]
-            self._frames[tree] = tree_frame(np.concatenate(pts)) if pts else self._scene_frame
 
         # Calibration sample, stratified by (tree, role); traced with each point's own vertex.
         own_tracer = tracer is None
@@ -233,9 +215,19 @@ class RegressionRung:
                            receivers=int(n_recv),
                            shared_tracer=not own_tracer,
                            leaves={k: int(len(v.size)) for k, v in self._leaves.items() if v},
-                           timings=dict(grid=t_grid - t0, leaves=t_leaves - t_grid,
-                                        tracer=t_tracer - t_leaves,
+                           timings=dict(grid=t_grid - t0, tracer=t_tracer - t_grid,
                                         calibration=t_cal - t_tracer, fit=t_fit - t_cal))
+
+    def at_frame(self, items, meshes=None):
+        """A copy on a frame of the same meshes deformed (live AO): _geometry redone, fit kept."""
+        out = copy.copy(self)
+        items = [it for it in items if it.role != "IGNORE"]
+        occ = [it for it in items if it.role in OCCLUDER_ROLES]  # the first frame's: not none
+        out._features, out._leaves, out._scene_frame, out._frames = _geometry(
+            items, occ, meshes, self.report["resolution"], self.report["directions"],
+            self._leaves)
+        out._bounded = True  # features held to the first frame's sample (Model.predict)
+        return out
 
     def _compute(self, tree, p, n, name=None, own=None, pieces=True):
         """Features of points p, n: the NATIVE columns, then (pieces) the LeafTable's."""
@@ -259,7 +251,8 @@ class RegressionRung:
         model = self._models.get((tree, role))
         if model is None:  # an item the sample did not see: its role's fit, else any
             model = next((m for (t, r), m in self._models.items() if r == role), self._fallback)
-        return model.predict(self._compute(tree, p, n, name, own, pieces=model.pieces))
+        return model.predict(self._compute(tree, p, n, name, own, pieces=model.pieces),
+                             bounded=self._bounded)
 
 
 class OpenSky:
@@ -273,6 +266,35 @@ class OpenSky:
 
     def ao(self, role, tree, p, n, name=None, own=None):
         return np.ones(len(p), np.float32)
+
+    def at_frame(self, items, meshes=None):
+        return self
+
+
+def _geometry(items, occ, meshes, resolution, directions, before=None):
+    """(OcclusionFeatures over the occluders' density grid, {mesh: LeafTable or None} of the
+    CANOPY and TRUNK meshes (meshes: unsplit items; a name seen twice gets none; before: an
+    earlier frame's, pieces kept), the scene's tree frame, {tree: its frame})."""
+    _core = native.require()
+    grid = _core.DensityGrid(*merged([card_area.counted_item(it) for it in occ]),
+                             resolution=resolution)  # cards by their opaque area
+    features = _core.OcclusionFeatures(grid, directions=directions)
+    whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
+    leaves = {}
+    for it in whole:
+        if it.role in LEAF_TABLE_ROLES:
+            old = (before or {}).get(it.name)
+            keep = old is not None and len(old.labels) == len(it.positions)
+            leaves[it.name] = None if it.name in leaves or (before and old is None) else \
+                LeafTable(it.positions, it.triangles, labels=old.labels if keep else None)
+    scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
+    frames = {}
+    for tree in sorted({it.tree for it in items if it.tree}):
+        own = [it for it in items if it.tree == tree and it.role in ("CANOPY", "TRUNK")]
+        same = len(own) == len(occ) and all(a is b for a, b in zip(own, occ))  # one tree
+        frames[tree] = tree_frame(np.concatenate([it.positions for it in own])) \
+            if own and not same else scene_frame
+    return features, leaves, scene_frame, frames
 
 
 def occludes(items) -> bool:
@@ -291,23 +313,6 @@ def bake(items, distance=0.0, **options):
            for it in items}
     rung.report["timings"]["total"] = time.perf_counter() - t0
     return out, rung.report
-
-
-def _fit(F, y):
-    """The group's Model, with the piece columns (LeafTable) only if they cut its
-    cross-validated MAE on the sample by more than PIECES_GAIN, else the simpler model without
-    them (a tie is the folds' noise); ``.pieces`` says which. The columns say where on its
-    piece — a leaf card, a branch tube — a point is: they cut the CV MAE by 6 % on
-    japanese_maple's leaves and 12 % on douglas_fir's twigs, under 2 % on broadleaf limbs and
-    on a grove's small per-tree samples (docs/DESIGN.md, 'The ray-free rung'), so each sample
-    decides."""
-    plain = Model(F[:, :NATIVE], y)
-    plain.pieces = False
-    if not np.any(F[:, NATIVE:]):  # no piece columns (ground, grass): nothing to choose
-        return plain
-    full = Model(F, y)
-    full.pieces = True
-    return full if full.cv_mae < (1.0 - PIECES_GAIN) * plain.cv_mae else plain
 
 
 def _trace(tracer, P, N, samples, distance, seed, ids):
