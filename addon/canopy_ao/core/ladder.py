@@ -126,9 +126,16 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         sel = keep if where is None else where
         rung = rungs.get(method)
         if rung.exact:
-            # Its own noise, not the reference's: another seed than the reference traced with.
-            got = [trace(plan, p, n, samples or rays, seed=s.seed + 7919, own=own)
-                   for _it, p, n, own, _ in groups]
+            # As the bake casts them (each vertex's rays spread evenly: ray_budget.py), with
+            # its own noise, not the reference's: another seed than the reference traced with.
+            saved = plan.settings
+            plan.settings = dataclasses.replace(saved, samples=int(samples or rays),
+                                                seed=s.seed + 7919)
+            try:
+                got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau,
+                                       local) for it, p, n, _own, local in groups]
+            finally:
+                plan.settings = saved
         elif rung.scene_plan:  # the scene plan: one call per role, a tree per point
             got = [np.empty(len(ref), np.float32)]
             for (role, key), (trees, p, n, where) in batches.items():
