@@ -186,19 +186,19 @@ def predict(plan, method, receivers: int, names=None, samples=None) -> dict:
             "seconds": count * c / n}
 
 
-# Auto may bake the exact rung at fewer rays per corner than settings.samples when those are
-# predicted over the time budget: the samples halved until they fit, never below AUTO_MIN_RAYS
-# (16 rays are 2-3x 64 rays' error on real trees, about the ray-free rung's; fewer rarely beat
-# it). The halved rung is scored on the sample like any other, so it is taken only where it
-# cuts the error (docs/DESIGN.md, 'Auto mode').
+# The most rays per corner auto traces the calibration sample at to measure the exact rung
+# (frontier.py predicts every count from it and the fewest): the samples halved until they fit
+# the time budget, never below AUTO_MIN_RAYS (a count it is measured at is one it may bake
+# and the model's anchor; the counts below it are weighed all the same) (docs/DESIGN.md,
+# 'Auto mode').
 AUTO_MIN_RAYS = 16
 
 
 def affordable_samples(plan, receivers: int) -> int:
-    """Rays per corner auto weighs the exact rung at: settings.samples when predicted within
-    the time budget (or there is none), else the largest halving of it, at least
-    AUTO_MIN_RAYS, predicted within it; settings.samples if none is (then the walk skips the
-    rung). Counted work × fixed constants: no clock."""
+    """Rays per corner auto measures the exact rung at on the calibration sample:
+    settings.samples when predicted within the time budget (or there is none), else the
+    largest halving of it, at least AUTO_MIN_RAYS, predicted within it; settings.samples if
+    none is. Counted work × fixed constants: no clock."""
     s = plan.settings
     k = int(s.samples)
     if s.time_budget <= 0:

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import cost, native
+from . import cost, frontier, native
 from .buried import BURIED_RAYS, BURIED_SCALE, buried
 from .lighting import evaluate_points, own_ids, trace, traces_instances
 from .rungs import auto, base as rungs, registry  # noqa: F401  (registry: fills the ladder)
@@ -116,16 +116,26 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
 
     n_receivers = cost.receiver_count(plan, items)
     exact = rungs.exact().name
+    # The exact rung is measured at the most rays per corner auto may bake it at within the
+    # budget and at the fewest it weighs; every count between is predicted (frontier.py).
     rays = cost.affordable_samples(plan, n_receivers) if exact in candidates else s.samples
+    counts = frontier.ray_counts(s.samples) if exact in candidates else []
 
-    def err(method, tau, scale=None, where=None):
+    def err(method, tau, scale=None, where=None, samples=None):
         plan.role_scale = scale or {}
         sel = keep if where is None else where
         rung = rungs.get(method)
         if rung.exact:
-            # Its own noise, not the reference's: another seed than the reference traced with.
-            got = [trace(plan, p, n, rays, seed=s.seed + 7919, own=own)
-                   for _it, p, n, own, _ in groups]
+            # As the bake casts them (each vertex's rays spread evenly: ray_budget.py), with
+            # its own noise, not the reference's: another seed than the reference traced with.
+            saved = plan.settings
+            plan.settings = dataclasses.replace(saved, samples=int(samples or rays),
+                                                seed=s.seed + 7919)
+            try:
+                got = [evaluate_points(plan, it.role, it.tree, it.name, p, n, method, tau,
+                                       local) for it, p, n, _own, local in groups]
+            finally:
+                plan.settings = saved
         elif rung.scene_plan:  # the scene plan: one call per role, a tree per point
             got = [np.empty(len(ref), np.float32)]
             for (role, key), (trees, p, n, where) in batches.items():
@@ -157,28 +167,45 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
         # Counted work × fixed constants (cost.py): the same prediction whatever the load.
         predicted[m] = cost.predict(plan, m, n_receivers,
                                     samples=rays if rungs.get(m).exact else None)
-    # Walk up the ladder: a richer rung only if it cuts the error by > 10 %, the current one
-    # misses the target, and the richer one fits the time budget.
-    chosen, skipped = candidates[0], []
-    for m in candidates[1:]:
-        if math.sqrt(results[chosen][1]) <= s.target_rmse:
-            break
-        if results[m][1] < 0.81 * results[chosen][1]:  # RMSE down by more than 10 %
-            if s.time_budget > 0 and predicted[m]["seconds"] > s.time_budget:
-                skipped.append(m)
-                continue
-            chosen = m
+    ray_model, options = None, []
+    for i, m in enumerate(candidates):
+        if not rungs.get(m).exact:
+            options.append({"method": m, "samples": None, "mse": results[m][1],
+                            "seconds": predicted[m]["seconds"], "rank": (i, 0),
+                            "measured": True})
+            continue
+        measured = {rays: results[m][1]}
+        if counts[0] < rays:
+            measured[counts[0]] = err(m, results[m][0], samples=counts[0])
+        ray_model = frontier.fit_ray_error(measured, s.calibration_samples)
+        for k in counts:
+            options.append({"method": m, "samples": k,
+                            "mse": measured.get(k, ray_model.mse(k)),
+                            "seconds": cost.predict(plan, m, n_receivers, samples=k)["seconds"],
+                            "rank": (i, k), "measured": k in measured})
+    # Only the Pareto front of predicted time and error (frontier.py), cheapest first: a
+    # costlier candidate only while the current one misses the target, if it cuts the RMSE by
+    # more than 10 % and fits the time budget.
+    on = frontier.front(options)
+    best, skipped = frontier.walk(on, s.target_rmse, s.time_budget)
+    chosen = best["method"]
+    if best["samples"] is not None:  # the exact rung at the count chosen
+        results[chosen] = (results[chosen][0], best["mse"])
+        predicted[chosen] = cost.predict(plan, chosen, n_receivers, samples=best["samples"])
+        rays = best["samples"]
     plan.role_scale = dict(scales.get(chosen) or {})
     rmse = math.sqrt(results[chosen][1])
-    why = (f"{chosen}: sample RMSE {rmse:.3f}; no richer rung cut it by more than 10 %"
-           if rmse > s.target_rmse else f"{chosen}: sample RMSE {rmse:.3f} meets the target "
-           f"{s.target_rmse}")
+    why = (f"{_label(best)}: sample RMSE {rmse:.3f}; no costlier candidate on the front of "
+           "time and error cut it by more than 10 %"
+           if rmse > s.target_rmse else f"{_label(best)}: sample RMSE {rmse:.3f} meets the "
+           f"target {s.target_rmse}")
     if skipped:
-        why += f" within the {s.time_budget:g} s budget (over it: {', '.join(skipped)})"
+        why += (f" within the {s.time_budget:g} s budget (over it: "
+                f"{', '.join(_label(c) for c in skipped)})")
     if rungs.get(chosen).exact and rays != s.samples:
         full = cost.predict(plan, chosen, n_receivers)["seconds"]
         why += (f"; at {rays} rays per corner, not the {s.samples} asked ({full:.2g} s "
-                f"predicted, over the {s.time_budget:g} s budget)")
+                f"predicted at those)")
     info = {
         "points": int(keep.sum()),
         "buried_points_left_out": int(len(ref) - keep.sum()),
@@ -197,11 +224,25 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
                        for m, (t, e) in results.items()},
         "chosen": chosen,
         "why": why,
+        # Every candidate weighed (the exact rung at each count), its predicted time and error
+        # (measured on the sample, or predicted by the ray-error model) and whether it is on
+        # the front; the exact rung's model: v, α, the reference's rays.
+        "frontier": [{"method": c["method"], "samples": c["samples"],
+                      "rmse": math.sqrt(c["mse"]), "predicted_seconds": c["seconds"],
+                      "measured": c["measured"], "on_front": any(c is o for o in on)} for c in options],
+        "ray_error": None if ray_model is None else {
+            "v": ray_model.v, "alpha": ray_model.alpha, "reference_samples": ray_model.reference,
+            "formula": "MSE(S) = v (S^-2α + reference^-2α)"},
         "cost_model": {"seconds_per_unit": dict(cost.SECONDS_PER_UNIT),
                        "threads": cost.threads(), "receivers": n_receivers,
                        "formula": cost.FORMULA},
     }
     return chosen, results[chosen][0], info
+
+
+def _label(c) -> str:
+    """A frontier candidate's name in the report: the rung, with its rays per corner."""
+    return c["method"] if c["samples"] is None else f"{c['method']} at {c['samples']} rays"
 
 
 def _batches(groups):
@@ -233,13 +274,13 @@ def _tree_taus(tau):
 
 
 def _bake_samples(plan: Plan) -> None:
-    """Bake with the rays per corner calibrate() weighed the chosen exact rung at (fewer than
-    asked where the asked ones are over the time budget): plan.settings becomes a copy, the
-    caller's settings stay as given."""
+    """Bake with the rays per corner calibrate() chose the exact rung at (fewer than asked
+    where those are over the time budget, or fewer meet the target or are all the front
+    affords): plan.settings becomes a copy, the caller's settings stay as given."""
     k = (plan.calibration or {}).get("candidates", {}).get(plan.method, {}).get("samples")
     if rungs.get(plan.method).exact and k is not None and int(k) != int(plan.settings.samples):
         plan.notes.append(f"auto: rays at {int(k)} per corner, not the "
-                          f"{plan.settings.samples} asked (those are over the time budget)")
+                          f"{plan.settings.samples} asked (auto's choice on the calibration sample)")
         plan.settings = dataclasses.replace(plan.settings, samples=int(k))
 
 

@@ -168,9 +168,9 @@ OPTIONS = (
            "k times this many, a texel this many), spread evenly over the vertices",
            min=1, max=65536, soft_max=1024),
     Option("time_budget", "float", 2.0, "Time Budget",
-           "Auto: seconds the bake may take; richer models predicted to take longer are not "
-           "chosen, and rays over it are weighed at half the samples, halved again down to 16 "
-           "(0 = no limit)", min=0.0, unit='TIME'),
+           "Auto: seconds the bake may take; models predicted to take longer are not chosen; "
+           "rays are weighed at every halving of the samples down to 4 (0 = no limit)",
+           min=0.0, unit='TIME'),
     Option("target_rmse", "float", 0.06, "Target Error",
            "Auto: stop climbing the ladder once a rung's RMSE on the ray-traced sample is below "
            "this (0.06 is about an MAE of 0.05, an error an artist does not see)",
