@@ -124,3 +124,14 @@ def test_the_frontier_is_deterministic():
     _p2, b = auto(scene, time_budget=0.03)
     assert a["frontier"] == b["frontier"] and a["chosen"] == b["chosen"]
     assert all(math.isfinite(c["rmse"]) for c in a["frontier"])
+
+
+def test_rays_are_baked_at_the_count_the_budget_affords():
+    """Fewer rays only prune the front: with no budget, auto that climbs to the exact rung bakes
+    it at the asked samples, even where fewer would meet the target error (an artist asking for
+    64 rays within budget gets 64, not 16 that are 'good enough')."""
+    scene = cs.round_tree(leaves=800)
+    plan, cal = auto(scene, time_budget=0.0, target_rmse=0.0, samples=64)
+    assert plan.method == "raytrace" and plan.settings.samples == 64, cal["why"]
+    plan, cal = auto(scene, time_budget=0.0, target_rmse=0.045, samples=64)
+    assert plan.settings.samples in (64,) or plan.method != "raytrace", cal["why"]

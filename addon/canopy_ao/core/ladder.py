@@ -186,7 +186,13 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     # Only the Pareto front of predicted time and error (frontier.py), cheapest first: a
     # costlier candidate only while the current one misses the target, if it cuts the RMSE by
     # more than 10 % and fits the time budget.
+    # Fewer rays than the budget affords only prune the front (a ray-free rung 8 rays beat on
+    # both is off it): the exact rung is baked at the most rays on the front the budget fits.
     on = frontier.front(options)
+    fits = [c["samples"] for c in on if c["samples"] is not None
+            and (s.time_budget <= 0 or c["seconds"] <= s.time_budget)]
+    if fits:  # (none fits: the walk skips them all and says so)
+        on = [c for c in on if c["samples"] in (None, max(fits))]
     best, skipped = frontier.walk(on, s.target_rmse, s.time_budget)
     chosen = best["method"]
     if best["samples"] is not None:  # the exact rung at the count chosen
