@@ -188,8 +188,10 @@ def test_raytrace_traces_the_instances(proto):
 def test_a_ground_bake_leaves_the_prototypes_untouched(proto, method):
     """Baking only the ground writes nothing into the prototypes' meshes (nobody asked for
     their AO: they are fitted, and occlude, but are not baked), and the ground gets the same
-    AO, bit for bit, as when the prototypes are baked too (their fit is the same, the rays are
-    seeded per receiver)."""
+    AO, bit for bit, as when the prototypes are baked too: a fixed rung fits them as before;
+    under auto they are fitted without calibrating on themselves (forest_fit.fit_only: ellipsoid
+    shells at the default τ, what their own calibration gives here, where it picks rays), and
+    the ground's rays are seeded per receiver."""
     place_instances(proto)
     kw = dict(method=method, samples=32, tau=None if method == "auto" else 2.0)
     _job, rep = bake_all(["Ground"], **kw)
@@ -201,6 +203,8 @@ def test_a_ground_bake_leaves_the_prototypes_untouched(proto, method):
                for line in _job.lines), _job.lines
     _job, rep = bake_all(**kw)  # everything: the prototypes baked and written as well
     assert set(rep["instances"]["prototypes"]) == {"Trunk", "Leaves"}
+    if method == "auto":  # calibrated on themselves: rays, which light with the ellipsoid
+        assert rep["instances"]["prototypes"]["Leaves"]["method"] == "raytrace"
     for name in ("Trunk", "Leaves"):
         assert ATTR in bpy.data.objects[name].data.attributes, name
     want = mesh_io.read_ao_attribute(bpy.data.objects["Ground"], ATTR)

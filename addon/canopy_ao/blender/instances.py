@@ -30,7 +30,7 @@ import numpy as np
 from . import gather, materials, mesh_io, opacity_io, ownership
 from .visibility import RenderVisibility
 from .. import core
-from ..core import forest, opacity, roles
+from ..core import forest, forest_fit, opacity, roles
 
 # A blade's AO per vertex is its mean over this many of its instances at most (evenly spread
 # over the field): the mean of 2000 is within ~0.005 of all of them, at a bounded cost.
@@ -247,7 +247,11 @@ class Prototypes:
                 protos.append(forest.Prototype(tree, [], 1.0, mats,
                                                mesh=forest.prototype_mesh(items)))
                 continue
-            plan = core.prepare(items, settings)  # its fit: what every instance occludes with
+            # Its fit is what every instance occludes with; calibrated on the prototype only
+            # when its own AO is baked (here, or by the main bake: a target).
+            own = any(it.name in self.writable or it.name in skip for it in items)
+            plan = None if own else forest_fit.fit_only(items, settings)
+            plan = plan or core.prepare(items, settings)
             self.plans[tree] = plan
             protos.append(forest.prototype_from_plan(plan, tree, mats, items=items))
             for it in items:
