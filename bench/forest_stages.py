@@ -2,7 +2,7 @@
 
     blender -b --factory-startup --python-exit-code 1 --python bench/forest_stages.py -- \
         [--trees 200] [--ground-vertices 10000] [--side 50] [--methods auto sphere shells] \
-        [--samples 64] [--reference 256]
+        [--samples 64] [--reference 256] [--bakes ground everything]
 
 (with the add-on installed, or BLENDER_USER_SCRIPTS pointing at a folder whose addons/ links
 addon/canopy_ao, as in the README). The scene is examples/forest_scene.py's, as
@@ -13,8 +13,10 @@ plan's (forest_tau: the forest's τ fit) and the native core's (the rays' tracin
 the CPU seconds their threads ran: native stage_clock.h). With --reference N (0: none), the
 ground is first baked with rays at N samples and each method's MAE against it is printed
 (deterministic: the rays are seeded per receiver). "prototypes written" counts the prototype
-meshes the bake wrote its attribute into (a bake of the Ground alone writes none). Exits
-non-zero on failure.
+meshes the bake wrote its attribute into. --bakes: "ground" bakes the Ground alone (as
+`--objects Ground`: the prototypes are fitted and occlude, their own AO is not baked),
+"everything" bakes with no names and nothing selected (as `--all`: the Ground, and each
+prototype's own AO). Exits non-zero on failure.
 
 Measured with 200 trees on 50 m, 10,000 ground vertices (load average ~10): auto chose the
 exact rung, 7.5 CPU s, of which the rays 7.1 (the prototypes' own bake about a third, the
@@ -47,6 +49,7 @@ def main(argv):
     ap.add_argument("--methods", nargs="+", default=["auto", "sphere", "shells"])
     ap.add_argument("--samples", type=int, default=64)
     ap.add_argument("--reference", type=int, default=0)
+    ap.add_argument("--bakes", nargs="+", choices=["ground", "everything"], default=["ground"])
     args = ap.parse_args(argv)
     import addon_utils
     if addon_utils.enable("canopy_ao", default_set=True) is None:
@@ -75,20 +78,22 @@ def main(argv):
             run_bake(bpy.context, ["Ground"], opts)
             ref = mesh_io.read_ao_attribute(g, opts["attribute"])
             print(f"reference: rays at {args.reference} samples, mean AO {ref.mean():.4f}")
-        for m in args.methods:
+        for m, bake in ((m, b) for m in args.methods for b in args.bakes):
             opts = options(m, args.samples)
+            for o in bpy.context.view_layer.objects:
+                o.select_set(False)
             for o in protos:  # what this bake writes, not an earlier one
                 if opts["attribute"] in o.data.attributes:
                     o.data.attributes.remove(o.data.attributes[opts["attribute"]])
             core.take_stage_seconds()
             t0, c0 = time.perf_counter(), time.process_time()
-            _job, rep = run_bake(bpy.context, ["Ground"], opts)
+            _job, rep = run_bake(bpy.context, ["Ground"] if bake == "ground" else [], opts)
             wall, cpu = time.perf_counter() - t0, time.process_time() - c0
             native = core.take_stage_seconds()
             ao = mesh_io.read_ao_attribute(g, opts["attribute"])
             mae = f", MAE {np.abs(ao - ref).mean():.5f}" if ref is not None else ""
             written = sum(opts["attribute"] in o.data.attributes for o in protos)
-            print(f"\n{m} -> {rep['method']}: {wall:.2f} s wall, {cpu:.2f} CPU s, ground mean "
+            print(f"\n{m} ({bake}) -> {rep['method']}: {wall:.2f} s wall, {cpu:.2f} CPU s, ground mean "
                   f"AO {ao.mean():.4f}{mae}, prototypes written {written} of {len(protos)}")
             for title, table in (("bake", rep["stage_seconds"]), ("plan", rep["timings"]),
                                  ("native", {k: v[0] for k, v in native.items()})):
