@@ -18,13 +18,14 @@ meshes the bake wrote its attribute into. --bakes: "ground" bakes the Ground alo
 "everything" bakes with no names and nothing selected (as `--all`: the Ground, and each
 prototype's own AO). Exits non-zero on failure.
 
-Measured with 200 trees on 50 m, 10,000 ground vertices (load 4-7): auto chose the exact
-rung; the Ground alone took 3.9-4.3 CPU s, nearly all the ground's rays through the instances
-(3.4-4.0), the bake of everything 6.9 (the prototypes' own bake on top); the ground's AO is
-the same in both (MAE 0.01198 against rays at 256). Sphere 1.0 and shells 1.2 CPU s (the
-bake of everything), each mostly the forest's τ fit. Tracing a flattened copy of the instances (3.6M triangles in one BVH) took
-5.4 CPU s against 3.8 for Embree's instances, and neither Embree's HIGH build quality nor a
-non-ROBUST build of the prototypes changed the tracing's CPU seconds (5.87 / 6.13 / 6.08).
+Measured with 200 trees on 50 m, 10,000 ground vertices (load 4-7): auto chose the exact rung;
+the Ground alone took 3.9-4.3 CPU s, nearly all the ground's rays through the instances
+(3.4-4.0), the bake of everything 6.9 (the prototypes' own bake on top); the ground's AO is the
+same in both (MAE 0.01198 against rays at 256). Sphere 1.0 and shells 1.2 CPU s (the bake of
+everything), each mostly the forest's τ fit. Tracing a flattened copy of the instances (3.6M
+triangles in one BVH) took 5.4 CPU s against 3.8 for Embree's instances, and neither Embree's
+HIGH build quality nor a non-ROBUST build of the prototypes changed the tracing's CPU seconds
+(5.87 / 6.13 / 6.08).
 """
 from __future__ import annotations
 
@@ -94,8 +95,9 @@ def main(argv):
             ao = mesh_io.read_ao_attribute(g, opts["attribute"])
             mae = f", MAE {np.abs(ao - ref).mean():.5f}" if ref is not None else ""
             written = sum(opts["attribute"] in o.data.attributes for o in protos)
-            print(f"\n{m} ({bake}) -> {rep['method']}: {wall:.2f} s wall, {cpu:.2f} CPU s, ground mean "
-                  f"AO {ao.mean():.4f}{mae}, prototypes written {written} of {len(protos)}")
+            print(f"\n{m} ({bake}) -> {rep['method']}: {wall:.2f} s wall, {cpu:.2f} CPU s, "
+                  f"ground mean AO {ao.mean():.4f}{mae}, prototypes written {written} of "
+                  f"{len(protos)}")
             for title, table in (("bake", rep["stage_seconds"]), ("plan", rep["timings"]),
                                  ("native", {k: v[0] for k, v in native.items()})):
                 for k, v in table.items():

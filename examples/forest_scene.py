@@ -12,8 +12,8 @@ the ground, half each, whole collection per particle, upright, random heading an
 The ground is a grid of --ground-vertices vertices. One bake (canopy_ao's run_bake, as the
 operator does) of the Ground alone: each prototype is fitted once (its own AO is not baked:
 neither it nor its emitter is a target), the ground gets every instance's shells as occluders
-(cut-off ε and the core's spatial grid). Prints the time of each step and the ground's AO statistics; exits non-zero on
-failure.
+(cut-off ε and the core's spatial grid). Prints the time of each step and the ground's AO
+statistics; exits non-zero on failure.
 """
 from __future__ import annotations
 

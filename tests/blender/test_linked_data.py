@@ -50,7 +50,8 @@ def test_a_linked_instanced_tree_occludes_and_is_not_written(tmp_path, user_scri
     _clear_scene()
     r = subprocess.run(
         [bpy.app.binary_path, "-b", "--factory-startup", blend, "--python-exit-code", "1",
-         "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()", "--", "--all",  # the prototypes' own AO asked for
+         "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()", "--",
+         "--all",  # everything: the prototypes' own AO asked for
          "--method", "ellipsoid", "--tau", "2", "--save"],
         env=dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts), capture_output=True,
         text=True, timeout=300)
