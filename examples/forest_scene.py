@@ -10,10 +10,10 @@ round tree and the conifer) each live in their own collection, excluded from the
 two hair particle systems on an emitter plane (role Ignore, instancer hidden) scatter them over
 the ground, half each, whole collection per particle, upright, random heading and ±20 % size.
 The ground is a grid of --ground-vertices vertices. One bake (canopy_ao's run_bake, as the
-operator does): each prototype is fitted and self-baked once (its attribute is shared by every
-instance), the ground gets every instance's shells as occluders (cut-off ε and the core's
-spatial grid). Prints the time of each step and the ground's AO statistics; exits non-zero on
-failure.
+operator does) of the Ground alone: each prototype is fitted once (its own AO is not baked:
+neither it nor its emitter is a target), the ground gets every instance's shells as occluders
+(cut-off ε and the core's spatial grid). Prints the time of each step and the ground's AO
+statistics; exits non-zero on failure.
 """
 from __future__ import annotations
 
@@ -158,9 +158,9 @@ def main(argv):
         print("note:", note)
     ao = mesh_io.read_ao_attribute(g, opts["attribute"])
     gr = rep["objects"]["Ground"]
-    print("prototypes self-baked: " + ", ".join(
+    print("prototypes self-baked: " + (", ".join(
         f"{n} ({p['vertices']} v, {p['seconds']:.2f} s)"
-        for n, p in rep["instances"]["prototypes"].items()))
+        for n, p in rep["instances"]["prototypes"].items()) or "none (the Ground alone)"))
     stages = rep.get("stage_seconds") or rep["timings"]
     print(f"stages: {', '.join(f'{k} {v:.2f} s' for k, v in stages.items())}")
     print(f"ground: {gr['vertices']} vertices in {gr['seconds']:.1f} s "

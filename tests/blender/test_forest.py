@@ -1,8 +1,8 @@
 """Instanced trees in Blender (docs/DESIGN.md, 'How each role is lit'): a tree collection instanced
 over a plane by collection-instance empties and by a particle system. Known answers: the ground
 under an instance is darker than open ground (by ≥ 0.05, as for a real tree in test_addon.py); the
-prototype's meshes get the attribute once (one mesh, shared by every instance) and the report
-counts the instances."""
+prototype's meshes get the attribute once (one mesh, shared by every instance) when the bake is of
+everything, and none when only the ground is baked; the report counts the instances."""
 
 import bpy
 import numpy as np
@@ -42,10 +42,14 @@ def ground_xy():
     return co.reshape(-1, 3)[:, :2]
 
 
-def bake_all():
+def bake_all(names=(), **kw):
+    """The bake of everything visible (no names, nothing selected), or of ``names``."""
+    for ob in bpy.context.view_layer.objects:
+        ob.select_set(False)
     opts = properties.scene_options(bpy.context.scene)
     opts.update(method="ellipsoid", tau=2.0, distance=0.0, show_proxies=False)
-    return run_bake(bpy.context, ["Ground"], opts)
+    opts.update(kw)
+    return run_bake(bpy.context, list(names), opts)
 
 
 def check(rep, places):
@@ -178,3 +182,31 @@ def test_raytrace_traces_the_instances(proto):
     opts.update(method="auto")
     _job, rep = run_bake(bpy.context, ["Ground"], opts)
     assert rep["calibration"]["instances_traced"] is True
+
+
+@pytest.mark.parametrize("method", ["raytrace", "auto", "ellipsoid"])
+def test_a_ground_bake_leaves_the_prototypes_untouched(proto, method):
+    """Baking only the ground writes nothing into the prototypes' meshes (nobody asked for
+    their AO: they are fitted, and occlude, but are not baked), and the ground gets the same
+    AO, bit for bit, as when the prototypes are baked too: a fixed rung fits them as before;
+    under auto they are fitted without calibrating on themselves (forest_fit.fit_only: ellipsoid
+    shells at the default τ, what their own calibration gives here, where it picks rays), and
+    the ground's rays are seeded per receiver."""
+    place_instances(proto)
+    kw = dict(method=method, samples=32, tau=None if method == "auto" else 2.0)
+    _job, rep = bake_all(["Ground"], **kw)
+    ground = mesh_io.read_ao_attribute(bpy.data.objects["Ground"], ATTR)
+    for name in ("Trunk", "Leaves"):
+        assert ATTR not in bpy.data.objects[name].data.attributes, name
+    assert rep["instances"]["prototypes"] == {} and rep["instances"]["instances"] == 3
+    assert any("instanced tree TreeProto: 3 instance(s)" in line
+               for line in _job.lines), _job.lines
+    _job, rep = bake_all(**kw)  # everything: the prototypes baked and written as well
+    assert set(rep["instances"]["prototypes"]) == {"Trunk", "Leaves"}
+    if method == "auto":  # calibrated on themselves: rays, which light with the ellipsoid
+        assert rep["instances"]["prototypes"]["Leaves"]["method"] == "raytrace"
+    for name in ("Trunk", "Leaves"):
+        assert ATTR in bpy.data.objects[name].data.attributes, name
+    want = mesh_io.read_ao_attribute(bpy.data.objects["Ground"], ATTR)
+    assert want.min() < 0.9  # the trees shade it
+    assert np.array_equal(ground, want), np.abs(ground - want).max()

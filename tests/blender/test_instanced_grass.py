@@ -244,6 +244,15 @@ def test_leaves_scattered_by_a_crown_volume_are_its_trees_canopy():
             got[m], reps[m] = bake_ground(m, distance=6.0)
             [real] = reps[m]["instances"]["realized"].values()
             assert real["role"] == "CANOPY" and real["instances"] == 800, real
+        # Nobody asked for the leaf's own AO (neither it nor its crown a target): untouched.
+        assert ATTR not in bpy.data.objects["Leaf"].data.attributes
+        for ob in bpy.context.view_layer.objects:
+            ob.select_set(False)
+        opts = properties.scene_options(bpy.context.scene)
+        opts.update(method="raytrace", distance=6.0, samples=64, tau=2.0, show_proxies=False)
+        run_bake(bpy.context, [], opts)  # everything: the leaf gets its instances' mean
+        a = mesh_io.read_ao_attribute(bpy.data.objects["Leaf"], ATTR)
+        assert a.shape == (4,) and 0.05 < a.mean() < 0.95, a
         bpy.data.objects.remove(crown, do_unlink=True)
         add_mesh("RealLeaves", np.concatenate(verts), np.concatenate(tris))
         bpy.context.view_layer.update()
@@ -254,7 +263,5 @@ def test_leaves_scattered_by_a_crown_volume_are_its_trees_canopy():
             assert want[under].mean() < 0.85, (m, want[under].mean())
             err = np.abs(got[m] - want).mean()
             assert err < 0.002, (m, err)
-        a = mesh_io.read_ao_attribute(bpy.data.objects["Leaf"], ATTR)
-        assert a.shape == (4,) and 0.05 < a.mean() < 0.95, a
     finally:
         _clear_scene()

@@ -50,8 +50,9 @@ def test_a_linked_instanced_tree_occludes_and_is_not_written(tmp_path, user_scri
     _clear_scene()
     r = subprocess.run(
         [bpy.app.binary_path, "-b", "--factory-startup", blend, "--python-exit-code", "1",
-         "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()", "--", "--objects",
-         "Ground", "--method", "ellipsoid", "--tau", "2", "--save"],
+         "--python-expr", "import canopy_ao.cli; canopy_ao.cli.main()", "--",
+         "--all",  # everything: the prototypes' own AO asked for
+         "--method", "ellipsoid", "--tau", "2", "--save"],
         env=dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts), capture_output=True,
         text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]

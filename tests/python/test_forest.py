@@ -346,3 +346,29 @@ def test_sample_vertices_spreads_over_the_instances():
     [(_n, idx_all, k_all, _v)] = real.sample_vertices(100)
     assert k_all == 10 and list(idx_all) == list(range(40))
     assert real.sample_vertices(4, names={"Other"}) == []
+
+
+@pytest.mark.parametrize("tau", [None, 2.5])
+def test_a_prototype_nobody_bakes_is_fitted_without_calibrating(tau):
+    """forest_fit.fit_only: under auto, the fit of a prototype whose own AO is not baked is
+    auto's fallback rung at the given τ (else the default), the same shells, trunks and τ as
+    prepare gives at that rung, and no tracer or calibration; other methods are left to
+    prepare (None)."""
+    from canopy_ao.core import forest_fit
+    from canopy_ao.core.ladder import DEFAULT_TAU
+    tree = items(ground=False)
+    plan = forest_fit.fit_only(tree, core.BakeSettings(method="auto", tau=tau, seed=3))
+    want = core.prepare(tree, core.BakeSettings(method="ellipsoid", tau=tau or DEFAULT_TAU,
+                                                seed=3))
+    assert plan.method == want.method == "ellipsoid"
+    assert plan.tau == want.tau == (tau or DEFAULT_TAU)
+    assert plan.tracer is None and not plan.calibration and plan.lights is None
+    got = forest.prototype_from_plan(plan, "T", affine()[None])
+    ref = forest.prototype_from_plan(want, "T", affine()[None])
+    assert got.tau == ref.tau and len(got.shells) == len(ref.shells) == 1
+    assert len(got.solids) == len(ref.solids) >= 1  # the trunk occludes as a solid
+    for a, b in zip(got.shells + got.solids, ref.shells + ref.solids):
+        np.testing.assert_array_equal(a.center, b.center)
+        np.testing.assert_array_equal(a.radii, b.radii)
+    for method in ("ellipsoid", "raytrace", "shells"):
+        assert forest_fit.fit_only(tree, core.BakeSettings(method=method, tau=tau)) is None

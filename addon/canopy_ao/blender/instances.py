@@ -7,10 +7,12 @@ particle systems, collection-instance empties and geometry-nodes instances alike
 of mesh object O gives the matrix M = instance.matrix_world · O.matrix_world⁻¹, which maps O as
 it stands in the scene (the prototype's space) onto the instance. Prototype objects are grouped
 into trees as the bake groups real objects (gather.tree_of: usually the collection that is
-instanced), each tree is fitted and baked once with the engine (its self-AO, written to the
-prototype's mesh, which the instances share), and its shells and trunks, moved by every M, are
-occluders for everything the main bake evaluates; the exact rung and auto's calibration trace
-its triangles at every M (Embree instances).
+instanced), each tree is fitted once with the engine, and its shells and trunks, moved by every
+M, are occluders for everything the main bake evaluates; the exact rung and auto's calibration
+trace its triangles at every M (Embree instances). A prototype's self-AO (written to its mesh,
+which the instances share) is baked only when asked for: the prototype or an object that
+instances it is a target, or the bake is of everything; a bake of the ground alone leaves the
+trees' meshes untouched.
 
 A geometry-nodes instance of an object (Object Info, a collection on points) names the
 instancer as its object; its prototype is found by the instanced mesh (_mesh_owner).
@@ -28,7 +30,7 @@ import numpy as np
 from . import gather, materials, mesh_io, opacity_io, ownership
 from .visibility import RenderVisibility
 from .. import core
-from ..core import forest, opacity, roles
+from ..core import forest, forest_fit, opacity, roles
 
 # A blade's AO per vertex is its mean over this many of its instances at most (evenly spread
 # over the field): the mean of 2000 is within ~0.005 of all of them, at a bounded cost.
@@ -102,11 +104,14 @@ class Prototypes:
     """The instanced trees of a scene: gathered (nothing changed), prepared and baked with the
     main bake's settings, written at commit."""
 
-    def __init__(self, depsgraph, vertex_mode=True):
+    def __init__(self, depsgraph, vertex_mode=True, targets=None):
+        """targets: the bake's target names; a prototype's own AO is baked and written only
+        when it or an object that instances it is one (None: every prototype, the bake of
+        everything). The others are fitted alone: they occlude, their meshes are not touched."""
         self.items = {}  # tree -> [SceneItem] in the prototype's space
         self.matrices = {}  # tree -> [(N, 4, 4)] one array per object of the tree
         self.objects = {}  # item name -> original object
-        self.writable = set()  # item names whose vertex count allows a per-vertex result
+        self.writable = set()  # item names asked for whose vertex count allows a result
         self.how = {}
         self.results = []
         self.plans = {}
@@ -115,9 +120,10 @@ class Prototypes:
         alphas = {}  # each material's alpha, read once (gather.scene_items')
         for name, (obj, mats, parents) in instance_matrices(depsgraph).items():
             self.instancers[name] = parents
+            asked = targets is None or name in targets or bool(parents & set(targets))
             try:
                 pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=True)
-                if vertex_mode:
+                if vertex_mode and asked:
                     self.writable.add(name)
             except mesh_io.MeshIOError:
                 pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=False)
@@ -241,7 +247,11 @@ class Prototypes:
                 protos.append(forest.Prototype(tree, [], 1.0, mats,
                                                mesh=forest.prototype_mesh(items)))
                 continue
-            plan = core.prepare(items, settings)
+            # Its fit is what every instance occludes with; calibrated on the prototype only
+            # when its own AO is baked (here, or by the main bake: a target).
+            own = any(it.name in self.writable or it.name in skip for it in items)
+            plan = None if own else forest_fit.fit_only(items, settings)
+            plan = plan or core.prepare(items, settings)
             self.plans[tree] = plan
             protos.append(forest.prototype_from_plan(plan, tree, mats, items=items))
             for it in items:

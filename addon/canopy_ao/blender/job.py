@@ -71,7 +71,12 @@ class BakeJob:
         t0 = time.perf_counter()
         # Instanced trees (particles, collection instances, geometry nodes): each prototype is
         # baked once (its instances share its mesh) and every instance occludes (instances.py).
-        self.prototypes = instances.Prototypes(depsgraph, vertex_mode=self.kind.per_vertex)
+        # Their own AO only when asked: a prototype or its instancer a target, or the bake of
+        # everything (no names, nothing selected); else they occlude and stay untouched.
+        everything = not object_names and not any(
+            gather.is_candidate(o) for o in context.selected_objects)
+        self.prototypes = instances.Prototypes(depsgraph, vertex_mode=self.kind.per_vertex,
+                                               targets=None if everything else target_names)
         why = self.prototypes.check(opts["attribute"], opts["overwrite"], skip=target_names)
         if why:
             raise CanopyAOError(why + " (nothing was changed)")
