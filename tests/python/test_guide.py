@@ -5,6 +5,8 @@ parser's. So `-- --help` and the guide cannot drift apart."""
 import os
 import re
 
+import pytest
+
 from canopy_ao import cli
 from canopy_ao.batch import __main__ as batch_main
 
@@ -59,22 +61,16 @@ def check(rows, flags):
     return problems
 
 
-def test_every_cli_option_has_its_row():
+@pytest.mark.parametrize("title, build, least", [
+    ("The command line", lambda: cli.build_parser(), 40),
+    ("Batch bakes", lambda: batch_main.build_parser(), 10)])
+def test_every_option_has_its_row(title, build, least):
     with open(GUIDE, encoding="utf-8") as f:
-        rows = option_rows(section(f.read(), "The command line"))
-    flags = parser_flags(cli.build_parser())
-    assert len(flags) >= 40
+        rows = option_rows(section(f.read(), title))
+    flags = parser_flags(build())
+    assert len(flags) >= least
     problems = check(rows, flags)
-    assert not problems, "docs/guide.md, 'The command line':\n" + "\n".join(problems)
-
-
-def test_every_batch_option_has_its_row():
-    with open(GUIDE, encoding="utf-8") as f:
-        rows = option_rows(section(f.read(), "Batch bakes"))
-    flags = parser_flags(batch_main.build_parser())
-    assert len(flags) >= 10
-    problems = check(rows, flags)
-    assert not problems, "docs/guide.md, 'Batch bakes':\n" + "\n".join(problems)
+    assert not problems, f"docs/guide.md, '{title}':\n" + "\n".join(problems)
 
 
 def test_the_check_can_fail():
