@@ -104,9 +104,11 @@ def bake_targets(context, object_names, opts=None):
     modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
     vertex (opts' mode), one whose modifiers change its vertex count (they realise the
     scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
-    wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
-    bake here cannot do)."""
+    wrong, a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
+    bake here cannot do) or does not render (it would occlude the other targets, which Cycles
+    does not)."""
     scene = context.scene
+    vis = RenderVisibility(context.view_layer)
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
         if missing:
@@ -119,7 +121,6 @@ def bake_targets(context, object_names, opts=None):
     else:
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
-            vis = RenderVisibility(context.view_layer)
             dg = context.evaluated_depsgraph_get()
             vertex_mode = (opts or {}).get("mode", 'VERTEX') == 'VERTEX'
             targets = [o for o in scene.objects
@@ -134,6 +135,15 @@ def bake_targets(context, object_names, opts=None):
                             "Cycles' AO rays pass through it, its own included, which this "
                             "bake cannot do; turn Shadow on, or bake other objects (nothing "
                             "was changed)")
+    # A target is an occluder like any other (what renders occludes): one that does not render
+    # would darken the other targets only when baked with them, and Cycles refuses to bake it.
+    unrendered = [o.name for o in targets if not vis.object_renders(o)]
+    if unrendered:
+        raise CanopyAOError(f"{', '.join(unrendered)}: disabled in renders (the object, a "
+                            "collection holding it, or excluded from the view layer), so "
+                            "Cycles neither renders it nor lets it occlude, and refuses to bake "
+                            "it; enable it in renders, or bake other objects (nothing was "
+                            "changed)")
     return targets
 
 
