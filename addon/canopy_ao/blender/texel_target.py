@@ -13,6 +13,23 @@ from . import (bent_io, cycles_check, files_io, gltf_io, maps_io, materials, own
 from .targets import Target, check_wiring, wire_undo
 
 
+def texel_bent(bent, weight, k):
+    """Each texel's bent normal from its k sub-samples' (float32 (k T, 3), unit; each from its
+    share of the texel's rays): their mean weighted by the share of their rays that were open
+    (weight (k T,), or None: equal), so a sub-sample whose rays were all blocked (its normal
+    stands in, raytrace.h 'Bent normals') adds no direction; unit again. Texels whose weighted
+    mean is zero (every ray blocked) take the plain mean, then the first sub-sample's."""
+    each = np.asarray(bent, np.float64).reshape(-1, k, 3)
+    plain = each.mean(axis=1)
+    b = plain if weight is None else np.einsum(
+        "tk,tki->ti", np.asarray(weight, np.float64).reshape(-1, k), each)
+    for alt in (plain, each[:, 0]):
+        length = np.linalg.norm(b, axis=1, keepdims=True)
+        b = np.where(length > 1e-12, b, alt)
+    length = np.linalg.norm(b, axis=1, keepdims=True)
+    return (b / np.maximum(length, 1e-30)).astype(np.float32)
+
+
 class TexelTarget(Target):
     """An image in the UV layout: an EXR file and a Blender image, wired when asked."""
 
@@ -36,6 +53,7 @@ class TexelTarget(Target):
                                          self.rx.triangles)
         super().__init__(item, obj, pos, nrm)
         self.group = self.rx.aa ** 2
+        self.bent_weight = None  # each sub-sample's open fraction of its rays (loop.Loop)
         # The raster's loop triangles are the item's own when the counts agree (the same
         # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
         if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
@@ -76,12 +94,8 @@ class TexelTarget(Target):
         self.ao = self.ao.reshape(-1, k).mean(axis=1, dtype=np.float64).astype(np.float32)
         if self.thickness is not None:
             self.thickness = self.thickness.reshape(-1, k).mean(axis=1).astype(np.float32)
-        if self.bent is not None:  # unit again; sub-samples that cancel keep the first's
-            each = self.bent.reshape(-1, k, 3)
-            b = each.mean(axis=1)
-            length = np.linalg.norm(b, axis=1, keepdims=True)
-            self.bent = np.where(length > 0, b / np.maximum(length, 1e-30),
-                                 each[:, 0]).astype(np.float32)
+        if self.bent is not None:
+            self.bent = texel_bent(self.bent, self.bent_weight, k)
         self.positions, self.normals = self.rx.positions, self.rx.normals
         self.triangles = None
 
