@@ -30,6 +30,45 @@ def texel_bent(bent, weight, k):
     return (b / np.maximum(length, 1e-30)).astype(np.float32)
 
 
+def check_shared_materials(targets, opts):
+    """Refuse, before anything is written, wiring an object's image into a material another
+    object shows (one of its slots, or for an object without materials the one wiring gives
+    its mesh): a material holds one image, so the last target wired would show on all of them,
+    each through its own UVs. With an Atlas the targets share one image: only objects outside
+    the bake count."""
+    if not (opts["wire_material"] or opts["gltf"]):
+        return
+    by_material, by_mesh = {}, {}
+    for o in bpy.data.objects:
+        if o.type == 'MESH':
+            by_mesh.setdefault(o.data.as_pointer(), set()).add(o.name)
+            for slot in o.material_slots:
+                if slot.material is not None:
+                    by_material.setdefault(slot.material.as_pointer(), set()).add(o.name)
+    baked = {t.obj.name for t in targets}
+    found = []
+    for t in targets:
+        own = baked if opts["atlas"] else {t.obj.name}
+        mats = {s.material.as_pointer(): s.material.name for s in t.obj.material_slots
+                if s.material is not None}
+        for ptr, name in mats.items():
+            others = sorted(by_material[ptr] - own)
+            if others:
+                found.append(f"{t.obj.name}: material '{name}' is also shown on "
+                             f"{', '.join(others)}")
+        others = sorted(by_mesh[t.obj.data.as_pointer()] - own) if not mats else []
+        if others:
+            found.append(f"{t.obj.name}: the material wiring gives its mesh "
+                         f"'{t.obj.data.name}' is also shown on {', '.join(others)}")
+    if found:
+        raise CanopyAOError(f"{'; '.join(found)}; a material shows one image, so each would "
+                            "show the last object's AO through its own UVs. Give each object "
+                            "its own material (Object > Relations > Make Single User > "
+                            "Materials; for a shared mesh, Object Data too), bake the objects "
+                            "sharing it together into an Atlas, or bake without Wire Material "
+                            "(nothing was changed)")
+
+
 class TexelTarget(Target):
     """An image in the UV layout: an EXR file and a Blender image, wired when asked."""
 
@@ -221,3 +260,4 @@ class TexelTarget(Target):
                 out.append((files_io.tile_path(path, o.tile) if o.tile is not None else path,
                             o))
         files_io.check_outputs(out, opts["overwrite"])
+        check_shared_materials(targets, opts)

@@ -1,0 +1,66 @@
+"""Texel bakes against what users' files hold: one material shared by several objects (each
+object's AO is its own image, a material shows one), linked duplicates, and where images of a
+.blend never saved go."""
+import os
+
+import bpy
+import pytest
+
+import helpers_materials as H
+
+
+@pytest.fixture
+def scene():
+    sc = H.empty_scene()
+    yield sc
+    H.empty_scene()
+
+
+def _bake(image_dir, objects, **kw):
+    args = dict(objects=objects, mode='TEXEL', resolution=8, method="sphere", tau=2.0,
+                use_world_distance=False, distance=5.0, show_proxies=False,
+                image_dir=str(image_dir))
+    args.update(kw)
+    return bpy.ops.canopy_ao.bake(**args)
+
+
+def _sources(mat):
+    return [n.image for n in mat.node_tree.nodes if n.get("canopy_ao") == "source"]
+
+
+@pytest.mark.parametrize("other", ["target", "not baked", "linked duplicate"])
+def test_wiring_into_a_material_another_object_shows_is_refused(scene, tmp_path, other):
+    """A material shows one image: wired for A, then for B, it showed B's AO on A (or A's on
+    an object not baked, through that object's own UVs). Refused before anything is written,
+    naming the material and its other users; an Atlas (one image for every target) is how
+    targets sharing a material are wired."""
+    a = H.add_plane(name="A")
+    mat = H.add_material(a, "Shared")
+    if other == "linked duplicate":
+        b = a.copy()  # shares the mesh, so the material too
+        scene.collection.objects.link(b)
+        b.name, b.location.x = "B", 5.0
+    else:
+        b = H.add_plane(location=(5.0, 0.0, 0.0), name="B")
+        b.data.materials.append(mat)
+    names = "A,B" if other == "target" else "A"
+    with pytest.raises(RuntimeError, match="material 'Shared'.*also shown on B"):
+        _bake(tmp_path, names, wire_material=True)
+    assert not os.listdir(tmp_path) and _sources(mat) == []
+    # Unwired, each object gets its own image and nothing is refused.
+    assert _bake(tmp_path, "A", wire_material=False) == {'FINISHED'}
+    if other == "target":  # one image for both: what a shared material can show
+        assert _bake(tmp_path, "A,B", wire_material=True, atlas="Both") == {'FINISHED'}
+        assert [i.name for i in _sources(mat)] == ["Both_CanopyAO"]
+
+
+def test_a_target_without_material_whose_mesh_another_object_uses_is_refused(scene, tmp_path):
+    """Wiring gives an object without a material one of ours on its mesh: a linked duplicate
+    would show the target's AO through it."""
+    a = H.add_plane(name="A")
+    b = a.copy()
+    scene.collection.objects.link(b)
+    b.name = "B"
+    with pytest.raises(RuntimeError, match="A: .*also shown on B"):
+        _bake(tmp_path, "A", wire_material=True)
+    assert len(a.material_slots) == 0 and not os.listdir(tmp_path)
