@@ -2,6 +2,8 @@
 object's AO is its own image, a material shows one), linked duplicates, and where images of a
 .blend never saved go."""
 import os
+import shutil
+import tempfile
 
 import bpy
 import pytest
@@ -64,3 +66,31 @@ def test_a_target_without_material_whose_mesh_another_object_uses_is_refused(sce
     with pytest.raises(RuntimeError, match="A: .*also shown on B"):
         _bake(tmp_path, "A", wire_material=True)
     assert len(a.material_slots) == 0 and not os.listdir(tmp_path)
+
+
+def _read(path):
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def test_a_blend_never_saved_keeps_its_images_apart_from_another_ones(scene, tmp_path):
+    """Both files never saved, their images went to one temporary folder with records that
+    both said 'unsaved': the second file's bake replaced the image the first shows, also once
+    the first was saved (its material still reads the temporary file)."""
+    H.add_plane(name="Ground", size=4.0)
+    assert _bake("", "Ground", wire_material=True) == {'FINISHED'}
+    first = bpy.data.images["Ground_CanopyAO"].filepath
+    kept = _read(first)
+    assert os.path.dirname(first).startswith(os.path.join(tempfile.gettempdir(), "canopy_ao"))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "a.blend"))
+    H.empty_scene()  # another file, never saved: a ball over its ground
+    H.add_plane(name="Ground", size=4.0)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.0, 0.0, 0.6))
+    assert _bake("", "Ground", wire_material=True) == {'FINISHED'}
+    second = bpy.data.images["Ground_CanopyAO"].filepath
+    try:
+        assert second != first and _read(first) == kept
+        assert _read(second) != kept  # the ball's shadow: not the first file's image
+    finally:
+        for path in (first, second):
+            shutil.rmtree(os.path.dirname(path), ignore_errors=True)
