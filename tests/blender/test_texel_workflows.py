@@ -94,3 +94,15 @@ def test_a_blend_never_saved_keeps_its_images_apart_from_another_ones(scene, tmp
     finally:
         for path in (first, second):
             shutil.rmtree(os.path.dirname(path), ignore_errors=True)
+
+
+@pytest.mark.parametrize("name", ["Tree, left", " Padded ", "Ast/Zweig ü", "木"])
+def test_an_operator_bakes_an_object_whatever_its_name(scene, tmp_path, name):
+    """objects= is a comma-separated list: an object whose name has a comma or spaces at its
+    ends could not be named ('no object named Tree, left'); the whole text naming an object
+    is that object. Slashes and other letters keep a file of their own."""
+    H.add_plane(name=name)
+    assert _bake(tmp_path, name) == {'FINISHED'}
+    (image,) = [i for i in bpy.data.images if i.get("canopy_ao_object") == name]
+    assert os.path.dirname(bpy.path.abspath(image.filepath)) == str(tmp_path)
+    assert bpy.ops.canopy_ao.remove_wiring(objects=name) == {'FINISHED'}

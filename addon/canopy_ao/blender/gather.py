@@ -4,6 +4,7 @@ arrays (the core's SceneItems). Nothing here changes the scene."""
 import math
 import time
 
+import bpy
 import numpy as np
 
 from . import mesh_io, opacity_io, parts_io
@@ -96,6 +97,15 @@ def world_ao_distance(scene, bake=False):
 def is_candidate(obj):
     """A mesh that may take part in a bake (not one of our proxy displays)."""
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
+
+
+def object_names(text):
+    """The names an operator's ``objects`` argument gives: the whole text when it is an
+    object's exact name (one with a comma, or spaces at its ends), else the comma-separated
+    names, stripped."""
+    if text and bpy.data.objects.get(text) is not None:
+        return [text]
+    return [s.strip() for s in text.split(",") if s.strip()]
 
 
 def bake_targets(context, object_names, opts=None):
