@@ -106,3 +106,25 @@ def test_an_operator_bakes_an_object_whatever_its_name(scene, tmp_path, name):
     (image,) = [i for i in bpy.data.images if i.get("canopy_ao_object") == name]
     assert os.path.dirname(bpy.path.abspath(image.filepath)) == str(tmp_path)
     assert bpy.ops.canopy_ao.remove_wiring(objects=name) == {'FINISHED'}
+
+
+@pytest.mark.parametrize("udim", [False, True])
+def test_uvs_reaching_past_the_baked_square_are_named(scene, tmp_path, udim):
+    """A UV map reaching past 0–1 (or past a UDIM tile) baked only what lies inside, without a
+    word: the image's edge showed on the rest. The report names the triangles; a map inside
+    says nothing."""
+    from canopy_ao.blender.job import run_bake
+    from canopy_ao.blender import properties
+    obj = H.add_plane(name="Ground", subdivisions=1)  # 8 triangles, UVs over 0–1
+    opts = dict(properties.scene_options(bpy.context.scene), mode='TEXEL', resolution=16,
+                method="sphere", tau=2.0, distance=5.0, show_proxies=False, udim=udim,
+                image_dir=str(tmp_path))
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert rep["objects"]["Ground"]["texel"]["warnings"] == []
+    uv = obj.data.uv_layers.active.data
+    for loop in uv:  # its right column of quads (4 triangles) reaches past u = 1
+        loop.uv = (loop.uv[0] * 1.5, loop.uv[1])
+    _job, rep = run_bake(bpy.context, ["Ground"], dict(opts, overwrite=True))
+    (warning,) = rep["objects"]["Ground"]["texel"]["warnings"]
+    square = "the UDIM tile of their centre" if udim else "the 0–1 square"
+    assert f"4 triangles of UV map 'UVMap' reach outside {square}" in warning, warning
