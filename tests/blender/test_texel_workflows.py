@@ -128,3 +128,25 @@ def test_uvs_reaching_past_the_baked_square_are_named(scene, tmp_path, udim):
     (warning,) = rep["objects"]["Ground"]["texel"]["warnings"]
     square = "the UDIM tile of their centre" if udim else "the 0–1 square"
     assert f"4 triangles of UV map 'UVMap' reach outside {square}" in warning, warning
+
+
+def test_linked_duplicates_bake_per_texel_into_images_of_their_own(scene, tmp_path):
+    """Two objects sharing one mesh (Alt+D) were refused per texel as per vertex ('only one
+    result could stay on it'), though per texel each result is an image of its own: baked,
+    the one under the ball darker than its twin in the open (per vertex still refused)."""
+    from canopy_ao.blender.job import run_bake
+    from canopy_ao.blender import properties
+    from canopy_ao.core.native import CanopyAOError, _core
+    ground = H.add_plane(name="Ground", size=4.0)
+    twin = ground.copy()
+    scene.collection.objects.link(twin)
+    twin.name, twin.location.x = "Twin", 10.0
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.0, 0.0, 0.6))
+    opts = dict(properties.scene_options(bpy.context.scene), mode='TEXEL', resolution=16,
+                method="raytrace", samples=16, distance=5.0, show_proxies=False,
+                image_dir=str(tmp_path))
+    _job, rep = run_bake(bpy.context, ["Ground", "Twin"], opts)
+    ao = {n: _core.read_image(rep["objects"][n]["texel"]["path"]) for n in ("Ground", "Twin")}
+    assert ao["Ground"].min() < 0.5 and ao["Twin"].min() == 1.0
+    with pytest.raises(CanopyAOError, match="share one mesh"):
+        run_bake(bpy.context, ["Ground", "Twin"], dict(opts, mode='VERTEX'))

@@ -108,7 +108,7 @@ def object_names(text):
     return [s.strip() for s in text.split(",") if s.strip()]
 
 
-def bake_targets(context, object_names, opts=None):
+def bake_targets(context, object_names, opts=None, on_mesh=True):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
     mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
     modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
@@ -138,7 +138,7 @@ def bake_targets(context, object_names, opts=None):
                        and vis.mesh_renders(o) and _holds_result(o, dg, vertex_mode)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
-    check_writable(targets)
+    check_writable(targets, on_mesh)
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
@@ -165,10 +165,11 @@ def _holds_result(obj, depsgraph, vertex_mode):
     return n > 0 and not (vertex_mode and n != len(obj.data.vertices))
 
 
-def check_writable(targets):
+def check_writable(targets, on_mesh=True):
     """Refuse, before anything is read or written, what a bake could not write back whole: a
     mesh in Edit Mode (its data is the edit copy until Blender leaves it), linked library data
-    (a write would be lost on save), and one mesh shared by several targets (each would
+    (a write would be lost on save), and, when the results go onto the mesh (on_mesh: per
+    vertex, not into each object's images), one mesh shared by several targets (each would
     overwrite the other's result)."""
     editing = [o.name for o in targets if o.mode == 'EDIT']
     if editing:
@@ -180,7 +181,7 @@ def check_writable(targets):
                             "could not be saved; make it local (Object > Relations > Make "
                             "Local) first (nothing was changed)")
     by_mesh = {}
-    for o in targets:
+    for o in targets if on_mesh else ():
         by_mesh.setdefault(o.data.name_full, []).append(o.name)
     shared = [names for names in by_mesh.values() if len(names) > 1]
     if shared:

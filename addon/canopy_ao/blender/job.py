@@ -49,7 +49,8 @@ class BakeJob:
         t_start = time.perf_counter()
         self.lines = []
         checks.check_request(opts)  # what needs no geometry: refused before any work
-        targets = gather.bake_targets(context, object_names, opts)
+        targets = gather.bake_targets(context, object_names, opts,
+                                      on_mesh=opts["mode"] == 'VERTEX')
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
         self.gather_notes = []
