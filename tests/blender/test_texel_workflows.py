@@ -150,3 +150,18 @@ def test_linked_duplicates_bake_per_texel_into_images_of_their_own(scene, tmp_pa
     assert ao["Ground"].min() < 0.5 and ao["Twin"].min() == 1.0
     with pytest.raises(CanopyAOError, match="share one mesh"):
         run_bake(bpy.context, ["Ground", "Twin"], dict(opts, mode='VERTEX'))
+
+
+@pytest.mark.parametrize("mode, noun", [('VERTEX', "4 vertices"), ('TEXEL', "64 texels")])
+def test_the_line_of_an_object_names_its_receivers(scene, tmp_path, mode, noun):
+    """The panel's line for an object read '4 vertexs'."""
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import BakeJob
+    H.add_plane(name="Ground")
+    opts = dict(properties.scene_options(bpy.context.scene), mode=mode, resolution=8,
+                method="sphere", tau=2.0, distance=5.0, show_proxies=False,
+                image_dir=str(tmp_path))
+    job = BakeJob(bpy.context, ["Ground"], opts, blocking=True)
+    job.prepare()
+    line = job.step()
+    assert f", {noun}, " in line, line

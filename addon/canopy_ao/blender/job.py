@@ -142,7 +142,7 @@ class BakeJob:
                             it.tree_source, it.tree_why)
         self.results.append(r)
         return (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method "
-                f"{r.method}, {t.count} {t.kind}{'s' if t.count != 1 else ''}, "
+                f"{r.method}, {t.count} {t.kind if t.count == 1 else t.kinds}, "
                 f"{r.seconds:.3f} s")
 
     def progress(self):

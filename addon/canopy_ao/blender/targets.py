@@ -15,8 +15,9 @@ from . import materials, ownership, parts_io
 
 
 class Target:
-    # The receivers' noun in the report lines ("4 texels").
+    # The receivers' noun in the report lines ("1 texel", "4 texels"), and its plural.
     kind = ""
+    kinds = ""
     # Results per mesh vertex: an instanced prototype's vertices take the mean AO over its
     # instances (instances.Prototypes), and its attribute is written in place when last
     # (commit.Transaction).

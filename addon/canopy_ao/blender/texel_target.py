@@ -73,6 +73,7 @@ class TexelTarget(Target):
     """An image in the UV layout: an EXR file and a Blender image, wired when asked."""
 
     kind = "texel"
+    kinds = "texels"
 
     def __init__(self, item, obj, opts, depsgraph):
         if opts["channel"] != "RGBA" and (opts["udim"] or opts["atlas"]):

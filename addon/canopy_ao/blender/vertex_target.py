@@ -13,6 +13,7 @@ class VertexTarget(Target):
     """A color attribute per vertex."""
 
     kind = "vertex"
+    kinds = "vertices"
     per_vertex = True
 
     def __init__(self, item, obj, opts, depsgraph=None):
