@@ -22,6 +22,8 @@ class Target:
     # instances (instances.Prototypes), and its attribute is written in place when last
     # (commit.Transaction).
     per_vertex = False
+    # Results written onto the mesh (an attribute), so several targets may not share one.
+    on_mesh = False
 
     def __init__(self, item, obj, positions, normals):
         self.item, self.obj = item, obj

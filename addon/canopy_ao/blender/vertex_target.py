@@ -14,6 +14,7 @@ class VertexTarget(Target):
 
     kind = "vertex"
     kinds = "vertices"
+    on_mesh = True
     per_vertex = True
 
     def __init__(self, item, obj, opts, depsgraph=None):
