@@ -38,7 +38,8 @@ def _add_option(p, o):
     text = f"{o.help} (default: {default})"
     if o.kind == "bool":
         p.add_argument(o.flag, dest=o.name, action="store_false" if o.default else "store_true",
-                       default=None, help=o.help)
+                       default=None,  # a flag that turns an option off says so (--no-proxies)
+                       help=f"do not {o.help[0].lower()}{o.help[1:]}" if o.default else o.help)
     elif o.kind == "enum":
         ids = [i[0].lower() for i in o.items]
         each = "; ".join(f"{i[0].lower()}: {i[2]}" for i in o.items if len(i) > 2 and i[2])

@@ -147,3 +147,57 @@ def test_command_line_bakes_and_refuses_bent_normals(tree, capsys, tmp_path):
     assert exc.value.code == 1 and "no UV map" in capsys.readouterr().err
     assert "CanopyBentNormal" not in leaves.data.attributes
     assert "CanopyAO" not in leaves.data.attributes
+
+
+def _bent_rays(monkeypatch, **kw):
+    """The rays the bent normals' traces cast in a texel bake of the ground, per texel, and the
+    bake's report (lighting.trace spied on: a call casts samples / point_group per point)."""
+    from canopy_ao.core import lighting
+    calls, trace = [], lighting.trace
+
+    def spy(plan, p, n, *args, **extra):
+        if extra.get("bent_normals"):
+            samples = extra.get("samples", args[0] if args else None)
+            calls.append(len(p) * samples // extra.get("point_group", 1))
+        return trace(plan, p, n, *args, **extra)
+    monkeypatch.setattr(lighting, "trace", spy)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=16, **kw))
+    texels = rep["objects"]["Ground"]["texel"]["texels"]
+    return sum(calls) / texels, rep
+
+
+@pytest.mark.parametrize("aa", [1, 2, 3])
+def test_texel_bent_normals_deal_a_texels_samples_over_its_sub_samples(tree, monkeypatch, aa):
+    """A texel's bent normal costs its Samples rays (rounded up to a multiple of the N × N
+    sub-samples, as its AO's), not N² × Samples: counted, not timed (it cast 4 and 9 times
+    the rays at 2 × 2 and 3 × 3)."""
+    from canopy_ao.core.texel_budget import texel_rays
+    per_texel, _rep = _bent_rays(monkeypatch, texel_aa=aa, bent_normals="WORLD",
+                                 image_dir=tree["image_dir"])
+    assert per_texel == texel_rays(256, aa * aa)  # 256, 256, 261
+
+
+def test_texel_ao_with_bent_normals_is_the_ao_without_them(tree):
+    """Under the exact rung one trace gives a texel's AO and bent normal: with its rays dealt
+    over the sub-samples as the AO alone deals them, the AO is the same to the bit (it was
+    another estimate, from every sub-sample's full Samples)."""
+    got = {}
+    for bent in ("OFF", "WORLD"):
+        _job, rep = run_bake(bpy.context, ["Ground"], opts(
+            mode='TEXEL', resolution=16, texel_aa=2, method="raytrace", samples=16,
+            bent_normals=bent, image_dir=tree["image_dir"]))
+        got[bent] = _core.read_image(rep["objects"]["Ground"]["texel"]["path"]).copy()
+    assert got["OFF"].min() < 0.9  # the crown shades part of the ground
+    np.testing.assert_array_equal(got["OFF"], got["WORLD"])
+
+
+def test_a_texels_bent_normal_weighs_its_sub_samples_by_their_open_rays():
+    """A sub-sample whose rays were all blocked stands in its normal (raytrace.h): it adds no
+    direction to its texel's; weights that are all zero fall back to the plain mean."""
+    from canopy_ao.blender.texel_target import texel_bent
+    up, lean = np.array([0.0, 0.0, 1.0]), np.array([0.6, 0.0, 0.8])
+    bent = np.float32([up, lean, lean, up, up, up, up, up])  # two texels of 4 sub-samples
+    out = texel_bent(bent, np.float32([0.0, 0.5, 0.25, 0.0, 0, 0, 0, 0]), 4)
+    np.testing.assert_allclose(out, [lean, up], atol=1e-6)
+    np.testing.assert_allclose(texel_bent(bent, None, 4)[0], (up + lean) / np.linalg.norm(
+        up + lean), atol=1e-6)

@@ -104,7 +104,10 @@ def test_every_image_of_a_bake_takes_the_format(tree):
     files = ["Ground_CanopyAO.png", "Ground_CanopyBentNormal.png", "Ground_CanopyThickness.png"]
     assert sorted(os.listdir(d)) == files
     bent = _core.read_image(os.path.join(d, "Ground_CanopyBentNormal.png"))
-    assert bent.shape == (32, 32, 3) and 0.0 < bent.min() and bent.max() < 1.0
+    # Encoded 0.5 + 0.5 b: in [0, 1]; 1.0 where b is the normal (rays summing straight up,
+    # or every ray blocked: raytrace.h "Bent normals")
+    assert bent.shape == (32, 32, 3) and 0.0 < bent.min() and bent.max() <= 1.0
+    assert bent[:, :, 2].min() > 0.5  # the ground's bent normals lean up
     for f in files:
         assert files_io.file_record(os.path.join(d, f))["format"] == "PNG16"
         assert bpy.data.images[f[:-4]].colorspace_settings.name == "Non-Color"

@@ -293,3 +293,36 @@ def test_modifiers_set_otherwise_for_renders_are_named_in_the_notes(ground, sett
     assert any(n.startswith("Roof: modifiers set differently for viewport and render")
                for n in rep["notes"]), rep["notes"]
     assert not any("Ground" in n for n in rep["notes"]), rep["notes"]
+
+
+def _roof_hidden(how):
+    if how == "object":
+        _roof(bpy.context.scene.collection).hide_render = True
+    else:
+        _roof(_collection("Roofs"))
+        if how == "collection":
+            bpy.data.collections["Roofs"].hide_render = True
+        else:
+            _layer("Roofs").exclude = True
+
+
+@pytest.mark.parametrize("chosen, how", [("named", "object"), ("named", "collection"),
+                                         ("named", "excluded"), ("selected", "object"),
+                                         ("selected", "collection")])
+def test_a_target_that_does_not_render_is_refused_unwritten(ground, how, chosen):
+    """A target is an occluder like any other: a roof disabled in renders does not occlude
+    the ground in Cycles (1.00) nor when the ground is baked alone here, so baked beside it
+    the roof must not darken it either (it did: 0.00); Cycles refuses to bake such an object,
+    and so does this bake, by name, with nothing written."""
+    _roof_hidden(how)
+    bpy.context.view_layer.update()
+    kw = dict(method="raytrace", samples=SAMPLES, distance=DISTANCE, show_proxies=False)
+    if chosen == "named":
+        kw["objects"] = "Ground,Roof"
+    else:
+        for o in bpy.context.scene.objects:
+            o.select_set(o.name in ("Ground", "Roof"))
+    with pytest.raises(RuntimeError, match="Roof: disabled in renders"):
+        bpy.ops.canopy_ao.bake(**kw)
+    assert "CanopyAO" not in ground.data.attributes
+    assert "CanopyAO" not in bpy.data.objects["Roof"].data.attributes

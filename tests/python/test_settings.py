@@ -77,6 +77,13 @@ def test_command_line_has_one_argument_per_option():
     assert opts["distance"] == 0.0 and opts["samples"] == BY_NAME["samples"].default
 
 
+
+def test_a_flag_that_turns_an_option_off_says_so_in_its_help():
+    """--no-proxies turns Show Proxies off: its help must not read as the option's own."""
+    helps = {a.dest: a.help for a in cli.build_parser()._actions}
+    assert helps["show_proxies"].startswith("do not show the fitted shells"), helps["show_proxies"]
+    assert helps["wire_material"] == BY_NAME["wire_material"].help  # a flag turning one on
+
 @pytest.mark.parametrize("args", [["--samples", "99999999999"], ["--tau", "inf"],
                                   ["--tau", "1e400"], ["--distance", "nan"],
                                   ["--time-budget", "nan"], ["--target-error", "nan"],

@@ -7,6 +7,7 @@ atomically (atomic_io.py)."""
 import json
 import os
 import tempfile
+import uuid
 from typing import NamedTuple
 
 import bpy
@@ -58,6 +59,24 @@ def file_stem(name):
     return clean if clean == name else f"{clean}_{name_digest(name)}"
 
 
+# On the scene of a .blend never saved: the name of its own folder in the temporary folder.
+UNSAVED_KEY = "canopy_ao_unsaved_folder"
+
+
+def unsaved_folder():
+    """The images' folder of a .blend never saved: one of its own in the temporary folder
+    (named by a token kept on the scene), so another unsaved file's bake, in this Blender or
+    another, never replaces an image this file shows (their records both say 'unsaved') --
+    one this file keeps showing once saved, until baked again beside it."""
+    scene = bpy.context.scene
+    token = scene.get(UNSAVED_KEY) if scene is not None else None
+    if not (isinstance(token, str) and token.isalnum()):
+        token = uuid.uuid4().hex[:16]
+        if scene is not None:
+            scene[UNSAVED_KEY] = token
+    return os.path.join(tempfile.gettempdir(), "canopy_ao", token)
+
+
 def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True, fmt="EXR"):
     """Where obj's image file of format fmt (core/image_formats.FORMATS) goes (the folder is
     made unless make=False); a note says when it is a temporary one. obj: anything with a
@@ -68,16 +87,17 @@ def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True, fmt="EXR"):
         image_dir = image_dir.replace(BLEND_TOKEN, stem)
     if image_dir:
         if image_dir.startswith("//") and not bpy.data.filepath:
-            d = os.path.join(tempfile.gettempdir(), "canopy_ao")
+            d = unsaved_folder()
             notes.append(f"'{image_dir}' is relative to the .blend, which is not saved yet; "
-                         f"the image went to {d}")
+                         f"the image went to {d} (bake again once the .blend is saved)")
         else:
             d = bpy.path.abspath(image_dir)
     elif bpy.data.filepath:
         d = os.path.dirname(bpy.data.filepath)
     else:
-        d = os.path.join(tempfile.gettempdir(), "canopy_ao")
-        notes.append(f"the .blend is not saved yet; the image went to {d}")
+        d = unsaved_folder()
+        notes.append(f"the .blend is not saved yet; the image went to {d} (bake again once "
+                     "the .blend is saved)")
     try:
         if make:
             os.makedirs(d, exist_ok=True)

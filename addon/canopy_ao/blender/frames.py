@@ -11,7 +11,7 @@ import time
 
 import bpy
 
-from . import live_session, mesh_io
+from . import gather, live_session, mesh_io
 from .commit import Transaction
 from .frame_cache import GROUP_TAG, MODIFIER, attach, cache_name, clear, node_group
 from .job import BakeJob
@@ -168,7 +168,7 @@ class CANOPY_AO_OT_bake_frames(bpy.types.Operator):
         s = context.scene
         start, end = ((s.frame_start, s.frame_end) if self.use_scene_range
                       else (self.frame_start, self.frame_end))
-        names = [n.strip() for n in self.objects.split(",") if n.strip()]
+        names = gather.object_names(self.objects)
         return FrameBake(context, names, scene_options(s), start, end)
 
     def _done(self, rep):

@@ -4,6 +4,7 @@ arrays (the core's SceneItems). Nothing here changes the scene."""
 import math
 import time
 
+import bpy
 import numpy as np
 
 from . import mesh_io, opacity_io, parts_io
@@ -98,15 +99,26 @@ def is_candidate(obj):
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
 
 
-def bake_targets(context, object_names, opts=None):
+def object_names(text):
+    """The names an operator's ``objects`` argument gives: the whole text when it is an
+    object's exact name (one with a comma, or spaces at its ends), else the comma-separated
+    names, stripped."""
+    if text and bpy.data.objects.get(text) is not None:
+        return [text]
+    return [s.strip() for s in text.split(",") if s.strip()]
+
+
+def bake_targets(context, object_names, opts=None, on_mesh=True):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
     mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
     modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
     vertex (opts' mode), one whose modifiers change its vertex count (they realise the
     scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
-    wrong, or a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
-    bake here cannot do)."""
+    wrong, a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
+    bake here cannot do) or does not render (it would occlude the other targets, which Cycles
+    does not)."""
     scene = context.scene
+    vis = RenderVisibility(context.view_layer)
     if object_names:
         missing = [n for n in object_names if n not in scene.objects]
         if missing:
@@ -119,7 +131,6 @@ def bake_targets(context, object_names, opts=None):
     else:
         targets = [o for o in context.selected_objects if is_candidate(o)]
         if not targets:
-            vis = RenderVisibility(context.view_layer)
             dg = context.evaluated_depsgraph_get()
             vertex_mode = (opts or {}).get("mode", 'VERTEX') == 'VERTEX'
             targets = [o for o in scene.objects
@@ -127,13 +138,22 @@ def bake_targets(context, object_names, opts=None):
                        and vis.mesh_renders(o) and _holds_result(o, dg, vertex_mode)]
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
-    check_writable(targets)
+    check_writable(targets, on_mesh)
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
                             "Cycles' AO rays pass through it, its own included, which this "
                             "bake cannot do; turn Shadow on, or bake other objects (nothing "
                             "was changed)")
+    # A target is an occluder like any other (what renders occludes): one that does not render
+    # would darken the other targets only when baked with them, and Cycles refuses to bake it.
+    unrendered = [o.name for o in targets if not vis.object_renders(o)]
+    if unrendered:
+        raise CanopyAOError(f"{', '.join(unrendered)}: disabled in renders (the object, a "
+                            "collection holding it, or excluded from the view layer), so "
+                            "Cycles neither renders it nor lets it occlude, and refuses to bake "
+                            "it; enable it in renders, or bake other objects (nothing was "
+                            "changed)")
     return targets
 
 
@@ -145,10 +165,11 @@ def _holds_result(obj, depsgraph, vertex_mode):
     return n > 0 and not (vertex_mode and n != len(obj.data.vertices))
 
 
-def check_writable(targets):
+def check_writable(targets, on_mesh=True):
     """Refuse, before anything is read or written, what a bake could not write back whole: a
     mesh in Edit Mode (its data is the edit copy until Blender leaves it), linked library data
-    (a write would be lost on save), and one mesh shared by several targets (each would
+    (a write would be lost on save), and, when the results go onto the mesh (on_mesh: per
+    vertex, not into each object's images), one mesh shared by several targets (each would
     overwrite the other's result)."""
     editing = [o.name for o in targets if o.mode == 'EDIT']
     if editing:
@@ -160,7 +181,7 @@ def check_writable(targets):
                             "could not be saved; make it local (Object > Relations > Make "
                             "Local) first (nothing was changed)")
     by_mesh = {}
-    for o in targets:
+    for o in targets if on_mesh else ():
         by_mesh.setdefault(o.data.name_full, []).append(o.name)
     shared = [names for names in by_mesh.values() if len(names) > 1]
     if shared:

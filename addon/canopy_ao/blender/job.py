@@ -49,7 +49,8 @@ class BakeJob:
         t_start = time.perf_counter()
         self.lines = []
         checks.check_request(opts)  # what needs no geometry: refused before any work
-        targets = gather.bake_targets(context, object_names, opts)
+        self.kind = KINDS[opts["mode"]]
+        targets = gather.bake_targets(context, object_names, opts, on_mesh=self.kind.on_mesh)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
         self.gather_notes = []
@@ -57,7 +58,6 @@ class BakeJob:
             context, depsgraph, targets, opts, self.timings, notes=self.gather_notes)
         # Every target's receivers, read now: vertices, or texels rasterised from its UVs.
         t0 = time.perf_counter()
-        self.kind = KINDS[opts["mode"]]
         self.targets = [self.kind(it, self.objects[it.name], opts, depsgraph)
                         for it in self.items if it.name in target_names]
         self.targets += parts_io.targets(self.kind, self.items, self.objects, target_names, opts,
@@ -146,7 +146,7 @@ class BakeJob:
                             it.tree_source, it.tree_why)
         self.results.append(r)
         return (f"{r.name}: role {r.role} ({self.how[r.name]}), tree {r.tree}, method "
-                f"{r.method}, {t.count} {t.kind}{'s' if t.count != 1 else ''}, "
+                f"{r.method}, {t.count} {t.kind if t.count == 1 else t.kinds}, "
                 f"{r.seconds:.3f} s")
 
     def progress(self):

@@ -98,9 +98,14 @@ class Loop:
             t.bent = np.zeros((t.count, 3), np.float32)
         ao, world = maps.bent_normals(self.plan, t.item, t.positions[a:b], t.normals[a:b],
                                       vertices=t.vertices(a, b),
-                                      triangles=t.triangles_of(a, b), with_ao=True)
+                                      triangles=t.triangles_of(a, b), with_ao=True,
+                                      group=t.group)
         frames = (t.frames[0][a:b], t.frames[1][a:b]) if t.frames is not None else None
         t.bent[a:b] = bent_io.in_space(world, t.normals[a:b], self.bent, frames)
+        if t.group > 1:  # a texel's sub-samples: each one's share of open rays weighs it
+            if t.bent_weight is None:
+                t.bent_weight = np.zeros(t.count, np.float32)
+            t.bent_weight[a:b] = ao
         return ao
 
     def run(self):

@@ -7,7 +7,7 @@ import traceback
 import bpy
 from bpy.props import StringProperty
 
-from . import mesh_io, viewport
+from . import gather, mesh_io, viewport
 from .job import BakeJob
 from .modal import start_modal
 from .properties import option_properties, raw_values, resolve
@@ -41,8 +41,9 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
     # Every option of core/settings.py is an argument (option_properties, added below); one
     # left unset takes the scene's panel value.
     objects: StringProperty(name="Objects", default="",
-                            description="Comma-separated object names; empty = the selection, "
-                                        "or every visible mesh")
+                            description="Comma-separated object names (or one object's exact "
+                                        "name, commas and all); empty = the selection, or "
+                                        "every visible mesh")
 
     _timer = None
     _job = None
@@ -75,7 +76,7 @@ class CANOPY_AO_OT_bake(bpy.types.Operator):
         return resolve(values, context.scene)
 
     def _names(self):
-        return [s.strip() for s in self.objects.split(",") if s.strip()]
+        return gather.object_names(self.objects)
 
     def _report_error(self, exc):
         """CanopyAOError: its message. Anything else is a bug: the traceback goes to the
@@ -230,7 +231,7 @@ class CANOPY_AO_OT_remove_wiring(bpy.types.Operator):
     def execute(self, context):
         from . import materials
         if self.objects.strip():
-            names = [n.strip() for n in self.objects.split(",") if n.strip()]
+            names = gather.object_names(self.objects)
             missing = [n for n in names if n not in bpy.data.objects]
             if missing:
                 self.report({'ERROR'}, f"no object named {', '.join(map(repr, missing))}")

@@ -15,12 +15,15 @@ from . import materials, ownership, parts_io
 
 
 class Target:
-    # The receivers' noun in the report lines ("4 texels").
+    # The receivers' noun in the report lines ("1 texel", "4 texels"), and its plural.
     kind = ""
+    kinds = ""
     # Results per mesh vertex: an instanced prototype's vertices take the mean AO over its
     # instances (instances.Prototypes), and its attribute is written in place when last
     # (commit.Transaction).
     per_vertex = False
+    # Results written onto the mesh (an attribute), so several targets may not share one.
+    on_mesh = False
 
     def __init__(self, item, obj, positions, normals):
         self.item, self.obj = item, obj

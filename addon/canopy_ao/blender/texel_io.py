@@ -136,6 +136,21 @@ def split_tiles(uvs):
     return out, int(np.count_nonzero(~ok))
 
 
+def spilling_triangles(uvs, udim):
+    """How many triangles (corner UVs float32 (3M, 2)) have a corner outside the square they
+    are baked into, a hair's tolerance aside: 0–1 (a non-finite UV counts), or with udim the
+    UDIM tile of their centre (those in no tile are split_tiles' to count)."""
+    t = uvs.reshape(-1, 3, 2).astype(np.float64)
+    base = np.floor(t.mean(axis=1, keepdims=True)) if udim else np.zeros((1, 1, 2))
+    with np.errstate(invalid="ignore"):
+        inside = ((t >= base - 1e-6) & (t <= base + 1.0 + 1e-6)).all(axis=(1, 2))
+        if udim:  # in no UDIM tile: not baked at all, counted by split_tiles
+            b = base[:, 0]
+            inside |= ~(np.isfinite(b).all(axis=1) & (b[:, 0] >= 0) & (b[:, 0] < 10)
+                        & (b[:, 1] >= 0) & (b[:, 1] < 100))
+    return int(np.count_nonzero(~inside))
+
+
 def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False, aa=1):
     """The texels of obj's UV layout at resolution² as receivers (udim: of every UDIM tile its
     UVs use, tile by tile, split_tiles), with aa × aa sub-samples each when aa > 1
@@ -190,6 +205,14 @@ def receivers(obj, depsgraph, uv_map=None, resolution=1024, margin=4, udim=False
         stats["warnings"].append(f"Object '{obj.name}': {outside} triangles of UV map "
                                  f"'{uv_map}' lie outside the UDIM tiles 1001–1999 (u in "
                                  "[0, 10), v >= 0); they are not baked")
+    spill = spilling_triangles(uvs, udim)
+    if spill:
+        stats["warnings"].append(f"Object '{obj.name}': {spill} triangles of UV map "
+                                 f"'{uv_map}' reach outside the "
+                                 f"{'UDIM tile of their centre' if udim else '0–1 square'}; "
+                                 "what lies beyond is not baked (the image shows its edge "
+                                 "there): pack the UVs inside"
+                                 f"{'' if udim else ', or bake UDIM Tiles'}")
     if stats.get("overlapping_texels", 0) > 0:
         stats["warnings"].append(
             f"Object '{obj.name}': UV map '{uv_map}' overlaps ({stats['overlapping_texels']} "

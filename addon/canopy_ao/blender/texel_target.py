@@ -13,10 +13,67 @@ from . import (bent_io, cycles_check, files_io, gltf_io, maps_io, materials, own
 from .targets import Target, check_wiring, wire_undo
 
 
+def texel_bent(bent, weight, k):
+    """Each texel's bent normal from its k sub-samples' (float32 (k T, 3), unit; each from its
+    share of the texel's rays): their mean weighted by the share of their rays that were open
+    (weight (k T,), or None: equal), so a sub-sample whose rays were all blocked (its normal
+    stands in, raytrace.h 'Bent normals') adds no direction; unit again. Texels whose weighted
+    mean is zero (every ray blocked) take the plain mean, then the first sub-sample's."""
+    each = np.asarray(bent, np.float64).reshape(-1, k, 3)
+    plain = each.mean(axis=1)
+    b = plain if weight is None else np.einsum(
+        "tk,tki->ti", np.asarray(weight, np.float64).reshape(-1, k), each)
+    for alt in (plain, each[:, 0]):
+        length = np.linalg.norm(b, axis=1, keepdims=True)
+        b = np.where(length > 1e-12, b, alt)
+    length = np.linalg.norm(b, axis=1, keepdims=True)
+    return (b / np.maximum(length, 1e-30)).astype(np.float32)
+
+
+def check_shared_materials(targets, opts):
+    """Refuse, before anything is written, wiring an object's image into a material another
+    object shows (one of its slots, or for an object without materials the one wiring gives
+    its mesh): a material holds one image, so the last target wired would show on all of them,
+    each through its own UVs. With an Atlas the targets share one image: only objects outside
+    the bake count."""
+    if not (opts["wire_material"] or opts["gltf"]):
+        return
+    by_material, by_mesh = {}, {}
+    for o in bpy.data.objects:
+        if o.type == 'MESH':
+            by_mesh.setdefault(o.data.as_pointer(), set()).add(o.name)
+            for slot in o.material_slots:
+                if slot.material is not None:
+                    by_material.setdefault(slot.material.as_pointer(), set()).add(o.name)
+    baked = {t.obj.name for t in targets}
+    found = []
+    for t in targets:
+        own = baked if opts["atlas"] else {t.obj.name}
+        mats = {s.material.as_pointer(): s.material.name for s in t.obj.material_slots
+                if s.material is not None}
+        for ptr, name in mats.items():
+            others = sorted(by_material[ptr] - own)
+            if others:
+                found.append(f"{t.obj.name}: material '{name}' is also shown on "
+                             f"{', '.join(others)}")
+        others = sorted(by_mesh[t.obj.data.as_pointer()] - own) if not mats else []
+        if others:
+            found.append(f"{t.obj.name}: the material wiring gives its mesh "
+                         f"'{t.obj.data.name}' is also shown on {', '.join(others)}")
+    if found:
+        raise CanopyAOError(f"{'; '.join(found)}; a material shows one image, so each would "
+                            "show the last object's AO through its own UVs. Give each object "
+                            "its own material (Object > Relations > Make Single User > "
+                            "Materials; for a shared mesh, Object Data too), bake the objects "
+                            "sharing it together into an Atlas, or bake without Wire Material "
+                            "(nothing was changed)")
+
+
 class TexelTarget(Target):
     """An image in the UV layout: an EXR file and a Blender image, wired when asked."""
 
     kind = "texel"
+    kinds = "texels"
 
     def __init__(self, item, obj, opts, depsgraph):
         if opts["channel"] != "RGBA" and (opts["udim"] or opts["atlas"]):
@@ -36,6 +93,7 @@ class TexelTarget(Target):
                                          self.rx.triangles)
         super().__init__(item, obj, pos, nrm)
         self.group = self.rx.aa ** 2
+        self.bent_weight = None  # each sub-sample's open fraction of its rays (loop.Loop)
         # The raster's loop triangles are the item's own when the counts agree (the same
         # evaluated mesh): then a texel's rays skip only its own triangle, as Cycles' do.
         if tris is not None and self.rx.stats.get("triangles") == len(item.triangles):
@@ -76,12 +134,8 @@ class TexelTarget(Target):
         self.ao = self.ao.reshape(-1, k).mean(axis=1, dtype=np.float64).astype(np.float32)
         if self.thickness is not None:
             self.thickness = self.thickness.reshape(-1, k).mean(axis=1).astype(np.float32)
-        if self.bent is not None:  # unit again; sub-samples that cancel keep the first's
-            each = self.bent.reshape(-1, k, 3)
-            b = each.mean(axis=1)
-            length = np.linalg.norm(b, axis=1, keepdims=True)
-            self.bent = np.where(length > 0, b / np.maximum(length, 1e-30),
-                                 each[:, 0]).astype(np.float32)
+        if self.bent is not None:
+            self.bent = texel_bent(self.bent, self.bent_weight, k)
         self.positions, self.normals = self.rx.positions, self.rx.normals
         self.triangles = None
 
@@ -207,3 +261,4 @@ class TexelTarget(Target):
                 out.append((files_io.tile_path(path, o.tile) if o.tile is not None else path,
                             o))
         files_io.check_outputs(out, opts["overwrite"])
+        check_shared_materials(targets, opts)

@@ -13,6 +13,8 @@ class VertexTarget(Target):
     """A color attribute per vertex."""
 
     kind = "vertex"
+    kinds = "vertices"
+    on_mesh = True
     per_vertex = True
 
     def __init__(self, item, obj, opts, depsgraph=None):

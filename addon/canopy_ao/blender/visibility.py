@@ -13,6 +13,9 @@
   the instancer renders and casts shadows, and the instanced object casts shadows; a collection
   instance leaves out objects disabled in renders and collections (the instanced one included)
   disabled in renders, while a particle instance of an object disabled in renders renders.
+- A target (an object the bake writes) follows the same rules: one that does not render or
+  casts no shadow is refused (gather.bake_targets), as Cycles refuses to bake the first and
+  lets the second's own rays through it.
 """
 
 _INSTANCE_TYPES_WITH_COLLECTIONS = ('COLLECTION',)

@@ -93,13 +93,15 @@ def rung_is_the_trace(plan: Plan, item: SceneItem) -> bool:
 
 
 def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
-                 triangles=None, with_ao=False):
+                 triangles=None, with_ao=False, group=1):
     """World-space bent normals float32 (N, 3) of receivers on item (as
     bake.evaluate_receivers: its vertices, a chunk of them, or texels with their triangles):
     the cosine-weighted mean unoccluded direction of settings.samples rays per face corner,
     normalised, against the plan's tracer (ensure_tracer). Every ray blocked: the unit normal;
     a zero normal: (0, 0, 0) (raytrace.h, "Bent normals"). with_ao: (the trace's AO float32
-    (N,), bent normals); the AO is the exact rung's where rung_is_the_trace."""
+    (N,), bent normals); the AO is the exact rung's where rung_is_the_trace. group: receivers
+    per texel, its anti-aliasing sub-samples, which deal the texel's Samples among them as the
+    AO's do (lighting.ray_args): each point's bent normal is its share's."""
     if plan.tracer is None:
         raise CanopyAOError("bent normals need the ray tracer (maps.ensure_tracer)")
     p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1, 3)
@@ -108,7 +110,8 @@ def bent_normals(plan: Plan, item: SceneItem, positions, normals, vertices=None,
     if ray_budget.applies(plan, item.name, own):  # the exact rung's rays (ray_budget.py)
         ao, bent = ray_budget.trace(plan, item.name, p, n, own, bent_normals=True)
     else:
-        ao, bent = lighting.trace(plan, p, n, plan.settings.samples, own=own, bent_normals=True)
+        ao, bent = lighting.trace(plan, p, n, own=own, bent_normals=True,
+                                  **lighting.ray_args(plan, group))
     bent = np.asarray(bent, np.float32)
     return (np.asarray(ao, np.float32), bent) if with_ao else bent
 
