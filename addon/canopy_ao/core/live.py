@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import proxies
+from . import proxies, walls
 from .native import CanopyAOError, refusals_are_user_errors
 from .rungs import base as rungs
 from .scene import Plan, SceneItem, split_trees
@@ -67,6 +67,7 @@ def refit(base: Plan, items) -> Plan:
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried)
+    plan.walls = walls.build(items)  # the GROUND surfaces as they stand at this frame
     proxies.fit_scene(plan, split_trees(items))
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     return plan
@@ -75,6 +76,7 @@ def refit(base: Plan, items) -> Plan:
 def template_items(items) -> list:
     """The first bake's items as a frame's template: positions kept only for their count."""
     return [SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
-                      it.triangles if it.role == "GRASS" else np.zeros((0, 3), np.int32),
+                      it.triangles if it.role in ("GRASS", "GROUND")
+                      else np.zeros((0, 3), np.int32),
                       tree_source="set", tree_labels=it.tree_labels, tree_names=it.tree_names,
                       tree_why=it.tree_why) for it in items]

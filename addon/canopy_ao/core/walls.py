@@ -45,33 +45,54 @@ class Patch:
 
 def build(items) -> list:
     """The patches of every GROUND item with triangles (an empty list when there are none)."""
-    tris = [it.positions.astype(np.float64)[it.triangles] for it in items
-            if it.role == "GROUND" and len(it.triangles)]
-    if not tris:
+    ground = [it for it in items if it.role == "GROUND" and len(it.triangles)]
+    if not ground:
         return []
-    t = np.concatenate(tris)  # (T, 3, 3)
+    first = np.cumsum([0] + [len(it.positions) for it in ground])
+    pos = np.concatenate([it.positions for it in ground]).astype(np.float64)
+    tri = np.concatenate([it.triangles + f for it, f in zip(ground, first)])
+    t = pos[tri]  # (T, 3, 3)
     cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
     dbl = np.linalg.norm(cross, axis=1)
     ok = dbl > 1e-12 * max(float(dbl.max()), 1e-30)
-    t, cross, dbl = t[ok], cross[ok], dbl[ok]
+    t, tri, cross, dbl = t[ok], tri[ok], cross[ok], dbl[ok]
     if not len(t):
         return []
     m = cross / dbl[:, None]
     lo, hi = t.reshape(-1, 3).min(0), t.reshape(-1, 3).max(0)
     diag = max(float(np.linalg.norm(hi - lo)), 1e-30)
     d = np.einsum("ij,ij->i", m, t.mean(1))
-    key = np.column_stack([np.round(m / PLANE_ANGLE), np.round(d / (PLANE_OFFSET * diag))])
-    _, group = np.unique(key.astype(np.int64), axis=0, return_inverse=True)
+    step = PLANE_OFFSET * diag
+    # one int64 per (normal, offset) cell: normals' cells within ±64, offsets' within ±2^20
+    key = np.round(m / PLANE_ANGLE).astype(np.int64) + 64
+    key = (key[:, 0] * 128 + key[:, 1]) * 128 + key[:, 2]
+    key = key * (1 << 21) + np.round(d / step).astype(np.int64) + (1 << 20)
+    _, group = np.unique(key, return_inverse=True)
     group = group.reshape(-1)
     area = np.bincount(group, dbl * 0.5)
+    gm = np.column_stack([np.bincount(group, cross[:, k], len(area)) for k in range(3)])
+    gm /= np.maximum(np.linalg.norm(gm, axis=1, keepdims=True), 1e-300)
+    gd = np.bincount(group, d * dbl) / np.maximum(np.bincount(group, dbl), 1e-300)
+    # one plane cut by the rounding into two keys is one patch again: the largest pieces
+    # first, each joining the first plane within a step of it
+    planes, members = [], []
+    for g in np.argsort(-area)[:4 * MAX_PATCHES]:
+        for j, (pm, pd) in enumerate(planes):
+            if np.linalg.norm(gm[g] - pm) < PLANE_ANGLE and abs(gd[g] - pd) < step:
+                members[j].append(g)
+                break
+        else:
+            planes.append((gm[g], gd[g]))
+            members.append([g])
+    order = np.argsort([-area[g].sum() for g in map(np.array, members)])
     patches = []
-    for g in np.argsort(-area)[:MAX_PATCHES]:
-        sel = group == g
-        normal = (cross[sel]).sum(0)
+    for j in order[:MAX_PATCHES]:
+        sel = np.isin(group, members[j])
+        normal = cross[sel].sum(0)
         normal /= max(np.linalg.norm(normal), 1e-30)
-        hull = _hull_in_plane(t[sel].reshape(-1, 3), normal)
+        hull = _hull_in_plane(pos[np.unique(tri[sel])], normal)
         if hull is not None:
-            patches.append(Patch(hull, normal, area[g]))
+            patches.append(Patch(hull, normal, area[members[j]].sum()))
     return patches
 
 
@@ -82,7 +103,17 @@ def _hull_in_plane(points, normal):
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
     c = points.mean(0)
-    q = np.unique(np.column_stack([(points - c) @ u, (points - c) @ v]), axis=0)
+    q = np.column_stack([(points - c) @ u, (points - c) @ v])
+    # Akl–Toussaint: points inside the octagon of the extreme points in 8 directions are not
+    # on the hull (a subdivided ground keeps only its rim)
+    a = np.arange(8) * np.pi / 4
+    ext = q[np.argmax(q @ np.stack([np.cos(a), np.sin(a)]), axis=0)]
+    ext = ext[np.sort(np.unique(ext, axis=0, return_index=True)[1])]
+    if len(ext) >= 3:
+        e = np.roll(ext, -1, axis=0) - ext
+        side = e[:, 0] * (q[:, None, 1] - ext[:, 1]) - e[:, 1] * (q[:, None, 0] - ext[:, 0])
+        q = q[~np.all(side > 1e-12 * max(float(np.abs(q).max()), 1e-300), axis=1)]
+    q = np.unique(q, axis=0)
     if len(q) < 3:
         return None
 
