@@ -153,7 +153,17 @@ def visibility(patches, p, n, distance=np.inf, near=0.0) -> np.ndarray:
 
 def _form_factor(patch, p, n, distance):
     """(N,) the cosine-weighted share of each receiver's hemisphere the patch covers within
-    `distance` of it."""
+    `distance` of it: 0 where the patch is wholly below its horizon or out of reach."""
+    out = np.zeros(len(p))
+    above = np.einsum("kj,nj->nk", patch.corners, n) - np.einsum("nj,nj->n", p, n)[:, None]
+    live = np.any(above > EPS * patch.diameter, axis=1) & (
+        np.abs(p @ patch.normal - patch.offset) < distance)
+    if np.any(live):
+        out[live] = _form_factor_of(patch, p[live], n[live], distance)
+    return out
+
+
+def _form_factor_of(patch, p, n, distance):
     m = patch.normal
     eps = EPS * patch.diameter
     x = p.copy()
