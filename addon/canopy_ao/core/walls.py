@@ -4,7 +4,8 @@ lit'): a wall an ivy climbs, a rock face, the ground under a wall.
 The GROUND items' triangles are grouped by the plane they lie in (their unit normal to within
 PLANE_ANGLE, their offset to within PLANE_OFFSET of the surfaces' diagonal: scale-free), and
 each plane's triangles are replaced by the convex hull of their corners in that plane, a
-patch. A receiver sees a patch as an opaque polygon: its cosine-weighted form factor (Lambert's
+patch, where they cover at least COVERAGE of it (else they are facets of a curved surface
+scattered over one plane, and left out). A receiver sees a patch as an opaque polygon: its cosine-weighted form factor (Lambert's
 contour integral, exact for a polygon) after clipping it to the receiver's hemisphere and to
 the AO distance (the patch's plane meets the sphere of radius D in a disc; the disc is a
 DISC_SIDES-gon of its area). Patches are summed (solid surfaces meeting at an edge, a wall on a
@@ -26,7 +27,8 @@ import numpy as np
 PLANE_ANGLE = 0.02      # normals in one plane: unit normals within this (radians, ≈ 1.1°)
 PLANE_OFFSET = 1e-3     # offsets within this share of the surfaces' bounding diagonal
 MAX_PATCHES = 64        # the largest planes by area; the rest are left out (see DESIGN)
-DISC_SIDES = 16         # the AO distance's disc as a regular polygon of its area
+COVERAGE = 0.5          # a plane's triangles cover at least this share of their hull
+DISC_SIDES = 8          # the AO distance's disc as a regular polygon of its area
 EPS = 1e-5              # on a patch's plane: this share of the patch's diameter from it
 CHUNK = 8192            # receivers per numpy block
 
@@ -86,13 +88,21 @@ def build(items) -> list:
             members.append([g])
     order = np.argsort([-area[g].sum() for g in map(np.array, members)])
     patches = []
-    for j in order[:MAX_PATCHES]:
+    for j in order:
+        if len(patches) == MAX_PATCHES:
+            break
         sel = np.isin(group, members[j])
         normal = cross[sel].sum(0)
         normal /= max(np.linalg.norm(normal), 1e-30)
         hull = _hull_in_plane(pos[np.unique(tri[sel])], normal)
-        if hull is not None:
-            patches.append(Patch(hull, normal, area[members[j]].sum()))
+        if hull is None:
+            continue
+        covered = area[members[j]].sum()
+        hull_area = 0.5 * abs(float(np.cross(hull, np.roll(hull, -1, axis=0)).sum(0) @ normal))
+        # facets of a curved surface that happen to share a plane, far apart, are no solid
+        # piece of it: their hull would be a sheet where there is none
+        if covered >= COVERAGE * hull_area:
+            patches.append(Patch(hull, normal, covered))
     return patches
 
 
@@ -226,9 +236,10 @@ def _clip(poly, mask, w, c):
     cross = poly + tt[:, :, None] * (b - poly)
     slots = np.stack([poly, cross], axis=2).reshape(N, 2 * K, 3)
     keep = np.stack([ina, cut], axis=2).reshape(N, 2 * K)
-    order = np.argsort(~keep, axis=1, kind="stable")[:, :K + 1]
-    return (np.take_along_axis(slots, order[:, :, None], axis=1),
-            np.take_along_axis(keep, order, axis=1))
+    width = max(int(keep.sum(1).max(initial=0)), 1)  # never more than K + 1 (convex)
+    order = np.argsort(~keep, axis=1, kind="stable")[:, :width]
+    rows = np.arange(N)[:, None]
+    return slots[rows, order], keep[rows, order]
 
 
 def _lambert(poly, mask, n):
