@@ -22,6 +22,8 @@ A flat ground alone gives every receiver on it F = 0; it still occludes what sta
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 PLANE_ANGLE = 0.02      # normals in one plane: unit normals within this (radians, ≈ 1.1°)
@@ -45,11 +47,28 @@ class Patch:
         self.diameter = float(np.linalg.norm(corners.max(0) - corners.min(0)))
 
 
+_LAST = [None, []]  # the last build's (key, patches): live frames over a still ground
+
+
 def build(items) -> list:
-    """The patches of every GROUND item with triangles (an empty list when there are none)."""
+    """The patches of every GROUND item with triangles (an empty list when there are none).
+    The same GROUND geometry as the last call's (a live frame's) returns its patches."""
     ground = [it for it in items if it.role == "GROUND" and len(it.triangles)]
     if not ground:
         return []
+    h = hashlib.blake2b(digest_size=16)
+    for it in ground:
+        for a in (it.positions, it.triangles):
+            a = np.ascontiguousarray(a)
+            h.update(str((a.dtype, a.shape)).encode())
+            h.update(memoryview(a).cast("B"))
+    key = h.digest()
+    if _LAST[0] != key:
+        _LAST[:] = [key, _build(ground)]
+    return list(_LAST[1])
+
+
+def _build(ground) -> list:
     first = np.cumsum([0] + [len(it.positions) for it in ground])
     pos = np.concatenate([it.positions for it in ground]).astype(np.float64)
     tri = np.concatenate([it.triangles + f for it, f in zip(ground, first)])
