@@ -117,3 +117,19 @@ def test_no_ground_no_patches():
     plan = core.prepare(items, core.BakeSettings(method="sphere", tau=1.5))
     p = items[0].positions[:5]
     assert np.all(lighting.walls_ao(plan, p, items[0].normals[:5]) == 1.0)
+
+
+def test_a_bumpy_terrain_is_no_sheet_over_the_scene():
+    """Facets of a rough ground that share a plane far apart are no solid piece of it: their
+    hull would be a sheet through the scene (receivers above it facing sideways: AO 0.008
+    without COVERAGE, where rays see the ground below fill about half the hemisphere). Such a
+    terrain is left out (AO 1 there, as before the patches): never darker than the ground."""
+    rng = np.random.default_rng(3)
+    p, t = plane(size=50.0, cuts=100)
+    p = p.copy()
+    p[:, 2] = rng.normal(0.0, 0.05, len(p))
+    g = core.SceneItem("G", "GROUND", "", p, vertex_normals(p, t), t)
+    patches = walls.build([g])
+    q = np.column_stack([rng.uniform(-20, 20, (400, 2)), rng.uniform(0.5, 5, 400)])
+    v = walls.visibility(patches, q, np.tile([0.0, 1.0, 0.0], (400, 1)), 10.0)
+    assert v.min() > 0.45
