@@ -5,11 +5,12 @@ The GROUND items' triangles are grouped by the plane they lie in (their unit nor
 PLANE_ANGLE, their offset to within PLANE_OFFSET of the surfaces' diagonal: scale-free), and
 each plane's triangles are replaced by the convex hull of their corners in that plane, a
 patch, where they cover at least COVERAGE of it (else they are facets of a curved surface
-scattered over one plane, and left out). A receiver sees a patch as an opaque polygon: its cosine-weighted form factor (Lambert's
-contour integral, exact for a polygon) after clipping it to the receiver's hemisphere and to
-the AO distance (the patch's plane meets the sphere of radius D in a disc; the disc is a
-DISC_SIDES-gon of its area). Patches are summed (solid surfaces meeting at an edge, a wall on a
-ground, mostly cover different directions) and clipped to 1: V = 1 − Σ F.
+scattered over one plane, and left out). A receiver sees a patch as an opaque polygon: its
+cosine-weighted form factor (Lambert's contour integral, exact for a polygon) after clipping
+it to the receiver's hemisphere and to the AO distance (the patch's plane meets the sphere of
+radius D in a disc; the disc is a DISC_SIDES-gon of its area). Patches are summed (solid
+surfaces meeting at an edge, a wall on a ground, mostly cover different directions) and
+clipped to 1: V = 1 − Σ F.
 
 A receiver on a patch's plane (its own surface, or the ground under a wall's foot: within EPS
 of the patch's size) is moved that hair off it to the patch's front (its triangles' side), so
@@ -156,8 +157,7 @@ def _hull_in_plane(points, normal):
     h = np.array(half(q) + half(q[::-1]))  # Andrew's monotone chain
     if len(h) < 3:
         return None
-    off = float(normal @ c)
-    return c - normal * (normal @ c - off) + h[:, :1] * u + h[:, 1:] * v
+    return c + h[:, :1] * u + h[:, 1:] * v
 
 
 def visibility(patches, p, n, distance=np.inf, near=0.0) -> np.ndarray:
@@ -200,7 +200,7 @@ def _form_factor_of(patch, p, n, distance):
     flat = np.abs(h) < eps
     x[flat] += (eps - h[flat])[:, None] * m
     h[flat] = eps
-    poly = np.broadcast_to(patch.corners - 0.0, (len(x),) + patch.corners.shape) - x[:, None]
+    poly = patch.corners[None] - x[:, None]  # (N, K, 3), relative to each receiver
     mask = np.ones(poly.shape[:2], bool)
     # the receiver's hemisphere: n · v ≥ 0
     poly, mask = _clip(poly, mask, n, np.zeros(len(x)))
