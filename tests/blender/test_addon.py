@@ -634,7 +634,8 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
 
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     """Set roles and a given τ with an analytic model: no object's triangles are fetched, and
-    the bake equals the one that fetched them (grass keeps its blades)."""
+    the bake equals the one that fetched them (grass keeps its blades, the ground its
+    triangles: they occlude as patches, core/walls.py)."""
     from canopy_ao.blender import mesh_io as mio, properties
     from canopy_ao.blender.job import run_bake
     roles = {"Trunk": "TRUNK", "Leaves": "CANOPY", "Ground": "GROUND", "Grass": "GRASS"}
@@ -651,7 +652,7 @@ def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     before = {n: ao_of(n) for n in roles}
     force[0] = False
     assert bake(method="sphere", tau=1.5) == {'FINISHED'}
-    assert asked == {"Trunk": False, "Leaves": False, "Ground": False, "Grass": True}
+    assert asked == {"Trunk": False, "Leaves": False, "Ground": True, "Grass": True}
     for n in roles:
         np.testing.assert_array_equal(ao_of(n), before[n])
     opts = dict(properties.scene_options(bpy.context.scene), method="sphere", tau=1.5,

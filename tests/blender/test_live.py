@@ -307,7 +307,8 @@ def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_pa
     env = dict(os.environ, BLENDER_USER_SCRIPTS=user_scripts)
     cmd = ["blender", "-b", "--factory-startup", path, "--python-expr",
            "import canopy_ao.cli; canopy_ao.cli.main()", "-a", "--python-expr", probe, "--",
-           "--live", "--method", "ellipsoid", "--tau", "1.7", "--no-proxies"]
+           "--live", "--method", "ellipsoid", "--tau", "1.7", "--no-proxies",
+           "--distance", "0"]  # opts()'s: the ground's patch reaches the leaves by distance
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "canopy_ao: error" not in out.stderr, out.stderr

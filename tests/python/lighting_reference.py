@@ -4,14 +4,16 @@ native plan is tested against (tests/python/test_scene_plan.py). Analytic rungs 
 ellipsoid, reeves_blau, shells, medium), with the two multipliers that were applied after it:
 the grass layers over a ground point (the numpy disc count core/grass_layer.py had) and the
 instanced forest (one OccluderField per prototype and one for the solids, as core/forest.py
-had)."""
+had); then the GROUND surfaces' patches (core/walls.py), which lighting multiplies in after
+the native call."""
 
 import math
 
 import numpy as np
 
-from canopy_ao.core import forest as _forest
+from canopy_ao.core import forest as _forest, walls
 from canopy_ao.core.lighting import tau_of
+from canopy_ao.core.scene import ray_length
 from canopy_ao.core.native import _core
 from canopy_ao.core.proxies import own_shells
 
@@ -150,4 +152,7 @@ def evaluate(plan, role, tree, grass_key, p, n, method, tau):
         np.clip(ao, 0.0, 1.0, out=ao)
     if plan.forest is not None:
         ao = np.clip(ao * forest_ao(plan.forest, p, n), 0.0, 1.0).astype(np.float32)
-    return ao
+    # the GROUND surfaces' patches (core/walls.py), multiplied after the native plan's call
+    if role == "GRASS":  # the grass law holds the ground the blades stand on
+        return ao
+    return ao * walls.visibility(plan.walls, p, n, ray_length(plan.settings.distance))

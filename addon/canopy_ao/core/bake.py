@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from . import buried as _buried
-from . import cost, forest_tau, ladder, lighting, native, opacity, proxies, regression, trees
+from . import cost, forest_tau, ladder, lighting, native, opacity, proxies, regression, trees, walls
 from . import forest as _forest
 from .native import CanopyAOError, refusals_are_user_errors
 from .scene import RECEIVER_ROLES, ItemResult, Plan, SceneItem, own_primitives, split_trees
@@ -51,6 +51,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
     whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
     plan.notes.extend(opacity.notes(whole))
     proxies.fit_scene(plan, items)
+    plan.walls = walls.build(whole)  # GROUND surfaces occluding in the proxy rungs
     plan.timings["fit"] = time.perf_counter() - t0
     rung = rungs.get(settings.method)
     if (rung.scene_plan or rung.chooses) and (plan.fits or plan.trunks):

@@ -43,13 +43,14 @@ def triangles_needed(method: str, tau, role: str) -> bool:
     """Whether an item's triangles take part in a bake (the add-on skips fetching them
     otherwise: Blender's loop triangulation costs more than positions and normals together).
     They are rays' targets (the exact rung, and the calibration of auto or of any method with
-    tau None), the density grid's input, and grass blades (connected components); the
-    analytic models with a given τ need positions and normals only (Rung.needs_triangles)."""
+    tau None), the density grid's input, grass blades (connected components) and GROUND
+    surfaces (every proxy rung's opaque patches: core/walls.py); the analytic models with a
+    given τ need the other roles' positions and normals only (Rung.needs_triangles)."""
     if role == "IGNORE":
         return False
     if rungs.get(method).needs_triangles or tau is None:
         return True
-    return role == "GRASS"
+    return role in ("GRASS", "GROUND")
 
 
 def sample_receivers(items, count, seed):

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import card_area, ray_budget, texel_budget
+from . import card_area, ray_budget, texel_budget, walls
 from .forest import tracer_instances
 from .meshes import bake_shading, scene_triangles
 from .native import CanopyAOError, _core
@@ -122,7 +122,7 @@ def exact_ao(plan: Plan, grass_key, p, n, own=None, group=1) -> np.ndarray:
 
 def grid_ao(plan: Plan, role, grass_key, p, n) -> np.ndarray:
     """The density grid's AO times the grass (a blade's own law, the layers over the ground)."""
-    return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n))
+    return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n) * walls_ao(plan, p, n, role))
 
 
 def scene_plan_ao(rung, plan: Plan, role, tree, grass_key, p, n, tau, own=None, group=1):
@@ -139,8 +139,19 @@ def scene_plan_ao(rung, plan: Plan, role, tree, grass_key, p, n, tau, own=None, 
     if role == "GRASS":
         ground, blade, layer = _blades(plan, grass_key, p)
         grass = (ground, blade) if layer is None else (ground, blade, layer)
-    return lit.native.evaluate(p, n, role, lit.tree_ids(tree), plan_method(rung),
-                               lit.taus(tau), grass=grass)
+    ao = lit.native.evaluate(p, n, role, lit.tree_ids(tree), plan_method(rung),
+                             lit.taus(tau), grass=grass)
+    return ao * walls_ao(plan, p, n, role) if plan.walls else ao
+
+
+def walls_ao(plan: Plan, p, n, role=None, near=0.0) -> np.ndarray:
+    """float32 (N,): the GROUND surfaces (a wall, a rock, the ground under them) as opaque
+    occluders of the ray-free proxy rungs, from `near` out to the AO distance (core/walls.py;
+    docs/DESIGN.md, 'How each role is lit'). All ones without GROUND triangles, and for a
+    GRASS blade, whose grass law holds the ground it stands on."""
+    if role == "GRASS":
+        return np.ones(len(p), np.float32)
+    return walls.visibility(plan.walls, p, n, ray_length(plan.settings.distance), near)
 
 
 def _blades(plan: Plan, grass_key, p):
@@ -243,10 +254,13 @@ def hybrid_ao(plan, p, n, own=None, group=1):
     the caller traces the whole distance instead (the rays see the grass themselves)."""
     far = ray_length(plan.settings.distance)
     near = min(HYBRID_VOXELS * float(plan.grid.voxel_size), far)
-    return np.asarray(_core.ao_near_far(_tracer(plan), plan.grid, p, n, near, distance=far,
-                                        seed=int(plan.settings.seed), **ray_args(plan, group),
-                                        **(own or {})),
-                      dtype=np.float32)
+    ao = np.asarray(_core.ao_near_far(_tracer(plan), plan.grid, p, n, near, distance=far,
+                                      seed=int(plan.settings.seed), **ray_args(plan, group),
+                                      **(own or {})),
+                    dtype=np.float32)
+    # The far field holds the leaves and branches only: the GROUND surfaces beyond the near
+    # rays occlude as walls_ao's patches.
+    return ao * walls_ao(plan, p, n, near=near) if plan.walls else ao
 
 
 def build_tracer(items, bases=None, prototypes=None):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import proxies
+from . import proxies, walls
 from .native import CanopyAOError, refusals_are_user_errors
 from .rungs import base as rungs
 from .scene import Plan, SceneItem, split_trees
@@ -72,6 +72,7 @@ def refit(base: Plan, items) -> Plan:
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried)
+    plan.walls = walls.build(items)  # the GROUND surfaces as they stand at this frame
     parts = split_trees(items)
     proxies.fit_scene(plan, parts)
     if base.regression is not None and rungs.get(base.method).needs_regression:
@@ -83,7 +84,7 @@ def refit(base: Plan, items) -> Plan:
 def template_items(items, method=None) -> list:
     """The first bake's items as a frame's template: positions kept only for their count,
     triangles where ``method``'s frames need them (Rung.frame_triangle_roles)."""
-    keep = rungs.get(method).frame_triangle_roles if method else ("GRASS",)
+    keep = rungs.get(method).frame_triangle_roles if method else ("GRASS", "GROUND")
     return [SceneItem(it.name, it.role, it.tree, it.positions, it.normals,
                       it.triangles if it.role in keep else np.zeros((0, 3), np.int32),
                       tree_source="set", tree_labels=it.tree_labels, tree_names=it.tree_names,

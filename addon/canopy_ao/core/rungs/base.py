@@ -52,9 +52,9 @@ class Rung:
     rays_see_instances: bool = False  # its AO comes from rays alone, which see the instances
     finds_buried: bool = False       # reads 0 at buried receivers by itself (no buried test)
     live: bool = False               # refits and evaluates fast enough for every frame
-    # roles whose triangles a live frame keeps (grass blades always; the ray-free rung's
-    # density grid and leaf table need every occluder's)
-    frame_triangle_roles: tuple = ("GRASS",)
+    # roles whose triangles a live frame keeps (grass blades and the GROUND surfaces, whose
+    # walls occlude: core/walls.py; the ray-free rung's grid and leaf table need every one)
+    frame_triangle_roles: tuple = ("GRASS", "GROUND")
     uses_samples: bool = False       # settings.samples sets its rays
     exact: bool = False              # the reference rung: auto may halve its samples
     climbs: Callable | None = None   # climbs(plan): auto weighs it as a candidate on this plan
