@@ -193,8 +193,11 @@ def gn_scatter(crown, card, density=30.0, realize=False, seed=0):
     (Object Info, original space) at random rotations, and Realize Instances when asked."""
     import bpy
     ng = bpy.data.node_groups.new("Scatter leaves", "GeometryNodeTree")
-    ng.inputs.new("NodeSocketGeometry", "Geometry")
-    ng.outputs.new("NodeSocketGeometry", "Geometry")
+    for io in ("INPUT", "OUTPUT"):
+        if hasattr(ng, "interface"):  # Blender 4.0+
+            ng.interface.new_socket(name="Geometry", in_out=io, socket_type="NodeSocketGeometry")
+        else:
+            (ng.inputs if io == "INPUT" else ng.outputs).new("NodeSocketGeometry", "Geometry")
     n, link = ng.nodes, ng.links.new
     gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
     dist = n.new("GeometryNodeDistributePointsOnFaces")

@@ -109,8 +109,11 @@ def test_a_target_whose_modifier_drops_the_attribute_keeps_its_original_written(
     there to write, so live AO writes (and tags) the original, and keeps running."""
     leaves = animated.objects["Leaves"]
     ng = bpy.data.node_groups.new("Drop AO", 'GeometryNodeTree')
-    ng.inputs.new('NodeSocketGeometry', "Geometry")
-    ng.outputs.new('NodeSocketGeometry', "Geometry")
+    for io in ('INPUT', 'OUTPUT'):
+        if hasattr(ng, "interface"):  # 4.0+
+            ng.interface.new_socket(name="Geometry", in_out=io, socket_type='NodeSocketGeometry')
+        else:
+            (ng.inputs if io == 'INPUT' else ng.outputs).new('NodeSocketGeometry', "Geometry")
     gin, gout = ng.nodes.new('NodeGroupInput'), ng.nodes.new('NodeGroupOutput')
     drop = ng.nodes.new('GeometryNodeRemoveAttribute')
     drop.inputs["Name"].default_value = "CanopyAO"

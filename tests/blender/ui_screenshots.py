@@ -110,8 +110,10 @@ def steps():
         if os.path.exists(path):
             os.remove(path)
         if shot_area is None:
+            # The 3D View with its sidebar (the whole window reads back black under Xvfb in
+            # Blender 4.x: screen.screenshot there is taken before the window has drawn).
             with bpy.context.temp_override(window=win, area=area, region=region):
-                bpy.ops.screen.screenshot(filepath=path)
+                bpy.ops.screen.screenshot_area(filepath=path)
         else:
             # The AO alone: flat lighting shows the attribute's colour as it is.
             space.show_region_ui = space.show_region_toolbar = False
