@@ -2,7 +2,7 @@
 example tree (examples/make_scene.py's round_tree, quick size) baked per vertex from the panel,
 the 3D View filling the window with the sidebar on the *Canopy AO* tab, saved as
 
-    panel.png        the whole window: the panel beside the baked tree in Solid shading
+    panel.png        the 3D View with its sidebar: the panel beside the baked tree in Solid shading
     viewport_ao.png  the 3D View alone, the AO the bake showed, in flat lighting
 
 into $CANOPY_AO_SCREENSHOTS (default docs/images/). Regenerate the committed pictures with
