@@ -30,6 +30,7 @@ constexpr double kPi = 3.14159265358979323846;
 struct Prepared {
   std::vector<D3> corners;
   D3 m, u, v;
+  D3 dirs[kPatchDiscSides];  // the disc polygon's sides' outward normals, in-plane
   double offset, eps;
 };
 
@@ -42,34 +43,50 @@ Prepared prepare(const PatchPolygon& p) {
   q.u = cross(q.m, e);
   q.u = (1.0 / norm(q.u)) * q.u;
   q.v = cross(q.m, q.u);
+  for (int k = 0; k < kPatchDiscSides; ++k) {
+    const double ang = 2 * kPi * (k + 0.5) / kPatchDiscSides;
+    q.dirs[k] = std::cos(ang) * q.u + std::sin(ang) * q.v;
+  }
   q.offset = p.offset;
   q.eps = kPatchEps * p.diameter;
   return q;
 }
 
-/// poly (a convex polygon, in order) clipped to w · x >= c (Sutherland–Hodgman) into out.
-void clip(const std::vector<D3>& poly, D3 w, double c, std::vector<D3>* out) {
-  out->clear();
+/// poly (a convex polygon, in order) clipped to w · x >= c (Sutherland–Hodgman) into out;
+/// false (out untouched) when every corner is inside: poly is its own clip.
+bool clip(const std::vector<D3>& poly, D3 w, double c, std::vector<double>* side,
+          std::vector<D3>* out) {
   const std::size_t k = poly.size();
+  side->resize(k);
+  bool all_in = true;
   for (std::size_t i = 0; i < k; ++i) {
-    const D3 a = poly[i], b = poly[i + 1 < k ? i + 1 : 0];
-    const double sa = dot(a, w) - c, sb = dot(b, w) - c;
+    (*side)[i] = dot(poly[i], w) - c;
+    all_in = all_in && (*side)[i] >= 0;
+  }
+  if (all_in) return false;
+  out->clear();
+  for (std::size_t i = 0; i < k; ++i) {
+    const std::size_t j = i + 1 < k ? i + 1 : 0;
+    const D3 a = poly[i], b = poly[j];
+    const double sa = (*side)[i], sb = (*side)[j];
     const bool ina = sa >= 0, inb = sb >= 0;
     if (ina) out->push_back(a);
     if (ina != inb) out->push_back(a + (sa / (sa - sb)) * (b - a));
   }
+  return true;
 }
 
 /// The form factor of a polygon (corners relative to the receiver): |Σ θ_i n · (a_i × a_i+1)
 /// / |a_i × a_i+1|| / 2π over its edges, a_i the unit directions to its corners.
-double lambert(const std::vector<D3>& poly, D3 n) {
+double lambert(const std::vector<D3>& poly, D3 n, std::vector<D3>* unit) {
   const std::size_t k = poly.size();
   if (k < 3) return 0.0;
+  unit->resize(k);
+  for (std::size_t i = 0; i < k; ++i)
+    (*unit)[i] = (1.0 / std::max(norm(poly[i]), 1e-300)) * poly[i];
   double sum = 0.0;
   for (std::size_t i = 0; i < k; ++i) {
-    const D3 pa = poly[i], pb = poly[i + 1 < k ? i + 1 : 0];
-    const D3 a = (1.0 / std::max(norm(pa), 1e-300)) * pa;
-    const D3 b = (1.0 / std::max(norm(pb), 1e-300)) * pb;
+    const D3 a = (*unit)[i], b = (*unit)[i + 1 < k ? i + 1 : 0];
     const D3 c = cross(a, b);
     const double s = norm(c);
     if (s > 1e-12) sum += std::atan2(s, dot(a, b)) * dot(c, n) / s;
@@ -77,10 +94,17 @@ double lambert(const std::vector<D3>& poly, D3 n) {
   return std::min(std::fabs(sum) / (2 * kPi), 1.0);
 }
 
+/// Scratch polygons and per-corner values, one set per block of receivers.
+struct Scratch {
+  std::vector<D3> a, b, unit;
+  std::vector<double> side;
+};
+
 /// The share of the receiver's (x, n) cosine-weighted hemisphere the patch covers within
-/// `distance` of it (walls._form_factor). a, b: scratch polygons.
-double form_factor(const Prepared& q, D3 x, D3 n, double distance, std::vector<D3>* a,
-                   std::vector<D3>* b) {
+/// `distance` of it (walls._form_factor).
+double form_factor(const Prepared& q, D3 x, D3 n, double distance, Scratch* w) {
+  std::vector<D3>* a = &w->a;
+  std::vector<D3>* b = &w->b;
   double h = dot(x, q.m) - q.offset;
   if (!(std::fabs(h) < distance)) return 0.0;
   const double xn = dot(x, n);
@@ -93,29 +117,27 @@ double form_factor(const Prepared& q, D3 x, D3 n, double distance, std::vector<D
   }
   a->clear();
   for (const D3& c : q.corners) a->push_back(c - x);
-  clip(*a, n, 0.0, b);  // the receiver's hemisphere
-  std::swap(*a, *b);
+  if (clip(*a, n, 0.0, &w->side, b)) std::swap(*a, *b);  // the receiver's hemisphere
   if (std::isfinite(distance)) {
     const double r2 = distance * distance - h * h;
     if (!(r2 > 0)) return 0.0;
-    double far = 0.0;
-    for (const D3& c : *a) far = std::max(far, norm(c));
-    if (far > distance) {
+    double far2 = 0.0;
+    for (const D3& c : *a) far2 = std::max(far2, dot(c, c));
+    if (far2 > distance * distance) {
       // the disc of radius sqrt(D² − h²) about the receiver's foot on the plane, as a
-      // kPatchDiscSides-gon of its area: one half-space per side, w its outward normal
-      const double r = std::sqrt(r2) *
-                       std::sqrt(2 * kPi / (kPatchDiscSides * std::sin(2 * kPi / kPatchDiscSides)));
+      // kPatchDiscSides-gon of its area: one half-space per side, dir its outward normal
+      static const double area_scale =
+          std::sqrt(2 * kPi / (kPatchDiscSides * std::sin(2 * kPi / kPatchDiscSides)));
+      static const double inscribed = std::cos(kPi / kPatchDiscSides);
+      const double r = std::sqrt(r2) * area_scale;
       const D3 foot = -h * q.m;
-      for (int k = 0; k < kPatchDiscSides; ++k) {
-        const double ang = 2 * kPi * (k + 0.5) / kPatchDiscSides;
-        const D3 w = std::cos(ang) * q.u + std::sin(ang) * q.v;
-        const double lim = r * std::cos(kPi / kPatchDiscSides) + dot(foot, w);
-        clip(*a, -1.0 * w, -lim, b);
-        std::swap(*a, *b);
+      for (const D3& dir : q.dirs) {
+        const double lim = r * inscribed + dot(foot, dir);
+        if (clip(*a, -1.0 * dir, -lim, &w->side, b)) std::swap(*a, *b);
       }
     }
   }
-  return lambert(*a, n);
+  return lambert(*a, n, &w->unit);
 }
 
 }  // namespace
@@ -127,14 +149,14 @@ void patch_visibility(const std::vector<PatchPolygon>& patches, const double* po
   prepared.reserve(patches.size());
   for (const PatchPolygon& p : patches) prepared.push_back(prepare(p));
   parallel_for_blocks(n, 256, [&](std::size_t begin, std::size_t end) {
-    std::vector<D3> a, b;
+    Scratch scratch;
     for (std::size_t i = begin; i < end; ++i) {
       const D3 x{positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]};
       const D3 nn{normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]};
       double occ = 0.0;
       for (const Prepared& q : prepared) {
-        occ += form_factor(q, x, nn, distance, &a, &b);
-        if (near > 0) occ -= form_factor(q, x, nn, near, &a, &b);
+        occ += form_factor(q, x, nn, distance, &scratch);
+        if (near > 0) occ -= form_factor(q, x, nn, near, &scratch);
       }
       const double v = 1.0 - occ;
       out[i] = static_cast<float>(v >= 0.0 ? std::min(v, 1.0) : 0.0);
