@@ -183,6 +183,7 @@ def test_native_patch_visibility_equals_numpy():
     """walls.visibility (native patch_visibility) and visibility_numpy, the reference: the same
     within 1e-6 on random receivers and patches, some receivers on a patch's plane, with and
     without the AO distance and near; and on the wall scene's own patches."""
+    assert native._core is not None, native.core_status()[1]  # else both would be numpy's
     rng = np.random.default_rng(5)
     for case in range(12):
         patches = _random_patches(rng, int(rng.integers(1, 6)))
