@@ -337,6 +337,25 @@ def c_shell_opacity(g, core, tmp):
     return (lambda: core.shell_opacity(g.tau())), check_unit_interval
 
 
+def c_patch_visibility(g, core, tmp):
+    k = int(g.r.integers(0, 4))
+    counts = g.r.integers(3, 9, k).astype(np.int32)
+    scale = g.pick(SCALES) if g.chance(0.3) else 1.0
+    with np.errstate(all="ignore"):
+        m = g.r.normal(size=(k, 3))
+        m /= np.linalg.norm(m, axis=1)[:, None]
+        corners = g.r.normal(size=(int(counts.sum()), 3)) * scale
+        planes = np.column_stack([m, g.r.normal(size=k) * scale,
+                                  g.r.uniform(0.1, 3, k) * scale])
+    p, n, count = receivers(g)
+    p, n = (g.mutate(a.astype(np.float64)) for a in (p, n))
+    distance = g.pick([np.inf, g.radius()])
+    near = g.pick([0.0, g.radius()])
+    call = (lambda: core.patch_visibility(g.mutate(corners), g.mutate(counts), g.mutate(planes),
+                                          p, n, distance, near))
+    return call, (lambda r: check_ao(r, count))
+
+
 def c_sphere_occlusion(g, core, tmp):
     return (lambda: core.sphere_occlusion(g.scalar(-1, 1), g.scalar(0, 1.5))), \
         check_unit_interval

@@ -15,6 +15,7 @@
 #include "canopy_ao/canopy_model.h"
 #include "canopy_ao/grass.h"
 #include "canopy_ao/occluders.h"
+#include "canopy_ao/patches.h"
 #include "canopy_ao/reeves_blau.h"
 
 namespace canopy_ao::py_bind {
@@ -31,6 +32,80 @@ ShellCombine combine_arg(const std::string& s) {
   if (s == "product") return ShellCombine::Product;
   if (s == "nearest") return ShellCombine::Nearest;
   throw py::value_error("combine must be \"product\" or \"nearest\", got \"" + s + "\"");
+}
+
+/// An (N, 3) float64 C-contiguous array of finite values within +-limit (patches and their
+/// receivers are taken in double: walls.py's numbers, and a few patches cost nothing to pass).
+const double* doubles3_arg(const py::array& a, const char* name, double limit, std::size_t* n) {
+  require_dtype(a, name, py::dtype::of<double>(), "float64");
+  if (a.ndim() != 2 || a.shape(1) != 3) {
+    throw py::value_error(std::string(name) + " must have shape (N, 3), got " + shape_str(a));
+  }
+  *n = static_cast<std::size_t>(a.shape(0));
+  const auto* d = static_cast<const double*>(a.data());
+  for (std::size_t i = 0; i < 3 * *n; ++i) {
+    if (!(std::fabs(d[i]) <= limit)) {
+      throw py::value_error(std::string(name) + " must hold finite values within +-" +
+                            num_str(limit) + ", got " + num_str(d[i]) + " in row " +
+                            std::to_string(i / 3));
+    }
+  }
+  return d;
+}
+
+/// The patches from corners (M, 3), counts int32 (P,) (each >= 3, summing to M) and planes
+/// float64 (P, 5): unit normal, offset, diameter.
+std::vector<PatchPolygon> patches_arg(const py::array& corners, const py::array& counts,
+                                      const py::array& planes) {
+  std::size_t m = 0;
+  const double* c = doubles3_arg(corners, "corners", kMaxCoordinate, &m);
+  require_dtype(counts, "counts", py::dtype::of<std::int32_t>(), "int32");
+  require_dtype(planes, "planes", py::dtype::of<double>(), "float64");
+  if (counts.ndim() != 1) {
+    throw py::value_error("counts must have shape (P,), got " + shape_str(counts));
+  }
+  const auto np = static_cast<std::size_t>(counts.shape(0));
+  if (planes.ndim() != 2 || planes.shape(1) != 5 ||
+      static_cast<std::size_t>(planes.shape(0)) != np) {
+    throw py::value_error("planes must have shape (" + std::to_string(np) +
+                          ", 5) (normal, offset, diameter per patch), got " + shape_str(planes));
+  }
+  const auto* k = static_cast<const std::int32_t*>(counts.data());
+  const auto* pl = static_cast<const double*>(planes.data());
+  std::vector<PatchPolygon> out(np);
+  std::size_t first = 0;
+  for (std::size_t j = 0; j < np; ++j) {
+    if (k[j] < 3 || static_cast<std::size_t>(k[j]) > m - first) {
+      throw py::value_error("counts must be >= 3 each and sum to the corners' " +
+                            std::to_string(m) + " rows, got " + std::to_string(k[j]) +
+                            " for patch " + std::to_string(j));
+    }
+    PatchPolygon& p = out[j];
+    p.corners.assign(c + 3 * first, c + 3 * (first + k[j]));
+    first += static_cast<std::size_t>(k[j]);
+    const double* q = pl + 5 * j;
+    const double len = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+    if (!(std::fabs(len - 1.0) <= 1e-6)) {
+      throw py::value_error("planes' normals must have unit length, got length " + num_str(len) +
+                            " for patch " + std::to_string(j));
+    }
+    if (!(std::fabs(q[3]) <= 2 * kMaxCoordinate)) {
+      throw py::value_error("planes' offsets must be finite within +-" +
+                            num_str(2 * kMaxCoordinate) + ", got " + num_str(q[3]));
+    }
+    if (!(q[4] >= kMinLength && q[4] <= kMaxLength)) {
+      throw py::value_error("planes' diameters must be lengths in [" + num_str(kMinLength) +
+                            ", " + num_str(kMaxLength) + "], got " + num_str(q[4]));
+    }
+    std::copy(q, q + 3, p.normal);
+    p.offset = q[3];
+    p.diameter = q[4];
+  }
+  if (first != m) {
+    throw py::value_error("counts must sum to the corners' " + std::to_string(m) +
+                          " rows, got " + std::to_string(first));
+  }
+  return out;
 }
 
 }  // namespace
@@ -188,6 +263,38 @@ void bind_models(py::module_& m) {
       py::arg("tau"),
       "Opacity of a leaf shell seen from outside: 1 - exp(-4 tau / 3) (mean chord 4R/3), in "
       "[0, 1]; tau in [0, 1e4].");
+
+  m.def(
+      "patch_visibility",
+      [](const py::array& corners, const py::array& counts, const py::array& planes,
+         const py::array& positions, const py::array& normals, double distance, double near) {
+        const std::vector<PatchPolygon> patches = patches_arg(corners, counts, planes);
+        std::size_t n = 0, nn = 0;
+        const double* p = doubles3_arg(positions, "positions", kMaxCoordinate, &n);
+        const double* q = doubles3_arg(normals, "normals", kMaxCoordinate, &nn);
+        if (n != nn) {
+          throw py::value_error("positions and normals must have the same number of rows, got " +
+                                std::to_string(n) + " and " + std::to_string(nn));
+        }
+        if (!(distance >= kMinLength)) {
+          throw py::value_error("distance must be >= " + num_str(kMinLength) +
+                                " (inf = unlimited), got " + num_str(distance));
+        }
+        if (!(near >= 0 && near <= kMaxLength)) {
+          throw py::value_error("near must be a finite length >= 0, got " + num_str(near));
+        }
+        return compute(n, [&](float* o) { patch_visibility(patches, p, q, n, distance, near, o); });
+      },
+      py::arg("corners"), py::arg("counts"), py::arg("planes"), py::arg("positions"),
+      py::arg("normals"), py::arg("distance") = std::numeric_limits<double>::infinity(),
+      py::arg("near") = 0.0,
+      "Opaque convex patches as occluders (core/walls.py's visibility): float32 (N,) = 1 - sum "
+      "over patches of the cosine-weighted form factor each covers of the receiver's "
+      "hemisphere between `near` and `distance` (inf = unlimited), clipped to [0, 1]. "
+      "corners: float64 (M, 3), each patch's in order about its normal; counts: int32 (P,), "
+      "corners per patch (>= 3, summing to M); planes: float64 (P, 5), unit normal, offset "
+      "(normal . corners' mean), diameter. positions, normals: float64 (N, 3), unit normals (the "
+      "form factor is linear in them; zero: no occlusion). Else ValueError.");
 
   m.def(
       "ao_grass",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from canopy_ao import core
-from canopy_ao.core import lighting, walls
+from canopy_ao.core import lighting, native, walls
 
 from tree_scene import leaves, plane, vertex_normals
 
@@ -158,3 +158,73 @@ def test_a_bumpy_terrain_is_no_sheet_over_the_scene():
     q = np.column_stack([rng.uniform(-20, 20, (400, 2)), rng.uniform(0.5, 5, 400)])
     v = walls.visibility(patches, q, np.tile([0.0, 1.0, 0.0], (400, 1)), 10.0)
     assert v.min() > 0.45
+
+
+def _random_patches(rng, count):
+    """Convex polygons (3 to 12 corners on an ellipse, random size, place and orientation)."""
+    out = []
+    for _ in range(count):
+        m = rng.normal(size=3)
+        m /= np.linalg.norm(m)
+        u = np.cross(m, [1.0, 0, 0] if abs(m[0]) < 0.9 else [0, 1.0, 0])
+        u /= np.linalg.norm(u)
+        v = np.cross(m, u)
+        k = int(rng.integers(3, 13))
+        a = np.sort(rng.uniform(0, 2 * np.pi, k))
+        r = rng.uniform(0.2, 3.0, 2)
+        c = rng.normal(scale=2.0, size=3)
+        corners = c + np.outer(r[0] * np.cos(a), u) + np.outer(r[1] * np.sin(a), v)
+        area = 0.5 * abs(float(np.cross(corners, np.roll(corners, -1, 0)).sum(0) @ m))
+        out.append(walls.Patch(corners, m, area))
+    return out
+
+
+def test_native_patch_visibility_equals_numpy():
+    """walls.visibility (native patch_visibility) and visibility_numpy, the reference: the same
+    within 1e-6 on random receivers and patches, some receivers on a patch's plane, with and
+    without the AO distance and near; and on the wall scene's own patches."""
+    assert native._core is not None, native.core_status()[1]  # else both would be numpy's
+    rng = np.random.default_rng(5)
+    for case in range(12):
+        patches = _random_patches(rng, int(rng.integers(1, 6)))
+        p = rng.normal(scale=3.0, size=(600, 3))
+        n = rng.normal(size=(600, 3))
+        n[:20] = 0.0  # no normal: no occlusion
+        on = patches[0]  # receivers on the first patch's plane, near its corners
+        p[20:80] = on.corners[rng.integers(len(on.corners), size=60)] + 0.1 * rng.normal(size=(
+            60, 3))
+        p[20:80] -= np.outer(p[20:80] @ on.normal - on.offset, on.normal)
+        distance, near = [(np.inf, 0.0), (2.5, 0.0), (4.0, 1.0), (0.7, 0.3)][case % 4]
+        want = walls.visibility_numpy(patches, p, n, distance, near)
+        got = walls.visibility(patches, p, n, distance, near)
+        assert got.dtype == np.float32 and got.shape == (600,)
+        np.testing.assert_allclose(got, want, atol=1e-6, rtol=0)
+        assert want.min() < 0.9  # the receivers do see the patches
+    items = _items()
+    patches = walls.build(items)
+    p = np.concatenate([it.positions for it in items]).astype(np.float64)
+    n = np.concatenate([it.normals for it in items]).astype(np.float64)
+    for distance, near in ((20.0, 0.0), (np.inf, 0.0), (20.0, 1.5)):
+        np.testing.assert_allclose(walls.visibility(patches, p, n, distance, near),
+                                   walls.visibility_numpy(patches, p, n, distance, near),
+                                   atol=1e-6, rtol=0)
+
+
+def test_native_patch_visibility_refuses_bad_patches():
+    _core = native._core
+    c = np.array([[0, 0, 1], [1, 0, 1], [0, 1, 1.0]])
+    ok = np.array([[0, 0, -1.0, -1.0, 1.5]])
+    p, n = np.zeros((1, 3)), np.array([[0, 0, 1.0]])
+    assert _core.patch_visibility(c, np.int32([3]), ok, p, n)[0] < 1.0
+    for counts, planes, match in ((np.int32([2]), ok, "counts"), (np.int32([4]), ok, "counts"),
+                                  (np.int32([3]), ok * [1, 1, 2, 1, 1], "unit length"),
+                                  (np.int32([3]), ok * [1, 1, 1, 1, 0], "diameters"),
+                                  (np.int32([3]), ok[:, :4], "planes")):
+        with pytest.raises(ValueError, match=match):
+            _core.patch_visibility(c, counts, planes, p, n)
+    with pytest.raises(ValueError, match="corners"):
+        _core.patch_visibility(c * np.nan, np.int32([3]), ok, p, n)
+    with pytest.raises(ValueError, match="float64"):
+        _core.patch_visibility(c, np.int32([3]), ok, p.astype(np.float32), n)
+    with pytest.raises(ValueError, match="distance"):
+        _core.patch_visibility(c, np.int32([3]), ok, p, n, 0.0)

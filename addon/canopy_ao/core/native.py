@@ -50,7 +50,7 @@ _REQUIRED = ("Ellipsoid", "fit_sphere", "fit_ellipsoid", "fit_shells", "ao_occlu
              "rasterize_uv", "splat_texels", "ao_near_far", "OcclusionFeatures",
              "expand_features", "predict_features",
              "to_world", "gray_rgba", "ScenePlan", "ForestOccluders", "GrassCover",
-             "connected_components")
+             "connected_components", "patch_visibility")
 
 
 def missing_functions(module) -> list[str]:

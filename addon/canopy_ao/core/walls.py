@@ -29,6 +29,8 @@ import hashlib
 
 import numpy as np
 
+from . import native
+
 PLANE_ANGLE = 0.02      # normals in one plane: unit normals within this (radians, ≈ 1.1°)
 PLANE_OFFSET = 1e-3     # offsets within this share of the surfaces' bounding diagonal
 MAX_PATCHES = 64        # the largest planes by area; the rest are left out (see DESIGN)
@@ -38,8 +40,8 @@ EPS = 1e-5              # on a patch's plane: this share of the patch's diameter
 CHUNK = 8192            # receivers per numpy block
 # Patches are made only where a GROUND surface has a wall: a solid plane steeper than 45°
 # (Blender's Z up). A ground alone (flat, or a slope) keeps the model without patches: the
-# patches' evaluation costs ~1.4 µs per receiver and patch in numpy, twice an analytic rung's
-# own and more than a live frame can pay, for an accuracy the rays already give.
+# patches' evaluation costs ~0.13-0.25 µs per receiver and patch natively (numpy 0.8-5 µs),
+# tens of times an analytic rung's own (docs/DESIGN.md), for an accuracy the rays already give.
 STEEP = np.cos(np.pi / 4)
 
 
@@ -173,7 +175,21 @@ def _hull_in_plane(points, normal):
 
 def visibility(patches, p, n, distance=np.inf, near=0.0) -> np.ndarray:
     """float32 (N,): 1 − Σ over patches of the form factor each covers of the receivers'
-    hemisphere between `near` and `distance`, clipped to [0, 1]; all ones without patches."""
+    hemisphere between `near` and `distance`, clipped to [0, 1]; all ones without patches.
+    The native module's patch_visibility computes it (the same numbers in float64, ~100×
+    faster); visibility_numpy, the reference, where the module is not loaded."""
+    if not patches or len(p) == 0 or native._core is None:
+        return visibility_numpy(patches, p, n, distance, near)
+    corners = np.ascontiguousarray(np.concatenate([pt.corners for pt in patches]), np.float64)
+    counts = np.array([len(pt.corners) for pt in patches], np.int32)
+    planes = np.array([[*pt.normal, pt.offset, pt.diameter] for pt in patches], np.float64)
+    return native._core.patch_visibility(
+        corners, counts, planes, np.ascontiguousarray(p, np.float64),
+        np.ascontiguousarray(n, np.float64), float(distance), float(near))
+
+
+def visibility_numpy(patches, p, n, distance=np.inf, near=0.0) -> np.ndarray:
+    """visibility in numpy (CHUNK receivers at a time), the native function's reference."""
     N = len(p)
     out = np.ones(N, np.float32)
     if not patches or N == 0:
