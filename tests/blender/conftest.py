@@ -115,14 +115,22 @@ def tree_scene_objects():
     _clear_scene()
 
 
-def require_sapling():
-    """Enable Blender's bundled Sapling Tree Gen, or skip: it is bundled with Blender up to 4.1
-    (from 4.2 it is an extension, not in Debian's package)."""
+def require_bundled(module, operator, name):
+    """Enable one of Blender's bundled curve generators, or skip: they are bundled up to 4.1
+    (from 4.2 on extensions, not in Debian's package). operator: its bpy.ops.curve name."""
     import addon_utils
-    addon_utils.enable("add_curve_sapling", default_set=False)
-    try:  # bpy.ops.curve.tree_add always exists as a wrapper; its RNA only when registered
-        bpy.ops.curve.tree_add.get_rna_type()
+    addon_utils.enable(module, default_set=False)
+    try:  # bpy.ops.curve.<op> always exists as a wrapper; its RNA only when registered
+        getattr(bpy.ops.curve, operator).get_rna_type()
     except KeyError:
-        pytest.skip(f"Sapling Tree Gen is not bundled with Blender {bpy.app.version_string} "
+        pytest.skip(f"{name} is not bundled with Blender {bpy.app.version_string} "
                     "(an extension from 4.2 on)")
+
+
+def require_sapling():
+    require_bundled("add_curve_sapling", "tree_add", "Sapling Tree Gen")
+
+
+def require_ivygen():
+    require_bundled("add_curve_ivygen", "ivy_gen", "IvyGen")
 

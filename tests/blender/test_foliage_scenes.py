@@ -26,7 +26,7 @@ EXPECT = {"card_tree": {"Tree_branches", "Tree_leaves", "Ground"},
 def test_scene_builds(scene):
     require_sapling()
     if scene == "ivy_wall":
-        from test_ivy_walls import require_ivygen
+        from conftest import require_ivygen
         require_ivygen()
     objs = foliage_scenes.build(scene)
     names = {o.name for o in bpy.context.scene.objects}

@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 import pytest
 
-from conftest import _clear_scene, add_mesh
+from conftest import _clear_scene, add_mesh, require_ivygen
 from real_shapes import ivy_on_wall
 
 
@@ -58,18 +58,6 @@ def test_wall_under_ivy_bakes_as_a_surface(wall_scene, tmp_path, capsys, method)
     wall = _ao("Wall", attr)
     assert np.all((wall >= 0) & (wall <= 1))
     assert wall.mean() < 0.95  # the ivy and the ground occlude it
-
-
-def require_ivygen():
-    """Enable Blender's bundled IvyGen, or skip: bundled up to 4.1 (from 4.2 on an extension,
-    not in Debian's package)."""
-    import addon_utils
-    addon_utils.enable("add_curve_ivygen", default_set=False)
-    try:  # bpy.ops.curve.ivy_gen always exists as a wrapper; its RNA only when registered
-        bpy.ops.curve.ivy_gen.get_rna_type()
-    except KeyError:
-        pytest.skip(f"IvyGen is not bundled with Blender {bpy.app.version_string} "
-                    "(an extension from 4.2 on)")
 
 
 @pytest.fixture(params=[0.0, 0.2], ids=["quad", "slab"])
