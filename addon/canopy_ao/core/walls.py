@@ -176,8 +176,9 @@ def _hull_in_plane(points, normal):
 def visibility(patches, p, n, distance=np.inf, near=0.0) -> np.ndarray:
     """float32 (N,): 1 − Σ over patches of the form factor each covers of the receivers'
     hemisphere between `near` and `distance`, clipped to [0, 1]; all ones without patches.
-    The native module's patch_visibility computes it (the same numbers in float64, ~100×
-    faster); visibility_numpy, the reference, where the module is not loaded."""
+    The native module's patch_visibility computes it (the same numbers in float64, 6–41×
+    faster: bench/walls_speed.py); visibility_numpy, the reference, where the module is not
+    loaded."""
     if not patches or len(p) == 0 or native._core is None:
         return visibility_numpy(patches, p, n, distance, near)
     corners = np.ascontiguousarray(np.concatenate([pt.corners for pt in patches]), np.float64)
