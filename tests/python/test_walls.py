@@ -245,3 +245,12 @@ def test_face_normals_tell_where_a_wall_may_be():
     ground = core.SceneItem("G", "GROUND", "", p, vertex_normals(p, t), t)
     cross = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
     assert not walls.may_hold_wall(cross) and walls.build([ground]) == []
+
+
+def test_a_level_ground_is_told_by_its_vertex_normals():
+    """level(): vertex normals all (anti)vertical say a level ground, whose triangles the
+    add-on then never reads; one tilted corner (a face rising from it) says it may not be."""
+    up = np.tile([0.0, 0.0, 1.0], (5, 1)).astype(np.float32)
+    assert walls.level(up) and walls.level(-up) and walls.level(np.zeros((0, 3)))
+    up[2] = [0.1, 0.0, 0.995]
+    assert not walls.level(up)

@@ -107,8 +107,11 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
         t = _lap(timings, "positions", t)
         nor = _vertex_normals(mesh, n)
         t = _lap(timings, "normals", t)
+        co, nor = _to_world(co, nor, matrix)
+        t = _lap(timings, "transform", t)
         if triangles == "walls":  # a GROUND's: only where a face may be part of a wall
-            triangles = walls.may_hold_wall(_face_normals(mesh, matrix))
+            triangles = not walls.level(nor) and walls.may_hold_wall(_face_normals(mesh,
+                                                                                  matrix))
         if triangles:
             mesh.calc_loop_triangles()
             tris = np.empty((len(mesh.loop_triangles), 3), dtype=np.int32)
@@ -123,7 +126,7 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     finally:
         if ob_eval is not None:
             ob_eval.to_mesh_clear()
-    pos, nor = _to_world(co, nor, matrix)
+    pos = co
     limit = native.LIMITS["coordinate"]
     bad = n - np.count_nonzero((np.abs(pos) <= limit).all(axis=1))  # NaN compares False
     if bad:
