@@ -113,3 +113,38 @@ def test_ivygen_ivy_on_a_wall(real_ivy, tmp_path, capsys, method):
     attr = bpy.context.scene.canopy_ao.attribute
     wall = _ao("Wall", attr)
     assert np.all((wall >= 0) & (wall <= 1)) and wall.mean() < 1.0
+
+
+def _ground_triangles(tau="0.5"):
+    """{name: triangle count} of the GROUND items a sphere bake at a given τ gathers."""
+    from canopy_ao.blender import gather
+    ctx = bpy.context
+    opts = {"method": "sphere", "tau": float(tau), "mode": 'VERTEX', "bent_normals": "OFF"}
+    items, _objs, _how = gather.scene_items(ctx, ctx.evaluated_depsgraph_get(), [], opts, {})
+    return {it.name: len(it.triangles) for it in items if it.role == "GROUND"}
+
+
+def _quad(name, role, rotate_x=0.0, z=0.0):
+    p = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], np.float32)
+    ob = add_mesh(name, p, [[0, 1, 2], [0, 2, 3]])
+    ob.rotation_euler[0], ob.location.z = rotate_x, z
+    ob.canopy_ao.role = role
+    return ob
+
+
+def test_a_ground_reads_its_triangles_only_where_a_wall_may_be():
+    """An analytic bake at a given τ needs a GROUND's triangles only for the walls' patches
+    (core/walls.py): a flat ground alone is read without them (Blender's loop triangulation
+    is the dearest read); a wall, also one that is a flat mesh turned upright by its object's
+    transform, brings every GROUND surface's triangles, the flat ground's too, as before."""
+    _clear_scene()
+    try:
+        _quad("Leaves", 'CANOPY', z=3.0)
+        _quad("Ground", 'GROUND')
+        bpy.context.view_layer.update()
+        assert _ground_triangles() == {"Ground": 0}
+        _quad("Wall", 'GROUND', rotate_x=np.pi / 2, z=2.0)
+        bpy.context.view_layer.update()
+        assert _ground_triangles() == {"Ground": 2, "Wall": 2}
+    finally:
+        _clear_scene()

@@ -290,7 +290,19 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             how[it.name] = f"part of {name}: {it.part_why}" if cut else why
         objects[name] = obj
         how[name] = parts_io.describe(cut) if cut else why
+    _walls_whole(items, objects, depsgraph, timings)
     return items, objects, how
+
+
+def _walls_whole(items, objects, depsgraph, timings):
+    """Once a GROUND surface may hold a wall, every GROUND surface is one of its patches
+    (core/walls.py), the flat ones too: fetch the triangles that the faces' normals spared."""
+    ground = [it for it in items if it.role == "GROUND"]
+    if any(len(it.triangles) for it in ground):
+        for it in ground:
+            if not len(it.triangles) and it.name in objects:
+                it.triangles = mesh_io.evaluated_arrays(objects[it.name], depsgraph, False,
+                                                        timings=timings)[2]
 
 
 def cycles_distance(depsgraph, distance):

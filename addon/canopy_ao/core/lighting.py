@@ -122,7 +122,10 @@ def exact_ao(plan: Plan, grass_key, p, n, own=None, group=1) -> np.ndarray:
 
 def grid_ao(plan: Plan, role, grass_key, p, n) -> np.ndarray:
     """The density grid's AO times the grass (a blade's own law, the layers over the ground)."""
-    return _grass(plan, role, grass_key, p, n, _grid_ao(plan, p, n) * walls_ao(plan, p, n, role))
+    ao = _grid_ao(plan, p, n)
+    if plan.walls:
+        ao = ao * walls_ao(plan, p, n, role)
+    return _grass(plan, role, grass_key, p, n, ao)
 
 
 def scene_plan_ao(rung, plan: Plan, role, tree, grass_key, p, n, tau, own=None, group=1):

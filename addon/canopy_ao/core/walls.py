@@ -45,6 +45,32 @@ CHUNK = 8192            # receivers per numpy block
 STEEP = np.cos(np.pi / 4)
 
 
+# A face this close to steep may hold a wall: a non-planar quad's or n-gon's triangles lean
+# further than the face's own normal (may_hold_wall).
+STEEP_MARGIN = 0.05
+LEVEL = 0.9999  # vertex normals within ~0.8° of vertical: a level ground (level())
+
+
+def level(vertex_normals) -> bool:
+    """Whether unit vertex normals (V, 3) are all within LEVEL of vertical (up or down): a
+    level surface, each of whose faces is level too (a face's tilt shows in its corners'
+    normals, unless faces tilted opposite ways cancel at every corner). The add-on then reads
+    no more of a GROUND mesh to know it holds no wall."""
+    z = np.abs(np.asarray(vertex_normals, dtype=np.float32).reshape(-1, 3)[:, 2])
+    return bool(np.all(z >= LEVEL))
+
+
+def may_hold_wall(face_normals) -> bool:
+    """Whether faces with these world normals (F, 3) (any length; zero ones are no face) may
+    make a wall: one of them within STEEP_MARGIN of steep. False guarantees that build()
+    finds no wall in their triangles (up to faces bent more than the margin), so the add-on
+    reads a GROUND mesh's triangles only when this is True."""
+    m = np.asarray(face_normals, dtype=np.float64).reshape(-1, 3)
+    length = np.linalg.norm(m, axis=1)
+    ok = length > 1e-12
+    return bool(np.any(np.abs(m[ok, 2]) < (STEEP + STEEP_MARGIN) * length[ok]))
+
+
 class Patch:
     """One plane's opaque convex polygon: corners (K, 3) float64, unit normal m (its
     triangles' area-weighted side), area, diameter."""
