@@ -20,11 +20,11 @@ def test_wire_twice_adds_nothing(scene):
     mat = H.add_material(obj)
     n0 = len(mat.node_tree.nodes)
     added = materials.wire_vertex_ao(obj, "CanopyAO")
-    assert added == 3  # attribute, multiply, AOV output
-    assert len(mat.node_tree.nodes) == n0 + 3
+    assert added == 4  # attribute, where baked, multiply, AOV output
+    assert len(mat.node_tree.nodes) == n0 + 4
     links1 = len(mat.node_tree.links)
     assert materials.wire_vertex_ao(obj, "CanopyAO") == 0
-    assert len(mat.node_tree.nodes) == n0 + 3
+    assert len(mat.node_tree.nodes) == n0 + 4
     assert len(mat.node_tree.links) == links1
     src = _source(mat)[0]
     assert src.bl_idname == "ShaderNodeVertexColor" and src.layer_name == "CanopyAO"
@@ -41,7 +41,7 @@ def test_unwire_restores_unlinked_base_color(scene):
     mat = H.add_material(obj, color=(0.1, 0.2, 0.3, 1.0))
     before = H.tree_snapshot(mat)
     materials.wire_vertex_ao(obj, "CanopyAO")
-    assert materials.unwire(obj) == 3
+    assert materials.unwire(obj) == 4
     assert H.tree_snapshot(mat) == before
     base = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"]
     assert not base.is_linked
@@ -68,7 +68,7 @@ def test_object_without_material_gets_ours_and_loses_it(scene):
     obj = H.add_plane()
     assert len(obj.material_slots) == 0
     n_mats = len(bpy.data.materials)
-    assert materials.wire_vertex_ao(obj, "CanopyAO") == 3
+    assert materials.wire_vertex_ao(obj, "CanopyAO") == 4
     mat = obj.material_slots[0].material
     assert mat.get("canopy_ao")
     materials.unwire(obj)
@@ -82,7 +82,7 @@ def test_two_materials_shared(scene):
     m1 = H.add_material(a, "M1")
     m2 = H.add_material(a, "M2")
     b.data.materials.append(m1)
-    assert materials.wire_vertex_ao(a, "CanopyAO") == 6
+    assert materials.wire_vertex_ao(a, "CanopyAO") == 8
     assert materials.wire_vertex_ao(b, "CanopyAO") == 0  # shares M1, already wired
     materials.unwire(a)
     assert not any(n.get("canopy_ao") for m in (m1, m2) for n in m.node_tree.nodes)
@@ -161,3 +161,39 @@ def test_remove_wiring_operator_restores_the_material(scene):
         o.select_set(False)
     with pytest.raises(RuntimeError, match="select the mesh objects"):
         bpy.ops.canopy_ao.remove_wiring()
+
+
+def test_an_unbaked_object_sharing_the_material_keeps_its_colour(scene, tmp_path):
+    """Per vertex, the wiring reads the AO attribute; a second object with the same material
+    but no attribute (not baked) reads it as 0 in Cycles and rendered black. It keeps its
+    colour (AO 1), and the baked one shows its AO, in the render and in the AOV."""
+    import numpy as np
+    from canopy_ao.blender import mesh_io
+    baked, other = H.add_plane(location=(-1.1, 0, 0), name="Baked"), \
+        H.add_plane(location=(1.1, 0, 0), name="Other")
+    mat = bpy.data.materials.new("Glow")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out, glow = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeEmission")
+    glow.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    nt.links.new(glow.outputs[0], out.inputs["Surface"])
+    baked.data.materials.append(mat)
+    other.data.materials.append(mat)
+    mesh_io.write_ao_attribute(baked, "CanopyAO", np.full(4, 0.5, np.float32))
+    materials.wire_vertex_ao(baked, "CanopyAO")
+    sc = bpy.context.scene
+    bpy.ops.object.camera_add(location=(0, 0, 5))
+    sc.camera = bpy.context.object
+    sc.camera.data.type, sc.camera.data.ortho_scale = 'ORTHO', 5.0
+    sc.render.engine = 'CYCLES'
+    sc.cycles.samples, sc.cycles.use_denoising = 1, False
+    sc.render.resolution_x, sc.render.resolution_y = 100, 50
+    sc.view_settings.view_transform = 'Standard'
+    sc.render.image_settings.file_format = 'OPEN_EXR'
+    sc.render.filepath = str(tmp_path / "shared.exr")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(sc.render.filepath)
+    px = np.array(img.pixels[:]).reshape(50, 100, 4)
+    assert px[25, 25, :3] == pytest.approx([0.5] * 3, abs=0.01)  # the baked one: its AO
+    assert px[25, 75, :3] == pytest.approx([1.0] * 3, abs=0.01)  # the other: unshaded

@@ -5,8 +5,9 @@ reuses the nodes) and ``unwire`` removes exactly what we added. The original Bas
 kept on our Mix node's A input, so unwire restores it from there; a Base Color that was unlinked
 keeps its default value untouched, so there is nothing else to remember.
 
-Roles: "source" (Color Attribute or Image Texture), "uv" (UV Map, texel only), "mix" (multiply
-into Base Color), "aov" (AOV Output).
+Roles: "source" (Color Attribute or Image Texture), "uv" (UV Map, texel only), "present" (the
+attribute's AO where a mesh has it, 1 where it has none: vertex only), "mix" (multiply into
+Base Color), "aov" (AOV Output).
 """
 import bpy
 
@@ -110,18 +111,41 @@ def _mix_sockets(node):
     return node.inputs["Color1"], node.inputs["Color2"], node.outputs["Color"]
 
 
-def _new_mix(nt, location):
+def _new_mix(nt, location, role="mix", label="Canopy AO multiply", blend="MULTIPLY"):
     if hasattr(bpy.types, "ShaderNodeMix"):
-        node = _new(nt, "ShaderNodeMix", "mix", "Canopy AO multiply", location)
+        node = _new(nt, "ShaderNodeMix", role, label, location)
         node.data_type = "RGBA"
-        node.blend_type = "MULTIPLY"
+        node.blend_type = blend
         node.clamp_result = False
         next(s for s in node.inputs if s.identifier == "Factor_Float").default_value = 1.0
     else:  # Blender < 3.4
-        node = _new(nt, "ShaderNodeMixRGB", "mix", "Canopy AO multiply", location)
-        node.blend_type = "MULTIPLY"
+        node = _new(nt, "ShaderNodeMixRGB", role, label, location)
+        node.blend_type = blend
         node.inputs["Fac"].default_value = 1.0
     return node
+
+
+def _factor_socket(node):
+    if node.bl_idname == "ShaderNodeMix":
+        return next(s for s in node.inputs if s.identifier == "Factor_Float")
+    return node.inputs["Fac"]
+
+
+def _where_baked(nt, src, location):
+    """The AO where the mesh has the attribute, 1 where it has none: an object that shares the
+    material but was not baked reads a missing attribute as black (0, alpha 0 too, in Cycles);
+    ours has alpha 1, so mix(1, colour, alpha) is its AO there and 1 elsewhere. Returns the
+    colour socket to use (node role "present")."""
+    nodes = _ours(nt, "present")
+    for extra in nodes[1:]:
+        _remove(nt, extra)
+    node = nodes[0] if nodes else _new_mix(nt, location, "present", "Canopy AO where baked",
+                                           "MIX")
+    a, b, r = _mix_sockets(node)
+    a.default_value = (1.0, 1.0, 1.0, 1.0)
+    _link_once(nt, src.outputs["Alpha"], _factor_socket(node))
+    _link_once(nt, src.outputs["Color"], b)
+    return r, int(not nodes)
 
 
 def _set_aov_target(node, aov_name):
@@ -200,6 +224,12 @@ def _wire_material(mat, make_source, source_kind, aov_name, uv_map=None):
         src[TAG + "_kind"] = source_kind
         added += 1
     color_out = src.outputs["Color"]
+    if source_kind == "vertex":
+        color_out, more = _where_baked(nt, src, (x0 - 700, y0 - 300))
+        added += more
+    else:
+        for node in _ours(nt, "present"):
+            _remove(nt, node)
     if source_kind == "texel":
         uv_nodes = _ours(nt, "uv")
         if not uv_nodes:
