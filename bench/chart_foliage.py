@@ -73,20 +73,9 @@ def draw(rows, path):
         ax.tick_params(which="minor", labelsize=6)
         ax.set_xlabel("wall time of the bake, s (log)")
         ax.set_ylabel("MAE vs rays 256, buried left out")
-    for ax in axes.ravel()[len(scenes):]:
-        ax.axis("off")
-    handles = {}
-    for ax in axes.ravel():
-        for h, lab in zip(*ax.get_legend_handles_labels()):
-            handles.setdefault(lab, h)
-    fig.legend(list(handles.values()), list(handles.keys()), loc="lower center",
-               ncol=min(7, len(handles)), fontsize=8, frameon=False)
-    fig.suptitle("Canopy AO on foliage as artists make it: every rung's error against time "
-                 "(all vertices, buried left out)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.05, 1, 0.96))
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    chart_real.finish(fig, axes, len(scenes), "Canopy AO on foliage as artists make it: every "
+                      "rung's error against time (all vertices, buried left out)", path, ncol=7,
+                      dpi=100)
     print(f"chart_foliage: wrote {path}")
 
 
