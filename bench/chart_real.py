@@ -100,20 +100,28 @@ def chart(rows, path):
         ax.grid(True, which="both", alpha=0.25)
         ax.set_xlabel("wall time, s (log)")
         ax.set_ylabel("MAE vs Embree 1024, buried left out")
-    for ax in axes.ravel()[len(scenes):]:
+    finish(fig, axes, len(scenes), "Canopy AO on Sapling Tree Gen trees: error against time "
+           "(* = scenes the rungs were designed on; circled = our front)", path, ncol=10)
+    print(f"chart_real: wrote {path}")
+
+
+def finish(fig, axes, used, title, path, ncol, dpi=110):
+    """Blank the panels past the first ``used``, one legend below them all (each label once),
+    the title, and write ``path``."""
+    import matplotlib.pyplot as plt
+    for ax in axes.ravel()[used:]:
         ax.axis("off")
     handles = {}
     for ax in axes.ravel():
         for h, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, h)
     fig.legend(list(handles.values()), list(handles.keys()), loc="lower center",
-               ncol=min(10, len(handles)), fontsize=8, frameon=False)
-    fig.suptitle("Canopy AO on Sapling Tree Gen trees: error against time "
-                 "(* = scenes the rungs were designed on; circled = our front)", fontsize=10)
+               ncol=min(ncol, len(handles)), fontsize=8, frameon=False)
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout(rect=(0, 0.05, 1, 0.96))
-    fig.savefig(path, dpi=110)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
-    print(f"chart_real: wrote {path}")
 
 
 def table(rows):

@@ -1,6 +1,9 @@
 """Foliage as artists make it (issue #38): every rung on examples/foliage_scenes.py's scenes,
-in Blender, against our own rays at 256 samples (which honour the cards' alpha), per role:
-MAE and bias, beside a constant (each object's mean reference AO), and the issue's targets:
+in Blender, against our own rays at 256 samples (which honour the cards' alpha), per role and
+over all vertices: MAE over all vertices / with buried ones left out (buried_masks: the leaf
+and branch vertices core/buried.py's test finds enclosed) and bias, with each bake's time,
+beside a constant (each object's mean reference AO) and the exact rung at 16 and 64 rays; and
+the issue's targets:
 
 - a tree joined into one object against the same tree in two objects, rung by rung (MAE);
 - the trunk's and the ground's bias under the card tree against under the same tree with opaque
@@ -8,24 +11,26 @@ MAE and bias, beside a constant (each object's mean reference AO), and the issue
 - ivy on a wall: the ray-free rung's MAE, and any rung worse than the constant.
 
     blender -b --factory-startup --python-exit-code 1 --python bench/foliage.py -- \\
-        --out bench/out/foliage.md
+        --out bench/results/foliage.md --csv bench/out/foliage.csv \\
+        --png bench/results/chart_foliage.png
     blender -b --factory-startup --python-exit-code 1 --python bench/foliage.py -- --speed
 
+--png draws bench/chart_foliage.py's chart (MAE, buried left out, against time, per scene).
 Exits non-zero on failure (not when a target is missed: the table says so).
 """
-import argparse
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-sys.path.insert(0, os.path.join(REPO, "examples"))
-sys.path.insert(0, os.path.join(REPO, "addon"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # Blender does not add it
+import harness  # noqa: E402  (addon/ and examples/ on sys.path)
+
+HERE, REPO = harness.HERE, harness.REPO
 
 import numpy as np  # noqa: E402
 
 RUNGS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid", "regression",
          "hybrid", "auto")
+RAYS = ("rays 16", "rays 64")  # the exact rung at fewer rays than the reference's
 REF_SAMPLES = 256
 
 
@@ -44,44 +49,116 @@ def _bake(method, samples=64):
     return ao, {n: e["role"] for n, e in rep["objects"].items()}
 
 
-def scene_rungs(scene):
-    """{"ref": ..., rung: ...} of (ao, roles) bakes of ``scene``."""
-    import foliage_scenes
-    foliage_scenes.build(scene)
-    out = {"ref": _bake("raytrace", REF_SAMPLES)}
-    for m in RUNGS:
-        out[m] = _bake(m)
+def buried_masks(roles):
+    """{object: bool (V,)}: the vertices of the leaf and branch objects (core/buried.py's
+    BURIED_ROLES) whose BURIED_RAYS rays per face corner all stop within BURIED_SCALE of their
+    object's size (its bounding-box diagonal), each object traced by the exact rung on its own
+    (the cards' alpha honoured, as every bake here does); other objects: none buried. The
+    test core/buried.py applies, and real_scenes.buried for the Sapling exports."""
+    import bpy
+    from canopy_ao.blender import mesh_io, properties
+    from canopy_ao.blender.job import run_bake
+    from canopy_ao.core import buried
+    out = {}
+    for n, role in roles.items():
+        ob = bpy.data.objects[n]
+        nv = len(ob.data.vertices)
+        if role.upper() not in buried.BURIED_ROLES:
+            out[n] = np.zeros(nv, bool)
+            continue
+        co = np.empty(3 * nv, np.float32)
+        ob.data.vertices.foreach_get("co", co)
+        size = buried.size(co.reshape(-1, 3) * np.float32(ob.matrix_world.to_scale()))
+        opts = properties.scene_options(bpy.context.scene)
+        opts.update(method="raytrace", samples=buried.BURIED_RAYS, overwrite=True,
+                    use_world_distance=False, distance=buried.BURIED_SCALE * size)
+        run_bake(bpy.context, [n], opts)
+        out[n] = mesh_io.read_ao_attribute(ob, opts["attribute"]) <= 0.0
     return out
 
 
-def _by_role(ao, roles, names=None):
+def scene_rungs(scene):
+    """{"ref": ..., rung or "rays S": ..., "buried": {object: bool (V,)}, "seconds": {rung:
+    s}} of (ao, roles) bakes of ``scene``."""
+    import time
+    import foliage_scenes
+    foliage_scenes.build(scene)
+    out = {"ref": _bake("raytrace", REF_SAMPLES), "seconds": {}}
+    for m in RUNGS + RAYS:
+        t0 = time.perf_counter()
+        out[m] = _bake("raytrace", int(m.split()[1])) if m in RAYS else _bake(m)
+        out["seconds"][m] = time.perf_counter() - t0
+    out["buried"] = buried_masks(out["ref"][1])
+    return out
+
+
+def _by_role(ao, roles, keep=None):
+    """{role: concatenated values of its objects, and "all"}; keep: {object: bool (V,)}."""
     got = {}
     for n, a in ao.items():
-        if names is None or n in names:
-            got.setdefault(roles[n], []).append(a)
+        a = a if keep is None else a[keep[n]]
+        got.setdefault(roles[n], []).append(a)
+        got.setdefault("all", []).append(a)
     return {r: np.concatenate(v) for r, v in got.items()}
 
 
-def table(scene, res):
-    """Markdown rows: per rung and role, MAE and bias against the reference; the constant."""
+def errors(res):
+    """[{"method", "role", "mae_all", "mae_unburied", "bias", "seconds"}] of every rung (and
+    the constant: each object's mean reference AO) per role and over "all" vertices."""
     ref_ao, roles = res["ref"]
-    ref = _by_role(ref_ao, roles)
-    const = _by_role({n: np.full_like(a, a.mean()) for n, a in ref_ao.items()}, roles)
-    lines = [f"### {scene}", "", "| rung | " + " | ".join(f"{r} MAE / bias" for r in ref) + " |",
-             "|---|" + "---|" * len(ref)]
+    unburied = {n: ~b for n, b in res["buried"].items()}
+    const = {n: np.full_like(a, a.mean()) for n, a in ref_ao.items()}
+    want, want_u = _by_role(ref_ao, roles), _by_role(ref_ao, roles, unburied)
+    out = []
+    for m in ("constant",) + RUNGS + RAYS:
+        ao = const if m == "constant" else res[m][0]
+        got, got_u = _by_role(ao, roles), _by_role(ao, roles, unburied)
+        for r in want:
+            out.append({"method": m, "role": r,
+                        "mae_all": float(np.abs(got[r] - want[r]).mean()),
+                        "mae_unburied": (float(np.abs(got_u[r] - want_u[r]).mean())
+                                         if len(want_u[r]) else float("nan")),
+                        "bias": float((got[r] - want[r]).mean()),
+                        "seconds": res["seconds"].get(m, float("nan"))})
+    return out
+
+
+def table(scene, res):
+    """Markdown rows: per rung and role, MAE over all vertices / with buried ones left out,
+    and bias, against the reference; the constant; the rungs worse than it."""
+    rows = errors(res)
+    roles = [r for r in dict.fromkeys(r["role"] for r in rows) if r != "all"] + ["all"]
+    n = {r: sum(len(a) for o, a in res["ref"][0].items() if res["ref"][1][o] == r or r == "all")
+         for r in roles}
+    nb = {r: sum(int(res["buried"][o].sum()) for o in res["ref"][0]
+                 if res["ref"][1][o] == r or r == "all") for r in roles}
+    lines = [f"### {scene}", "", "Vertices (buried): " + ", ".join(
+        f"{r} {n[r]} ({nb[r]})" for r in roles) + ".", "",
+        "| rung | " + " | ".join(f"{r}: MAE all / unburied, bias" for r in roles)
+        + " | time |", "|---|" + "---|" * (len(roles) + 1)]
+    const = {r["role"]: r["mae_all"] for r in rows if r["method"] == "constant"}
     worse = []
-    for m in ("constant",) + RUNGS:
-        got = const if m == "constant" else _by_role(res[m][0], roles)
-        cells = []
-        for r, want in ref.items():
-            e = float(np.abs(got[r] - want).mean())
-            b = float((got[r] - want).mean())
-            cells.append(f"{e:.3f} / {b:+.3f}")
-            if m != "constant" and e > float(np.abs(const[r] - want).mean()):
-                worse.append(f"{m} on {r}")
-        lines.append(f"| {m} | " + " | ".join(cells) + " |")
-    lines += ["", "worse than the constant: " + (", ".join(worse) or "none"), ""]
+    for m in dict.fromkeys(r["method"] for r in rows):
+        mine = {r["role"]: r for r in rows if r["method"] == m}
+        cells = [f"{mine[r]['mae_all']:.3f} / {mine[r]['mae_unburied']:.3f}, "
+                 f"{mine[r]['bias']:+.3f}" for r in roles]
+        worse += [f"{m} on {r}" for r in roles
+                  if m != "constant" and r != "all" and mine[r]["mae_all"] > const[r]]
+        lines.append(f"| {m} | " + " | ".join(cells) + f" | "
+                     f"{harness.fmt_seconds(mine[roles[0]]['seconds'])} |")
+    lines += ["", "worse than the constant (all vertices): " + (", ".join(worse) or "none"), ""]
     return lines
+
+
+def write_csv(path, res):
+    import csv
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        w = csv.DictWriter(f, ["scene", "method", "role", "mae_all", "mae_unburied", "bias",
+                               "seconds"])
+        w.writeheader()
+        for scene, r in res.items():
+            for row in errors(r):
+                w.writerow({"scene": scene, **row})
 
 
 def speed(repeats=3):
@@ -116,28 +193,10 @@ def speed(repeats=3):
             "|---|---|---|---|"] + out + [""]
 
 
-def main(argv):
-    ap = argparse.ArgumentParser(prog="foliage.py")
-    ap.add_argument("--out", default=os.path.join(REPO, "bench", "out", "foliage.md"))
-    ap.add_argument("--speed", action="store_true",
-                    help="only time the card vertices' AO (with over without, per rung)")
-    a = ap.parse_args(argv)
-    import addon_utils
-    if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
-        raise RuntimeError("the canopy_ao add-on did not enable")
-    if a.speed:
-        print("\n".join(speed()))
-        return 0
-    import foliage_scenes
-    res = {}
-    for scene in foliage_scenes.SCENES:
-        res[scene] = scene_rungs(scene)
-        print(f"foliage: {scene} baked", flush=True)
-    lines = ["# Foliage scenes: every rung against rays at 256 samples", ""]
-    for scene, r in res.items():
-        lines += table(scene, r)
-    lines += ["### Targets", "", "| rung | joined vs split MAE | trunk bias card − opaque | "
-              "ground bias card − opaque |", "|---|---|---|---|"]
+def targets(res):
+    """Markdown rows of the issue's targets: joined against split, card against opaque."""
+    lines = ["### Targets", "", "| rung | joined vs split MAE | trunk bias card − opaque | "
+             "ground bias card − opaque |", "|---|---|---|---|"]
     split, joined = res["card_tree"], res["card_tree_joined"]
     card, opaque = res["card_tree"], res["opaque_tree"]
 
@@ -153,7 +212,42 @@ def main(argv):
         else:
             row += " | |"
         lines.append(row)
+    return lines + [""]
+
+
+def main(argv):
+    import foliage_scenes
+    ap = harness.parser(__doc__, prog="foliage.py", scenes=list(foliage_scenes.SCENES))
+    ap.add_argument("--out", default=os.path.join(REPO, "bench", "out", "foliage.md"))
+    ap.add_argument("--csv", help="also write every rung's MAE per scene and role to this CSV")
+    ap.add_argument("--png", help="also draw the chart (bench/chart_foliage.py) to this PNG")
+    ap.add_argument("--speed", action="store_true",
+                    help="only time the card vertices' AO (with over without, per rung)")
+    a = ap.parse_args(argv)
+    import addon_utils
+    if addon_utils.enable("canopy_ao", default_set=True, handle_error=None) is None:
+        raise RuntimeError("the canopy_ao add-on did not enable")
+    if a.speed:
+        print("\n".join(speed()))
+        return 0
+    res = {}
+    for scene in a.scenes:
+        res[scene] = scene_rungs(scene)
+        print(f"foliage: {scene} baked", flush=True)
+    lines = ["# Foliage scenes: every rung against rays at 256 samples", "",
+             f"Times: one bake each, the whole bake as a user waits for it ({harness.load_note()}).",
+             ""]
+    for scene, r in res.items():
+        lines += table(scene, r)
+    if {"card_tree", "card_tree_joined", "opaque_tree"} <= set(res):
+        lines += targets(res)
     text = "\n".join(lines) + "\n"
+    if a.csv:
+        write_csv(a.csv, res)
+    if a.png:
+        import chart_foliage
+        chart_foliage.draw([r for scene, x in res.items() for r in
+                             ({"scene": scene, **e} for e in errors(x))], a.png)
     os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
     with open(a.out, "w", encoding="utf-8") as f:
         f.write(text)

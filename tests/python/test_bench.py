@@ -176,3 +176,46 @@ def test_real_names_filters_by_cycles_bake(tmp_path, monkeypatch):
     assert harness.real_names(cycles=1024, seed=1) == ["sap_a"]
     assert harness.real_names(cycles=1024) == ["sap_b"]
     assert harness.real_names(quick=False) == ["sap_c"]
+
+
+def test_foliage_cycles_opaque_texels_lie_inside_the_leaf():
+    """bench/foliage_cycles.py compares card texels only where the whole texel is leaf: every
+    such texel's centre maps (through its tile's inset) to a card point inside the lens, the
+    one-texel gutter is never compared, every tile of the atlas has the same mask, and most of
+    the lens's texels are kept (only its rim is dropped)."""
+    import foliage_cycles
+    import foliage_scenes
+    tile, g = 32, 2
+    ok = foliage_cycles.opaque_texels(g * tile, g, tile)
+    assert ok.shape == (g * tile, g * tile)
+    one = ok[:tile, :tile]
+    for r in range(g):
+        for c in range(g):
+            assert np.array_equal(ok[r * tile:(r + 1) * tile, c * tile:(c + 1) * tile], one)
+    assert not one[0].any() and not one[-1].any() and not one[:, 0].any() and not one[:, -1].any()
+    inset = 1.0 / tile
+    local = ((np.arange(tile) + 0.5) / tile - inset) / (1 - 2 * inset) * 2 - 1  # card x = 2u - 1
+    x, y = np.meshgrid(local, local)
+    lens = (x / foliage_scenes.LEAF_WIDTH) ** 2 + y ** 2 < 1.0
+    assert not (one & ~lens).any()
+    assert 0.6 * lens.sum() < one.sum() < lens.sum()
+
+
+def test_chart_foliage_draws_every_scene_from_the_csv(tmp_path):
+    """bench/chart_foliage.py reads bench/foliage.py's CSV (empty and "nan" cells as NaN) and
+    draws one panel per scene into a PNG."""
+    pytest.importorskip("matplotlib")
+    import chart_foliage
+    path = tmp_path / "f.csv"
+    lines = ["scene,method,role,mae_all,mae_unburied,bias,seconds"]
+    for scene in ("a", "b"):
+        lines += [f"{scene},constant,all,0.2,0.19,0.0,nan",
+                  f"{scene},grid,all,0.1,0.09,0.01,0.5", f"{scene},grid,TRUNK,0.1,,0.01,0.5",
+                  f"{scene},rays 16,all,0.02,0.02,0.0,0.2",
+                  f"{scene},rays 64,all,0.01,0.01,0.0,0.6"]
+    path.write_text("\n".join(lines) + "\n")
+    rows = chart_foliage.load(str(path))
+    assert len(rows) == 10 and math.isnan(rows[0]["seconds"]) and math.isnan(rows[2]["mae_unburied"])
+    png = tmp_path / "f.png"
+    chart_foliage.draw(rows, str(png))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
