@@ -3,7 +3,8 @@
 # in one run, the headline tables: equal error against Cycles on the Sapling trees (bake only and
 # whole process), live AO per frame, and the forest. Figures and tables go to bench/results/.
 #
-# Usage: scripts/bench.sh [--quick] [--full] [--cycles] [--scaling] [--real] [--no-build]
+# Usage: scripts/bench.sh [--quick] [--full] [--cycles] [--scaling] [--real] [--foliage]
+#                        [--no-build]
 #   --quick     the three headline tables alone, small: equal error on two Sapling trees (aspen,
 #               callistemon), live AO at 100k vertices, the forest to 1000 trees on a 1e5-vertex
 #               ground (4.5 CPU-minutes once the Sapling exports and their Cycles bakes exist;
@@ -11,7 +12,11 @@
 #   (default)   also the synthetic study (accuracy, chart, stability, bent normals), the whole
 #               bake against Blender's floor, the scene plan, texel anti-aliasing; equal error
 #               on every Sapling scene (the first run bakes each scene's Cycles ladder up to
-#               1024 samples twice: hours); live AO at 100k and 1M; the forest to 10,000 trees
+#               1024 samples twice: hours); live AO at 100k and 1M; the forest to 10,000 trees;
+#               the foliage scenes (leaf cards, a joined tree, ivy, scattered cards: every rung,
+#               all/unburied, and our rays on the card tree against Cycles' samples)
+#   --foliage   the foliage scenes also with --quick (~3 CPU-minutes, the first Cycles
+#               reference ~1 more)
 #   --full      realistic synthetic scene sizes (20k-60k leaves per tree) instead of quick ones
 #   --cycles    bake the missing Cycles references of the synthetic scenes (minutes per scene)
 #   --scaling   also time every method from 1e4 to 1e7 vertices (1e6 without --full)
@@ -21,7 +26,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-headline=0 full=0 cycles=0 scaling=0 real=0 build=1
+headline=0 full=0 cycles=0 scaling=0 real=0 foliage=0 build=1
 for a in "$@"; do
   case "$a" in
     --quick) headline=1 ;;
@@ -29,8 +34,9 @@ for a in "$@"; do
     --cycles) cycles=1 ;;
     --scaling) scaling=1 ;;
     --real) real=1 ;;
+    --foliage) foliage=1 ;;
     --no-build) build=0 ;;
-    -h|--help) sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "bench.sh: unknown option $a" >&2; exit 2 ;;
   esac
 done
@@ -94,6 +100,14 @@ else
   $py bench/forest.py --check | tee bench/out/forest.txt
 fi
 cp bench/out/equal_error_cycles.md bench/out/live_speed.txt bench/out/forest.txt bench/results/
+
+if ((foliage || !headline)); then
+  echo "== foliage (bench/foliage.py, bench/foliage_cycles.py)"
+  in_blender bench/foliage.py --out bench/out/foliage.md --csv bench/out/foliage.csv \
+    --png bench/out/chart_foliage.png
+  in_blender bench/foliage_cycles.py --samples 16 64 256 --out bench/out/foliage_cycles.md
+  cp bench/out/foliage.md bench/out/chart_foliage.png bench/out/foliage_cycles.md bench/results/
+fi
 
 if ((headline)); then
   echo "bench.sh: done in $((SECONDS - start)) s; tables in bench/results/"
