@@ -2,10 +2,15 @@
 
     blender -b scene.blend --python examples/render_preview.py -- --out preview.png
         [--attribute CanopyAO] [--look ao|shaded] [--size 800 600] [--samples 16]
+        [--frame OBJECT ...] [--view X Y Z] [--margin 1.05] [--background R G B] [--raw] [--grey]
 
-`ao` (default) overrides every material with an emission shader reading the colour attribute,
-so the picture is the AO itself (white = open sky). `shaded` renders the scene's own materials
-(with the AO wired into them by `--wire-material`) under a sun and sky. Cycles, CPU: works
+`ao` (default) makes every material an emission shader reading the colour attribute, so the
+picture is the AO itself (white = open sky); a material's alpha is kept (a Principled BSDF's
+Alpha, a Mix Shader with a Transparent BSDF), so leaf cards are cut out as Cycles renders them.
+`--raw`: a pixel is the AO value (Raw view; by default Standard, sRGB-encoded); `--grey`: one
+grey channel, a third of the file. `shaded` renders the scene's own materials (with the AO
+wired into them by `--wire-material`) under a sun and sky. The camera frames `--frame`'s
+objects (default: every mesh but the ground) from direction `--view`. Cycles, CPU: works
 without a display. Exits non-zero with a message on failure.
 """
 import argparse

@@ -82,3 +82,15 @@ def test_the_ao_look_cuts_cards_out_by_their_alpha(tmp_path, surface):
     assert np.all(np.abs(row[18:30] - CARD_AO) < 0.02), row  # the opaque half: the AO
     assert np.all(np.abs(row[34:46] - BACKGROUND) < 0.02), row  # the clear half: behind it
     assert abs(px[2, 2] - BACKGROUND) < 0.02  # the background itself
+
+
+def test_the_readme_card_picture_is_small_and_not_blank():
+    """examples/images/card_birch_ao.png, made by examples/card_picture.sh: 900 × 600 under
+    400 KB, and a tree in it (many grey tones between the background's and the ground's)."""
+    path = os.path.join(REPO, "examples", "images", "card_birch_ao.png")
+    assert os.path.getsize(path) < 400_000
+    px = grey(path)
+    assert px.shape == (600, 900)
+    assert abs(px[-1, -1] - 0.2) < 0.02  # the background
+    assert px.std() > 0.1
+    assert len(np.unique(np.round(px * 255))) > 100
