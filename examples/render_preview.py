@@ -195,8 +195,11 @@ def main(argv):
         sun.data.energy = 3.0
         sun.rotation_euler = (math.radians(40), 0, math.radians(30))
         scene.collection.objects.link(sun)
-    # No machine paths in the picture: Blender stamps the .blend's path into the PNG's text.
+    # No machine paths, dates or timings in the picture's PNG text (Blender stamps them): the
+    # same scene gives the same bytes.
     scene.render.use_stamp_filename = False
+    scene.render.use_stamp_date = scene.render.use_stamp_time = False
+    scene.render.use_stamp_render_time = False
     bpy.ops.render.render(write_still=True)
     print(f"render_preview: wrote {a.out} ({a.look}, {len(baked)} baked objects)")
     return 0
