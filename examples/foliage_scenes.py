@@ -4,6 +4,8 @@ and the benchmark:
 - ``card_tree``: a Sapling tree whose rectangular leaves carry an alpha-textured card material
   (a lens-shaped leaf on a transparent card), bark and leaves in two objects, over a ground;
 - ``card_tree_joined``: the same tree joined into one mesh (two material slots);
+- ``card_birch``: a larger tree for pictures (the README's): a Sapling white birch at the
+  preset's own resolution, twice its leaves at 1.5 times their size, with the same cards;
 - ``opaque_tree``: the same tree with opaque leaves of the card's opaque area (each card shrunk
   about its centre by √(opaque fraction));
 - ``sapling_joined``: the plain Sapling tree (no materials) joined into one mesh;
@@ -29,9 +31,13 @@ import numpy as np  # noqa: E402
 
 SCENES = ("card_tree", "card_tree_joined", "opaque_tree", "sapling_joined", "ivy_wall",
           "gn_cards", "particle_cards")
+PICTURES = ("card_birch",)  # for pictures, not benchmarks (bench/foliage.py bakes SCENES)
 # The card's leaf: a lens |2u − 1|² / w² + |2v − 1|² < 1 of half-width w across the card.
 LEAF_WIDTH = 0.6
 TREE = dict(preset="quaking_aspen", seed=5, leaf_factor=0.25)
+# card_birch: dense and leafy enough to read as a tree at a glance (its leaves 1.5 × the
+# preset's 0.2, so the cards' cut-out shows at 900 × 600).
+BIRCH = dict(preset="white_birch", seed=5, leaf_factor=2.0, coarse=False, leafScale=0.3)
 
 
 # === Materials ===============================================================================
@@ -132,16 +138,19 @@ def ground(col, size=16.0):
 
 
 def sapling_card_tree(col, cards=True, opaque_area=False, joined=False, materials=True,
-                      preset=TREE["preset"], seed=TREE["seed"], leaf_factor=TREE["leaf_factor"]):
+                      preset=TREE["preset"], seed=TREE["seed"], leaf_factor=TREE["leaf_factor"],
+                      coarse=True, **extra):
     """A Sapling tree with rectangular leaves: {role: object}. cards: the leaves carry the
     alpha-textured card material; opaque_area: instead, opaque leaves each shrunk to the card's
     opaque area; joined: bark and leaves joined into one mesh ("Tree"); materials: bark and
-    leaf materials at all (without, the tree has none, as Sapling makes it)."""
+    leaf materials at all (without, the tree has none, as Sapling makes it); coarse: Sapling's
+    coarsest branch resolution; extra: Sapling settings over the preset's."""
     import addon_utils
     import sapling_scenes
     addon_utils.enable("add_curve_sapling", default_set=False)
     branches, leaves = sapling_scenes.sapling_tree(preset, seed, (0, 0), "Tree", leaf_factor,
-                                                   col, coarse=True, leafShape="rect")
+                                                   col, coarse=coarse, leafShape="rect",
+                                                   **extra)
     if materials:
         branches.data.materials.append(plain_material("Bark", (0.3, 0.2, 0.1)))
         if cards or opaque_area:
@@ -363,6 +372,9 @@ def build(scene, realize=False):
                                      joined=scene.endswith("joined"),
                                      materials=scene != "sapling_joined"))
         out["ground"] = ground(col)
+    elif scene == "card_birch":
+        out.update(sapling_card_tree(col, **BIRCH))
+        out["ground"] = ground(col)
     elif scene == "ivy_wall":
         out.update(ivy_wall(col))
     elif scene == "gn_cards":
@@ -372,7 +384,7 @@ def build(scene, realize=False):
         out.update(scatter_tree(col, "particles"))
         out["ground"] = ground(col)
     else:
-        raise ValueError(f"unknown scene {scene!r} (one of {', '.join(SCENES)})")
+        raise ValueError(f"unknown scene {scene!r} (one of {', '.join(SCENES + PICTURES)})")
     world = bpy.data.worlds.new("World")
     bpy.context.scene.world = world
     world.light_settings.distance = 10.0
@@ -383,7 +395,7 @@ def build(scene, realize=False):
 def main(argv):
     import bpy
     ap = argparse.ArgumentParser(prog="foliage_scenes.py")
-    ap.add_argument("--scene", choices=SCENES, required=True)
+    ap.add_argument("--scene", choices=SCENES + PICTURES, required=True)
     ap.add_argument("--realize", action="store_true", help="gn_cards: realise the instances")
     ap.add_argument("--blend", required=True, help="save the scene to this .blend")
     a = ap.parse_args(argv)

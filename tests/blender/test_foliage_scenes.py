@@ -15,6 +15,7 @@ import foliage_scenes  # noqa: E402
 
 EXPECT = {"card_tree": {"Tree_branches", "Tree_leaves", "Ground"},
           "card_tree_joined": {"Tree", "Ground"},
+          "card_birch": {"Tree_branches", "Tree_leaves", "Ground"},
           "opaque_tree": {"Tree_branches", "Tree_leaves", "Ground"},
           "sapling_joined": {"Tree", "Ground"},
           "ivy_wall": {"Wall", "Ground", "IvyLeaf"},
@@ -22,7 +23,7 @@ EXPECT = {"card_tree": {"Tree_branches", "Tree_leaves", "Ground"},
           "particle_cards": {"Trunk", "Crown", "LeafCard", "Ground"}}
 
 
-@pytest.mark.parametrize("scene", foliage_scenes.SCENES)
+@pytest.mark.parametrize("scene", foliage_scenes.SCENES + foliage_scenes.PICTURES)
 def test_scene_builds(scene):
     require_sapling()
     if scene == "ivy_wall":
@@ -31,7 +32,7 @@ def test_scene_builds(scene):
     objs = foliage_scenes.build(scene)
     names = {o.name for o in bpy.context.scene.objects}
     assert EXPECT[scene] <= names, names
-    if scene.startswith("card_tree"):  # the leaves' material keeps its alpha texture
+    if scene.startswith("card_"):  # the leaves' material keeps its alpha texture
         mats = {m.name for o in objs.values() for m in o.data.materials if m}
         assert "Leaf card" in mats and "Bark" in mats, mats
     _clear_scene()
