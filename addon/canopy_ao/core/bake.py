@@ -25,7 +25,8 @@ from .settings import BakeSettings, validate
 
 
 @refusals_are_user_errors
-def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Plan:
+def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
+            carry_cards=True) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
 
     targets: {item name: ("vertex" | "texel", count[, group])}, the receivers the bake will
@@ -43,7 +44,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
     t_start = time.perf_counter()
     plan = Plan(settings=settings, method=settings.method,
                 tau=settings.tau if settings.tau is not None else DEFAULT_TAU,
-                targets=_targets(targets))
+                targets=_targets(targets), carry_cards=bool(carry_cards))
     t0 = time.perf_counter()
     trees.resolve(items)  # trees only a collection groups: told apart by where they stand
     plan.timings["trees"] = time.perf_counter() - t0
@@ -89,7 +90,8 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
         try:
             shared = {} if plan.tracer is None else dict(  # one BVH for the bake
                 tracer=plan.tracer,
-                ids=lambda it, idx: (ladder.sample_ids(plan, it, idx) or {}).get("vertex_ids"))
+                ids=lambda it, idx, key="vertex_ids": (ladder.sample_ids(plan, it, idx, key)
+                                                       or {}).get(key))
             if plan.forest is not None and not regression.occludes(items):
                 plan.regression = regression.OpenSky()
                 plan.notes.append("regression: the only occluders are instanced trees, "
@@ -98,7 +100,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
                 plan.regression = regression.RegressionRung(
                     items, settings.distance, points=regression.POINTS,
                     samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
-                    **shared)
+                    cards=plan.carry_cards, **shared)
         except CanopyAOError as exc:
             if rung.needs_regression:
                 raise
