@@ -66,7 +66,7 @@ def scene():
 def _carried(items, **settings):
     """The card vertices' AO as the bake gives it: each carries its card's opaque part's."""
     cards = items[0]
-    plan = core.prepare(items, core.BakeSettings(distance=10.0, **settings))
+    plan = core.prepare(items, core.BakeSettings(distance=10.0, **settings), carry_cards=True)
     every = slice(0, len(cards.positions))
     ao = core.evaluate_receivers(plan, cards, cards.positions, cards.normals, vertices=every)
     card_ao.carry(plan, cards, ao, every)
@@ -91,8 +91,8 @@ def _on_leaf(points, frames):
 def test_calibration_traces_a_card_vertex_on_its_leaf(scene, monkeypatch, carried):
     """auto's reference rays at a sampled card vertex start on its card's opaque part (where
     the bake's card vertex takes its AO), never at the clear corner; at the vertex itself
-    where the bake evaluates it there (carry_cards=False: live AO, a frame range, bent
-    normals)."""
+    where the bake evaluates it there (carry_cards=False: evaluate_item, live AO, a frame
+    range, bent normals)."""
     items, frames = scene
     traced = []
     real = ladder.trace

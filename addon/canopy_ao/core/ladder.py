@@ -76,7 +76,7 @@ def sample_ids(plan: Plan, item, idx, key="vertex_ids"):
     return own_ids(plan, item.name, {key: whole})
 
 
-def _sample_points(item, idx, cards=True):
+def _sample_points(item, idx, cards):
     """[(positions, normals, the item's own ids)] of its sample vertices idx: the vertices as
     they are, a leaf card's (with ``cards``: Plan.carry_cards) at its card's opaque part with
     that triangle (card_ao.sample_points: where the bake's card vertices take their AO, so τ

@@ -125,7 +125,7 @@ class RegressionRung:
     _bounded = False  # a live frame's copy holds its features to the sample's range
 
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
-                 directions=24, seed=0, tracer=None, ids=None, meshes=None, cards=True):
+                 directions=24, seed=0, tracer=None, ids=None, meshes=None, cards=False):
         _core = native.require()
         t0 = time.perf_counter()
         items = [it for it in items if it.role != "IGNORE"]
