@@ -116,7 +116,12 @@ class BakeJob:
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
         targets = parts_io.receivers(self.targets)  # a mesh baked by parts: its parts'
-        self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
+        # Card vertices carry their opaque part's AO in a single bake without bent normals
+        # (loop.start): the calibration samples take them there then (core/card_ao.py).
+        cards = (not (self.opts["live"] or self.opts.get("frames"))
+                 and self.opts["bent_normals"] == "OFF")
+        self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets,
+                                 carry_cards=cards)
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:
             self.prototypes.bake_realized(self.plan)
@@ -126,7 +131,7 @@ class BakeJob:
             maps.ensure_tracer(self.plan, self.items)
             self._lap("tracer (bent normals)", t0)
         self.loop.start(self.plan, self.opts["bent_normals"], bool(self.opts["thickness"]),
-                        self.prototypes.means, cards=not self.opts["live"])
+                        self.prototypes.means, cards=cards)
         if self.blocking and core.rung(self.plan.method).uses_samples:  # steps of a few seconds
             self.loop.split(max(4096, CHUNK * BLOCKING_CHUNKS * 16
                                 // max(self.settings.samples, 16)))

@@ -25,13 +25,16 @@ from .settings import BakeSettings, validate
 
 
 @refusals_are_user_errors
-def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Plan:
+def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
+            carry_cards=False) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
 
     targets: {item name: ("vertex" | "texel", count[, group])}, the receivers the bake will
     evaluate (an item's vertices, or the texels of its image: one face corner each, `group`
     receivers a texel, its anti-aliasing sub-samples, sharing its rays); None = every receiver
-    item at its vertices. Auto's cost model counts them (cost.py).
+    item at its vertices. Auto's cost model counts them (cost.py). carry_cards: the bake's
+    card vertices will carry their opaque part's AO (card_ao.carry, as the add-on's bake loop
+    does; evaluate_item does not), so the calibration samples take them there (Plan.carry_cards).
 
     prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every
     receiver. Given here rather than attached afterwards, the ray tracer traces their meshes
@@ -43,7 +46,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
     t_start = time.perf_counter()
     plan = Plan(settings=settings, method=settings.method,
                 tau=settings.tau if settings.tau is not None else DEFAULT_TAU,
-                targets=_targets(targets))
+                targets=_targets(targets), carry_cards=bool(carry_cards))
     t0 = time.perf_counter()
     trees.resolve(items)  # trees only a collection groups: told apart by where they stand
     plan.timings["trees"] = time.perf_counter() - t0
@@ -89,7 +92,8 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
         try:
             shared = {} if plan.tracer is None else dict(  # one BVH for the bake
                 tracer=plan.tracer,
-                ids=lambda it, idx: (ladder.sample_ids(plan, it, idx) or {}).get("vertex_ids"))
+                ids=lambda it, idx, key="vertex_ids": (ladder.sample_ids(plan, it, idx, key)
+                                                       or {}).get(key))
             if plan.forest is not None and not regression.occludes(items):
                 plan.regression = regression.OpenSky()
                 plan.notes.append("regression: the only occluders are instanced trees, "
@@ -98,7 +102,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None) -> Pla
                 plan.regression = regression.RegressionRung(
                     items, settings.distance, points=regression.POINTS,
                     samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
-                    **shared)
+                    cards=plan.carry_cards, **shared)
         except CanopyAOError as exc:
             if rung.needs_regression:
                 raise

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from . import cost, frontier, native
+from . import card_ao, cost, frontier, native
 from .buried import BURIED_RAYS, BURIED_SCALE, buried
 from .lighting import evaluate_points, own_ids, trace, traces_instances
 from .rungs import auto, base as rungs, registry  # noqa: F401  (registry: fills the ladder)
@@ -69,11 +69,28 @@ def sample_receivers(items, count, seed):
     return picks
 
 
-def sample_ids(plan: Plan, item, idx):
-    """The tracer-mesh vertex ids of an item's sample vertices idx (a part of an item names
-    the whole item's vertices: scene.parts), or None."""
+def sample_ids(plan: Plan, item, idx, key="vertex_ids"):
+    """The tracer-mesh ids of an item's sample vertices idx (a part of an item names the whole
+    item's vertices: scene.parts), or with key "triangle_ids" of its triangles idx, or None."""
+    whole = item.vertex_map[idx] if item.vertex_map is not None and key == "vertex_ids" else idx
+    return own_ids(plan, item.name, {key: whole})
+
+
+def _sample_points(item, idx, cards):
+    """[(positions, normals, the item's own ids)] of its sample vertices idx: the vertices as
+    they are, a leaf card's (with ``cards``: Plan.carry_cards) at its card's opaque part with
+    that triangle (card_ao.sample_points: where the bake's card vertices take their AO, so τ
+    is fitted to the card the bake shows)."""
     whole = item.vertex_map[idx] if item.vertex_map is not None else idx
-    return own_ids(plan, item.name, {"vertex_ids": whole})
+    cards = card_ao.sample_points(item, idx) if cards and item.vertex_map is None else None
+    if cards is None:
+        return [(np.ascontiguousarray(item.positions[idx]),
+                 np.ascontiguousarray(item.normals[idx]), {"vertex_ids": whole})]
+    card, p, n, tri = cards
+    rest = np.delete(idx, card)
+    out = [(np.ascontiguousarray(item.positions[rest]), np.ascontiguousarray(item.normals[rest]),
+            {"vertex_ids": rest})] if len(rest) else []
+    return out + [(p, n, {"triangle_ids": tri})]
 
 
 def calibrate(plan: Plan, items, candidates, tau_fixed=None):
@@ -91,13 +108,12 @@ def calibrate(plan: Plan, items, candidates, tau_fixed=None):
     t0 = time.perf_counter()
     refs, groups = [], []
     for it, idx in picks:
-        p = np.ascontiguousarray(it.positions[idx])
-        n = np.ascontiguousarray(it.normals[idx])
-        own = sample_ids(plan, it, idx)
-        refs.append(trace(plan, p, n, s.calibration_samples, own=own))
-        # The rungs' own ids of the points (item vertices; the regression's leaf features).
-        local = {"vertex_ids": it.vertex_map[idx] if it.vertex_map is not None else idx}
-        groups.append((it, p, n, own, local))
+        # The rungs' own ids of the points (item vertices, or a card's triangle; the
+        # regression's leaf features) and the tracer's.
+        for p, n, local in _sample_points(it, idx, plan.carry_cards):
+            own = own_ids(plan, it.name, local)
+            refs.append(trace(plan, p, n, s.calibration_samples, own=own))
+            groups.append((it, p, n, own, local))
     ref = np.concatenate(refs) if refs else np.zeros(0, np.float32)
     # Buried points (a leaf's base inside its twig): kept out of the fit, which they would
     # darken everything else to match (docs/DESIGN.md, 'Auto mode').

@@ -33,16 +33,16 @@ class LeafTable:
             else np.zeros(0, np.int64)
 
     def labels_of(self, own, count):
-        """Leaf of each of `count` points from own ({"vertex_ids" | "triangle_ids"}: the item's
-        vertex or triangle of each point, -1 = none); -1 where unknown."""
+        """Leaf of each of `count` points from own ({"vertex_ids", "triangle_ids"}, either or
+        both: the item's vertex or triangle of each point, -1 = none; a vertex first); -1 where
+        unknown."""
         out = np.full(count, -1, np.int64)
-        for key, table in (("vertex_ids", self.labels), ("triangle_ids", self.tri_labels)):
+        for key, table in (("triangle_ids", self.tri_labels), ("vertex_ids", self.labels)):
             ids = None if not own else own.get(key)
             if ids is not None:
                 ids = np.asarray(ids, np.int64)
                 ok = (ids >= 0) & (ids < len(table))
                 out[ok] = table[ids[ok]]
-                break
         return out
 
     def features(self, p, labels, frame):

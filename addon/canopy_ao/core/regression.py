@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from . import buried as _buried
-from . import card_area, native
+from . import card_ao, card_area, native
 from .leaf_features import LeafTable
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
@@ -98,10 +98,12 @@ def calibration_size(receivers, points=POINTS, samples=128):
 
 
 def _own_ids_from(bases):
-    """ids(item, idx) for the rung's own tracer: the rows' place in its merged mesh (bases:
-    {id(item): its first vertex there}; a part of an item is its own mesh there)."""
-    def ids(item, idx):
-        return (np.asarray(idx, np.int64) + bases[id(item)]).astype(np.int32)
+    """ids(item, idx, key) for the rung's own tracer: the rows' (key "vertex_ids") or the
+    triangles' ("triangle_ids") place in its merged mesh (bases: {id(item): its first vertex
+    and first triangle there}; a part of an item is its own mesh there)."""
+    def ids(item, idx, key="vertex_ids"):
+        first = bases[id(item)][key == "triangle_ids"]
+        return (np.asarray(idx, np.int64) + first).astype(np.int32)
     return ids
 
 
@@ -112,17 +114,18 @@ class RegressionRung:
     items: SceneItems (roles upper case; IGNORE skipped). distance: the AO distance of the
     calibration rays (0 = unlimited). points × samples: the calibration sample's largest size
     (calibration_size shrinks it on small scenes); resolution: the grid's. The sample is traced
-    against every non-ignored triangle with each
-    point's own vertex named, so a receiver skips only the triangles it starts on (as Cycles).
-    tracer, ids: the plan's ray tracer over the same triangles and ids(item, idx) -> its vertex
-    ids of those rows (ladder.sample_ids), so a bake builds one BVH; None = the rung's own.
-    meshes: the unsplit items when ``items`` are split per tree (scene.parts), for the leaf
-    tables (LeafTable) by item name; None = the items themselves."""
+    against every non-ignored triangle with each point's own vertex named, so a receiver skips
+    only the triangles it starts on (as Cycles); cards: a card vertex is sampled where the
+    bake's takes its AO, at its card's opaque part (card_ao.sample_points; Plan.carry_cards).
+    tracer, ids: the plan's ray tracer over the same triangles and ids(item, idx, key) -> its
+    ids of those rows (key "vertex_ids") or triangles ("triangle_ids"; ladder.sample_ids): one
+    BVH a bake; None = the rung's own. meshes: the unsplit items when ``items`` are split per
+    tree (scene.parts), for the leaf tables (LeafTable) by item name; None = the items."""
 
     _bounded = False  # a live frame's copy holds its features to the sample's range
 
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
-                 directions=24, seed=0, tracer=None, ids=None, meshes=None):
+                 directions=24, seed=0, tracer=None, ids=None, meshes=None, cards=False):
         _core = native.require()
         t0 = time.perf_counter()
         items = [it for it in items if it.role != "IGNORE"]
@@ -139,11 +142,11 @@ class RegressionRung:
         # Calibration sample, stratified by (tree, role); traced with each point's own vertex.
         own_tracer = tracer is None
         if own_tracer:
-            bases, base = {}, 0
+            bases, base, tbase = {}, 0, 0
             traced = occ + [it for it in items if it.role == "GROUND"]
             for it in traced:
-                bases[id(it)] = base
-                base += len(it.positions)
+                bases[id(it)] = (base, tbase)
+                base, tbase = base + len(it.positions), tbase + len(it.triangles)
             tracer = _core.RayTracer(*merged(traced), **bake_shading(traced))  # bake points
             ids = _own_ids_from(bases)
         t_tracer = time.perf_counter()
@@ -166,16 +169,20 @@ class RegressionRung:
                 got = ids(it, idx[m] - offs[k]) if m.any() else None
                 if got is not None:
                     own[m] = got
+            # a card vertex at its card's opaque part (its triangle its own), as the bake shows it
+            tri, own_tri = card_ao.move_to_cards(its if cards else (), owner, idx - offs[owner],
+                                                 P, N, own, ids)
             diag = np.array([_buried.size(it.positions) for it in its])[owner]
-            ao = _trace(tracer, P, N, samples, d, seed + 1, own)
-            buried = _buried_mask(tracer, P, N, diag, own)
+            ao = _trace(tracer, P, N, samples, d, seed + 1, own, own_tri)
+            buried = _buried_mask(tracer, P, N, diag, own, own_tri)
             F = np.zeros((len(idx), NATIVE + LeafTable.COUNT), np.float32)
             for k, it in enumerate(its):
                 m = owner == k
                 if m.any():
                     rows = idx[m] - offs[k]
                     whole = it.vertex_map[rows] if it.vertex_map is not None else rows
-                    F[m] = self._compute(it.tree, P[m], N[m], it.name, {"vertex_ids": whole})
+                    F[m] = self._compute(it.tree, P[m], N[m], it.name, {
+                        "vertex_ids": np.where(tri[m] < 0, whole, -1), "triangle_ids": tri[m]})
             sample[g] = dict(features=F[~buried], ao=ao[~buried], buried=int(buried.sum()))
         t_cal = time.perf_counter()
         # Fit per group, falling back to the role's pooled sample, then to everything.
@@ -315,20 +322,29 @@ def bake(items, distance=0.0, **options):
     return out, rung.report
 
 
-def _trace(tracer, P, N, samples, distance, seed, ids):
-    """Traced AO; points with an own vertex id (>= 0) skip only their own triangles."""
+def _own(ids, tris, m=slice(None)):
+    """RayTracer.ao's own-primitive arguments of rows m: vertex ids, and triangle ids (a card
+    vertex's receiver on its card) when any."""
+    out = {"vertex_ids": np.ascontiguousarray(ids[m], np.int32)}
+    if tris is not None:
+        out["triangle_ids"] = np.ascontiguousarray(tris[m], np.int32)
+    return out
+
+
+def _trace(tracer, P, N, samples, distance, seed, ids, tris=None):
+    """Traced AO; points with an own vertex id (>= 0) skip only their own triangles, those with
+    an own triangle id (tris, >= 0) that triangle."""
     P, N = np.ascontiguousarray(P, np.float32), np.ascontiguousarray(N, np.float32)
     return np.asarray(tracer.ao(P, N, samples=int(samples), distance=distance, seed=int(seed),
-                                vertex_ids=np.ascontiguousarray(ids, np.int32)))
+                                **_own(ids, tris)))
 
 
-def _buried_mask(tracer, P, N, diag, ids):
+def _buried_mask(tracer, P, N, diag, ids, tris=None):
     """bool: the points buried (buried.enclosed) in their object, of diagonal ``diag``."""
     out = np.zeros(len(P), bool)
     for dg in np.unique(diag):
         m = diag == dg
         if dg <= 0:
             continue
-        out[m] = _buried.enclosed(tracer, P[m], N[m], dg, BURIED_RAYS, 7,
-                                  vertex_ids=np.ascontiguousarray(ids[m], np.int32))
+        out[m] = _buried.enclosed(tracer, P[m], N[m], dg, BURIED_RAYS, 7, **_own(ids, tris, m))
     return out

@@ -132,6 +132,10 @@ class Plan:
     # role -> factor on every tree's τ with which the analytic rungs light that role's
     # receivers (SCALED_ROLES; calibrated apart from the leaves: ladder.calibrate); absent = 1
     role_scale: dict = field(default_factory=dict)
+    # The bake's card vertices carry their opaque part's AO (card_ao.carry: the add-on's bake
+    # loop, not evaluate_item, live AO, a frame range or bent normals): the calibration
+    # samples take them there too.
+    carry_cards: bool = False
     # tree -> int32 (N,): the k-means shell of each of its canopy points (kept by live AO)
     shell_labels: dict = field(default_factory=dict)
     # lighting.Lights: the native scene plan of fits and trunks, built once (lighting.lights)
