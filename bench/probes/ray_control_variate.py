@@ -32,16 +32,17 @@ v̄ − m, and the CPU seconds of the proxy's rays (numpy here; only the correla
 
 Measured (quick exports of the quaking aspen and the callistemon, S = 8 / 16 / 32 / 64; the
 directions reproduce the tracer's, 0.00° median from its bent normals): the ellipsoid's
-visibility does not correlate with the rays' (ρ 0.02-0.08; MAE 0.98-1.01 of plain rays at
-any β; on the white birch and the small maple at 16 / 64, ``--proxies ellipsoid``, ρ
-0.02-0.07 and MAE 0.998-1.001), though its rays in numpy already cost 0.35-1.3x Embree's CPU. The density grid's does a little, less as S grows (ρ 0.37 / 0.29 / 0.22 / 0.14 on the
-aspen, 0.37 / 0.32 / 0.25 / 0.17 on the callistemon): unburied MAE at β = 1 0.82 / 0.93 /
-1.00 / 1.04 of plain rays on the aspen and 0.91 / 0.95 / 0.98 / 1.01 on the callistemon, at
-the oracle β 0.84 / 0.93 / 0.97 / 0.99 and 0.91 / 0.94 / 0.97 / 0.99, where twice the rays give
-0.65-0.73. So at most 1.4x fewer rays at S = 8 on the aspen (1.16x on the callistemon) before
-the proxy's own rays are paid, and ≤ 1.05x at S ≥ 32 (the add-on's default is 64): the
-lattice already stratifies away the smooth, crown-scale part of the integrand, the only part a
-medium can predict; what is left is individual leaves' edges, which no medium sees.
+visibility does not correlate with the rays' (ρ 0.02-0.08; MAE 0.98-1.01 of plain rays at any β;
+on the white birch and the small maple at 16 / 64, ``--proxies ellipsoid``, ρ 0.02-0.07 and MAE
+0.998-1.001), though its rays in numpy already cost 0.35-1.3x Embree's CPU. The density grid's
+does a little, less as S grows (ρ 0.37 / 0.29 / 0.22 / 0.14 on the aspen, 0.37 / 0.32 / 0.25 /
+0.17 on the callistemon): unburied MAE at β = 1 0.82 / 0.93 / 1.00 / 1.04 of plain rays on the
+aspen and 0.91 / 0.95 / 0.98 / 1.01 on the callistemon, at the oracle β 0.84 / 0.93 / 0.97 /
+0.99 and 0.91 / 0.94 / 0.97 / 0.99, where twice the rays give 0.65-0.73. So at most 1.4x fewer
+rays at S = 8 on the aspen (1.16x on the callistemon) before the proxy's own rays are paid, and
+≤ 1.05x at S ≥ 32 (the add-on's default is 64): the lattice already stratifies away the smooth,
+crown-scale part of the integrand, the only part a medium can predict; what is left is
+individual leaves' edges, which no medium sees.
 """
 from __future__ import annotations
 
