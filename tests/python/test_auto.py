@@ -31,8 +31,15 @@ def test_auto_stops_at_the_sphere_where_it_is_good_enough():
     assert "meets the target" in cal["why"]
 
 
+# The weeping tree's crown hangs near the ground, which occludes its lower leaves in every rung
+# (core/walls.py): its sphere's sample RMSE is 0.106, the grid's 0.086, rays' 0.034. A target
+# between them asks more than the sphere gives.
+IRREGULAR_TARGET = 0.09
+
+
 def test_auto_climbs_on_an_irregular_tree():
-    method, cal = auto(cs.weeping_tree(leaves=4000), target_rmse=TARGET, time_budget=60.0)
+    method, cal = auto(cs.weeping_tree(leaves=4000), target_rmse=IRREGULAR_TARGET,
+                       time_budget=60.0)
     c = cal["candidates"]
     assert method != "sphere", cal["why"]
     # The choice is a real improvement on the sample, and the exact rung is on the ladder.
@@ -182,5 +189,7 @@ def test_the_ground_takes_its_own_tau(method, monkeypatch):
     monkeypatch.setattr(core.ladder, "MIN_SPLIT_POINTS", 10 ** 9)  # one τ for all, as before
     one, rep_one = errors()
     assert rep_one["tau_role_scale"] == {}
-    assert one["ground"] > 0.05 and split["ground"] < 0.03, (one, split)
+    # With the ground occluding the low leaves (core/walls.py) one τ is less wrong for the
+    # ground (MAE 0.043 sphere, 0.025 shells), and the split still more than halves it.
+    assert split["ground"] < 0.5 * one["ground"] and split["ground"] < 0.03, (one, split)
     assert split["round_leaves"] < one["round_leaves"] + 0.005, (one, split)

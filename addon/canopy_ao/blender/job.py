@@ -116,7 +116,8 @@ class BakeJob:
             self.lines.extend(self.prototypes.lines())
             t0 = self._lap("instances", t0)
         targets = parts_io.receivers(self.targets)  # a mesh baked by parts: its parts'
-        self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets)
+        self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets,
+                                 live=self.opts["live"])
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:
             self.prototypes.bake_realized(self.plan)
