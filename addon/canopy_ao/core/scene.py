@@ -13,9 +13,12 @@ from .native import CanopyAOError
 RECEIVER_ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS")
 # Receivers whose τ calibration fits apart from the leaves' (ladder.calibrate), each group one
 # factor on every tree's τ (Plan.role_scale): the ground and grass see the crowns from outside,
-# through their whole depth. (The branches as a group of their own moved the Sapling trees'
-# MAE by -0.004 to +0.002: they stay with the leaves.)
-SCALED_ROLES = (("GROUND", "GRASS"),)
+# through their whole depth; the trunk and branches from within, where the in-shell medium is
+# uniform and a crown may not be: cards scattered over a crown's surface leave it hollow, and
+# the leaves' τ (fitted on the shell, where they are) made its inside 0.17 too dark
+# (docs/studies/foliage.md). On the Sapling trees the trunk's own factor moves the MAE by
+# -0.002 to +0.002 (bench/probes/ground_patch.py --trunk-scale).
+SCALED_ROLES = (("GROUND", "GRASS"), ("TRUNK",))
 
 
 @dataclass
