@@ -31,7 +31,7 @@ from canopy_ao.core import ladder, walls  # noqa: E402
 
 RUNGS = ("sphere", "ellipsoid", "shells", "medium", "reeves_blau", "grid", "regression",
          "hybrid", "auto")
-SCENES = ("sap_callistemon", "sap_quaking_aspen", "sap_small_maple")
+SCENES = ("sap_callistemon", "sap_white_birch", "sap_small_maple", "sap_quaking_aspen")
 
 
 def bake(items, method, distance, every_ground, trunk_scale=True):
