@@ -1,4 +1,4 @@
-"""Probe, answered: on the scattered-card scenes the proxy rungs get both rings of the cylinder trunk wrong: the ring on the ground too bright (no occlusion from the ground it stands on), the ring inside the crown too dark (docs/studies/foliage.md, 'Where it fails').
+"""Probe, answered: on the scattered-card scenes the proxy rungs read both rings of the cylinder trunk as rays do, the ring on the ground occluded by the ground's patch (core/walls.py), the ring inside the hollow crown lit with the trunk's own factor on τ (scene.SCALED_ROLES; docs/studies/foliage.md).
 
 The mean AO of the trunk's two vertex rings (examples/foliage_scenes.py's gn_cards and
 particle_cards: a 32-sided cylinder, one ring at z = 0 on the ground, one at z = 3 inside the

@@ -115,11 +115,13 @@ def test_ivygen_ivy_on_a_wall(real_ivy, tmp_path, capsys, method):
     assert np.all((wall >= 0) & (wall <= 1)) and wall.mean() < 1.0
 
 
-def _ground_triangles(tau="0.5"):
-    """{name: triangle count} of the GROUND items a sphere bake at a given τ gathers."""
+def _ground_triangles(tau="0.5", live=True):
+    """{name: triangle count} of the GROUND items a sphere bake at a given τ gathers (a live
+    bake's first, or a bake's)."""
     from canopy_ao.blender import gather
     ctx = bpy.context
-    opts = {"method": "sphere", "tau": float(tau), "mode": 'VERTEX', "bent_normals": "OFF"}
+    opts = {"method": "sphere", "tau": float(tau), "mode": 'VERTEX', "bent_normals": "OFF",
+            "live": live}
     items, _objs, _how = gather.scene_items(ctx, ctx.evaluated_depsgraph_get(), [], opts, {})
     return {it.name: len(it.triangles) for it in items if it.role == "GROUND"}
 
@@ -132,17 +134,19 @@ def _quad(name, role, rotate_x=0.0, z=0.0):
     return ob
 
 
-def test_a_ground_reads_its_triangles_only_where_a_wall_may_be():
-    """An analytic bake at a given τ needs a GROUND's triangles only for the walls' patches
-    (core/walls.py): a flat ground alone is read without them (Blender's loop triangulation
-    is the dearest read); a wall, also one that is a flat mesh turned upright by its object's
-    transform, brings every GROUND surface's triangles, the flat ground's too, as before."""
+def test_a_live_ground_reads_its_triangles_only_where_a_wall_may_be():
+    """A bake's GROUND surfaces are all patches (core/walls.py): it reads every ground's
+    triangles. Live AO's are patches only where a wall is, so its analytic bake at a given τ
+    reads a flat ground alone without them (Blender's loop triangulation is the dearest read);
+    a wall, also one that is a flat mesh turned upright by its object's transform, brings
+    every GROUND surface's triangles, the flat ground's too."""
     _clear_scene()
     try:
         _quad("Leaves", 'CANOPY', z=3.0)
         _quad("Ground", 'GROUND')
         bpy.context.view_layer.update()
         assert _ground_triangles() == {"Ground": 0}
+        assert _ground_triangles(live=False) == {"Ground": 2}
         _quad("Wall", 'GROUND', rotate_x=np.pi / 2, z=2.0)
         bpy.context.view_layer.update()
         assert _ground_triangles() == {"Ground": 2, "Wall": 2}

@@ -53,10 +53,19 @@ def _ao(name, attribute="CanopyAO"):
     return mesh_io.read_ao_attribute(bpy.context.scene.objects[name], attribute)
 
 
-def _full(method, tau, attribute="Full"):
-    """A full bake of the current frame; {name: AO}."""
-    _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, tau=tau,
-                                                      attribute=attribute))
+def _full(method, tau, attribute="Full", live_ground=False):
+    """A full bake of the current frame; {name: AO}. live_ground: with live AO's rule for the
+    GROUND surfaces (core/walls.py: patches only where a wall is; a bake makes the flat ground
+    one), as a live frame is lit."""
+    from canopy_ao.core import walls
+    build = walls.build
+    if live_ground:
+        walls.build = lambda items, every_ground=True: build(items, False)
+    try:
+        _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, tau=tau,
+                                                          attribute=attribute))
+    finally:
+        walls.build = build
     assert rep["method"] == method
     return {n: _ao(n, attribute) for n in NAMES}
 
@@ -76,7 +85,7 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
     assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
     assert np.abs(now["Ground"] - first["Ground"]).max() > 0.005  # and the shadow moved
     if method in ("sphere", "ellipsoid"):
-        _assert_equal(now, _full(method, rep["tau"]))
+        _assert_equal(now, _full(method, rep["tau"], live_ground=True))
     else:
         # The shells keep the first bake's partition of the leaves (core/live.py): a full bake
         # clusters afresh, so the check is the first frame, reached again.
@@ -156,12 +165,12 @@ def test_live_keeps_the_first_bakes_calibrated_tau(animated):
     assert session.plan.role_scale == rep["tau_role_scale"]  # the ground's own factor too
     taus = set(rep["tau_by_tree"].values()) | {rep["tau"]}
     if len(taus) == 1:  # one τ for every tree: a full bake given it is the same bake ...
-        want = _full("ellipsoid", rep["tau"])
+        want = _full("ellipsoid", rep["tau"], live_ground=True)
         # ... but for the receivers frame 1's buried test set to 0 (a given τ traces nothing)
         for name, mask in session.plan.buried.items():
             want[name][mask] = 0.0
-        # ... and the ground and grass, lit with τ × their factor (a given τ has none)
-        scaled = {"Ground", "Grass"} if rep["tau_role_scale"] else set()
+        # ... and the ground, grass and trunk, lit with τ × their factor (a given τ has none)
+        scaled = {n for n in NAMES if ROLES[n] in rep["tau_role_scale"]}
         _assert_equal({n: _ao(n) for n in NAMES}, want, [n for n in NAMES if n not in scaled])
 
 
@@ -187,7 +196,7 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
     animated.canopy_ao.live = True
     live._forget()
     animated.frame_set(9)
-    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7))
+    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
     # Saved and loaded: re-armed from the file's record by the persistent handler.
     path = str(tmp_path / "live.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
@@ -195,7 +204,7 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
     scene = bpy.context.scene
     assert scene.canopy_ao.live and live.session_of(scene) is None
     scene.frame_set(3)
-    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7))
+    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
     # The user's own attribute of that name is never overwritten: live AO stops instead.
     leaves = scene.objects["Leaves"]
     mesh_io.remove_owned_attribute(leaves, "CanopyAO")
@@ -318,7 +327,8 @@ def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_pa
     # The leaves are keyed (a shape key): a render writes their AO into its own evaluated
     # mesh (test_live_render.py checks the frames), the file's keeps the frame the CLI baked.
     kept = np.load(tmp_path / "ao.npy")
-    np.testing.assert_allclose(kept, _full("ellipsoid", 1.7)["Leaves"], atol=2e-6)
+    np.testing.assert_allclose(kept, _full("ellipsoid", 1.7, live_ground=True)["Leaves"],
+                               atol=2e-6)
     assert os.path.exists(str(tmp_path / "frame_0004.png"))
     # --frames: the cache written and saved.
     cmd = ["blender", "-b", "--factory-startup", path, "--python-expr",

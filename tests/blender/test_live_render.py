@@ -96,14 +96,21 @@ def test_an_animation_render_with_live_ao_shows_each_frames_geometry_and_ao(
     assert out.returncode == 0, out.stdout + out.stderr
     assert "canopy_ao: error" not in out.stderr, out.stderr
     assert "canopy_ao: warning" not in out.stderr, out.stderr  # nothing a frame could keep
-    # The reference: each frame baked in full (same rung and τ, not live) and rendered here.
+    # The reference: each frame baked in full (same rung and τ, not live, but with a live
+    # frame's GROUND rule: no patch for a ground alone, core/walls.py) and rendered here.
+    from canopy_ao.core import walls
     opts = dict(properties.scene_options(scene), method="ellipsoid", tau=1.7,
                 show_proxies=False, live=False)
     first = _pixels(str(tmp_path / "live_0001.png"))
+    build = walls.build
     try:
         for frame in (1, 2, 3):
             scene.frame_set(frame)
-            run_bake(bpy.context, [], opts)
+            walls.build = lambda items, every_ground=True: build(items, False)
+            try:
+                run_bake(bpy.context, [], opts)
+            finally:
+                walls.build = build
             scene.render.filepath = str(tmp_path / f"full_{frame}.png")
             bpy.ops.render.render(write_still=True)
             want = _pixels(str(tmp_path / f"full_{frame}.png"))

@@ -90,12 +90,19 @@ def steps():
     ok = yield from wait_for_render(done)
     check(ok, "the Eevee animation render did not complete in 60 s")
     live.stop(scene)
-    # The reference: each frame baked in full (same rung and τ) and rendered in the foreground.
+    # The reference: each frame baked in full (same rung and τ, and a live frame's GROUND
+    # rule: no patch for a ground alone, core/walls.py) and rendered in the foreground.
+    from canopy_ao.core import walls
     opts = dict(properties.scene_options(scene), method="ellipsoid", tau=1.7,
                 show_proxies=False, live=False)
+    build = walls.build
     for frame in (1, 2, 3):
         scene.frame_set(frame)
-        run_bake(bpy.context, [], opts)
+        walls.build = lambda items, every_ground=True: build(items, False)
+        try:
+            run_bake(bpy.context, [], opts)
+        finally:
+            walls.build = build
         shots = {'CYCLES': [("Ctrl+F12", os.path.join(TMP, f"anim_{frame:04d}.png"))],
                  eevee: [("Eevee Ctrl+F12", os.path.join(TMP, f"eevee_{frame:04d}.png"))]}
         if frame == 3:

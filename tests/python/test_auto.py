@@ -31,8 +31,15 @@ def test_auto_stops_at_the_sphere_where_it_is_good_enough():
     assert "meets the target" in cal["why"]
 
 
+# The weeping tree's crown hangs near the ground, which occludes its lower leaves in every rung
+# (core/walls.py): its sphere's sample RMSE is 0.106, the grid's 0.086, rays' 0.034. A target
+# between them asks more than the sphere gives.
+IRREGULAR_TARGET = 0.09
+
+
 def test_auto_climbs_on_an_irregular_tree():
-    method, cal = auto(cs.weeping_tree(leaves=4000), target_rmse=TARGET, time_budget=60.0)
+    method, cal = auto(cs.weeping_tree(leaves=4000), target_rmse=IRREGULAR_TARGET,
+                       time_budget=60.0)
     c = cal["candidates"]
     assert method != "sphere", cal["why"]
     # The choice is a real improvement on the sample, and the exact rung is on the ladder.
@@ -177,10 +184,54 @@ def test_the_ground_takes_its_own_tau(method, monkeypatch):
 
     split, rep = errors()
     scale = rep["tau_role_scale"]
-    assert scale.keys() == {"GROUND", "GRASS"} and 0.05 < scale["GROUND"] < 0.9
+    assert {"GROUND", "GRASS"} <= scale.keys() and 0.05 < scale["GROUND"] < 0.9
     assert rep["calibration"]["candidates"][method]["role_scale"] == scale
     monkeypatch.setattr(core.ladder, "MIN_SPLIT_POINTS", 10 ** 9)  # one τ for all, as before
     one, rep_one = errors()
     assert rep_one["tau_role_scale"] == {}
-    assert one["ground"] > 0.05 and split["ground"] < 0.03, (one, split)
+    # With the ground occluding the low leaves (core/walls.py) one τ is less wrong for the
+    # ground (MAE 0.043 sphere, 0.025 shells), and the split still more than halves it.
+    assert split["ground"] < 0.5 * one["ground"] and split["ground"] < 0.03, (one, split)
     assert split["round_leaves"] < one["round_leaves"] + 0.005, (one, split)
+
+
+def _hollow_crown_tree(cards=800, seed=4):
+    """Leaf cards (0.2 quads) scattered over the surface of a crown of radius 1.5 centred at
+    z = 3.2, as geometry nodes scatter them on an icosphere (examples/foliage_scenes.py's
+    gn_cards): a hollow crown; a 32-sided trunk from the ground to z = 3, inside it; a ground.
+    SceneItems."""
+    import tree_scene as ts
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(cards, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    c = np.array([0.0, 0.0, 3.2]) + 1.5 * d
+    u = rng.normal(size=(cards, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(u, rng.normal(size=(cards, 3)))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    quad = np.stack([c - 0.1 * u - 0.1 * v, c + 0.1 * u - 0.1 * v, c + 0.1 * u + 0.1 * v,
+                     c - 0.1 * u + 0.1 * v], 1).reshape(-1, 3).astype(np.float32)
+    base = 4 * np.arange(cards)[:, None]
+    quads = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]]).astype(np.int32)
+    parts = {"Leaves": ("CANOPY", "T", quad, quads),
+             "Trunk": ("TRUNK", "T", *ts.cylinder(0.15, 3.0, 32)),
+             "Ground": ("GROUND", "", *ts.plane(16.0, 48))}
+    return [core.SceneItem(n, r, t, p, ts.vertex_normals(p, tri), tri)
+            for n, (r, t, p, tri) in parts.items()]
+
+
+@pytest.mark.parametrize("method", ["sphere", "medium"])
+def test_a_trunk_inside_a_hollow_crown_takes_its_own_tau(method):
+    """Inside a crown of cards scattered over its surface, a trunk sees one layer of leaves
+    where the uniform in-shell medium puts the crown's whole depth; the leaves' τ (fitted on
+    the shell, where they are) left the trunk's top too dark (here 0.26 sphere, 0.31 medium
+    against rays' 0.36; on gn_cards 0.55 against 0.72). The trunk's points fit a factor of
+    their own (scene.SCALED_ROLES): 0.35 and 0.34."""
+    scene = _hollow_crown_tree()
+    trunk = scene[1]
+    top = trunk.positions[:, 2] > 2.9
+    ref = core.bake(scene, core.BakeSettings(method="raytrace", samples=256, seed=9))[0]
+    res, rep = core.bake(scene, core.BakeSettings(method=method, samples=64, seed=3))
+    want, got = ref[1].ao[top], res[1].ao[top]
+    assert "TRUNK" in rep["tau_role_scale"], rep["tau_role_scale"]
+    assert abs(float(got.mean() - want.mean())) < 0.04, (got.mean(), want.mean())

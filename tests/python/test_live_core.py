@@ -169,3 +169,21 @@ def test_a_frame_holds_the_features_to_the_calibration_sample():
     assert np.abs(m.predict(far, bounded=True) - near).max() < 0.02
     assert np.abs(m.predict(far) - near).max() > 0.2  # what the bound prevents
     np.testing.assert_array_equal(m.predict(F[:50], bounded=True), near)  # inside: unchanged
+
+
+def test_a_live_bake_keeps_a_ground_alone_out_of_its_frames():
+    """A bake makes the flat ground a patch (core/walls.py: it darkens the trunk's foot and the
+    leaves facing down); a live bake's first plan and its frames do not (a ground alone costs
+    each frame no patch), and a frame-range bake's frames (not live) keep it as their bake."""
+    items = scene_items(0.0)
+    baked = core.prepare(items, core.BakeSettings(method="sphere", tau=1.7))
+    first = core.prepare(items, core.BakeSettings(method="sphere", tau=1.7), live=True)
+    assert len(baked.walls) == 1 and first.walls == []
+    (trunk,) = [i for i in items if i.name == "Trunk"]
+    foot = trunk.positions[:, 2] < trunk.positions[:, 2].min() + 0.05
+    ao = {k: core.evaluate_receivers(p, trunk, trunk.positions, trunk.normals,
+                                     vertices=slice(None))[foot] for k, p in
+          (("baked", baked), ("live", first))}
+    assert ao["baked"].mean() < ao["live"].mean() - 0.05, ao
+    assert frame_plan(first, 0.15)[1].walls == []
+    assert len(frame_plan(baked, 0.15)[1].walls) == 1

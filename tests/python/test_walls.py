@@ -77,34 +77,32 @@ def test_without_the_patches_the_wall_is_too_bright(scene, method, monkeypatch):
     """The control: with the GROUND surfaces left out of the proxies (as before them), the
     same check fails on the wall, so the test above measures the patches."""
     items, want = scene
-    monkeypatch.setattr(walls, "build", lambda items: [])
+    monkeypatch.setattr(walls, "build", lambda items, every_ground=True: [])
     mae, const = _errors(items, want, method)["Wall"]
     assert mae > const
 
 
 def _level_patches(ground):
-    """The level patches of ``ground`` (a GROUND item): built beside a small wall far off,
-    since a ground alone makes none (walls.STEEP), then the wall's patch left out."""
-    s = float(np.abs(ground.positions).max())
-    wp, wt = _wall(width=0.1 * s, height=0.1 * s, cuts=1)
-    wp = wp + np.float32([50 * s, 0, 0])
-    wall = core.SceneItem("W", "GROUND", "", wp, vertex_normals(wp, wt), wt)
-    patches = walls.build([ground, wall])
-    assert any(abs(pt.normal[2]) < walls.STEEP for pt in patches)
-    return [pt for pt in patches if abs(pt.normal[2]) > 0.9]
+    """The level patches of ``ground`` (a GROUND item)."""
+    return [pt for pt in walls.build([ground]) if abs(pt.normal[2]) > 0.9]
 
 
-def test_a_ground_alone_makes_no_patches():
-    """Flat or sloped (below 45°), a ground without a wall keeps the proxy rungs' model
-    without patches, at no cost; a wall on it makes the patches."""
+def test_a_ground_alone_is_a_patch_but_not_live():
+    """Flat or sloped, a ground alone is a patch in a bake (it occludes what stands above it);
+    live frames (every_ground=False) keep the model without patches there, at no cost per
+    frame, and make them all once a wall stands on the ground."""
     for tilt in (0.0, 0.5):
         p, t = plane(size=10.0, cuts=4)
         p = p.copy()
         p[:, 2] = tilt * p[:, 0]
         g = core.SceneItem("G", "GROUND", "", p, vertex_normals(p, t), t)
-        assert walls.build([g]) == []
+        (patch,) = walls.build([g])
+        assert patch.normal @ [-tilt, 0, 1] == pytest.approx(np.hypot(tilt, 1))
+        assert walls.build([g], every_ground=False) == []
+        assert len(walls.build([g])) == 1  # the last build's patches are not the live one's
     items = _items()
-    assert walls.build(items[:1]) == [] and len(walls.build(items[:2])) == 2
+    assert len(walls.build(items[:1])) == 1 and len(walls.build(items[:2])) == 2
+    assert walls.build(items[:1], False) == [] and len(walls.build(items[:2], False)) == 2
 
 
 def test_a_flat_ground_sees_itself_edge_on():
@@ -232,24 +230,24 @@ def test_native_patch_visibility_refuses_bad_patches():
 
 def test_face_normals_tell_where_a_wall_may_be():
     """may_hold_wall is True for any face within the margin of steep, in any direction and at
-    any length, and False for flat or gently sloped faces and for zero (degenerate) ones: the
-    add-on then skips a GROUND's triangles, which build() would find no wall in."""
+    any length, and False for flat or gently sloped faces and for zero (degenerate) ones: a
+    live bake then skips a GROUND's triangles, which its build() would find no wall in."""
     flat = np.array([[0, 0, 1], [0, 0, -2.0], [0.1, 0, 1], [0, 0, 0]])
     assert not walls.may_hold_wall(flat)
     assert not walls.may_hold_wall(np.zeros((0, 3)))
     tilt = np.cos(np.pi / 4) + walls.STEEP_MARGIN / 2  # just short of steep: within the margin
     for n in ([1, 0, 0], [0, -3, 0.5], [np.sqrt(1 - tilt ** 2), 0, tilt]):
         assert walls.may_hold_wall(np.vstack([flat, n]))
-    # What may_hold_wall rules out, build() finds no wall in.
+    # What may_hold_wall rules out, a live build() finds no wall in.
     p, t = plane(4.0, 10)
     ground = core.SceneItem("G", "GROUND", "", p, vertex_normals(p, t), t)
     cross = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
-    assert not walls.may_hold_wall(cross) and walls.build([ground]) == []
+    assert not walls.may_hold_wall(cross) and walls.build([ground], every_ground=False) == []
 
 
 def test_a_level_ground_is_told_by_its_vertex_normals():
-    """level(): vertex normals all (anti)vertical say a level ground, whose triangles the
-    add-on then never reads; one tilted corner (a face rising from it) says it may not be."""
+    """level(): vertex normals all (anti)vertical say a level ground, whose triangles a live
+    bake then never reads; one tilted corner (a face rising from it) says it may not be."""
     up = np.tile([0.0, 0.0, 1.0], (5, 1)).astype(np.float32)
     assert walls.level(up) and walls.level(-up) and walls.level(np.zeros((0, 3)))
     up[2] = [0.1, 0.0, 0.995]

@@ -258,7 +258,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             continue
         bent = opts.get("bent_normals", "OFF") != "OFF"  # ray-traced: every triangle counts
         tris_needed = declared is None or bent or ladder.triangles_needed(
-            opts["method"], opts["tau"], declared[0])
+            opts["method"], opts["tau"], declared[0], opts.get("live", False))
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
         faces = []
@@ -278,7 +278,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             else None
         kept = {id(it) for it, _idx in cut or [(item, None)]
                 if declared is not None or bent or ladder.triangles_needed(
-                    opts["method"], opts["tau"], it.role)}
+                    opts["method"], opts["tau"], it.role, opts.get("live", False))}
         if len(tris) and kept:  # which triangles rays pass (the materials' alpha)
             parts_io.set_opacity(item, cut, opacity_io.item_opacity(obj, depsgraph, len(tris),
                                                                     alphas))

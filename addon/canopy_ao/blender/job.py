@@ -121,7 +121,7 @@ class BakeJob:
         cards = (not (self.opts["live"] or self.opts.get("frames"))
                  and self.opts["bent_normals"] == "OFF")
         self.plan = core.prepare(self.items, self.settings, prototypes=protos, targets=targets,
-                                 carry_cards=cards)
+                                 carry_cards=cards, live=self.opts["live"])
         t0 = self._lap("prepare (fit, calibrate)", t0)
         if self.prototypes.realized:
             self.prototypes.bake_realized(self.plan)

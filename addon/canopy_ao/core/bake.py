@@ -26,7 +26,7 @@ from .settings import BakeSettings, validate
 
 @refusals_are_user_errors
 def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
-            carry_cards=False) -> Plan:
+            carry_cards=False, live=False) -> Plan:
     """Fit the proxies, build the ray tracer if needed, calibrate. Raises CanopyAOError.
 
     targets: {item name: ("vertex" | "texel", count[, group])}, the receivers the bake will
@@ -39,7 +39,10 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
     prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every
     receiver. Given here rather than attached afterwards, the ray tracer traces their meshes
     at every instance, so the exact rung and auto's calibration (the reference rays and every
-    candidate, whose occluders then include the instances' shells) see them."""
+    candidate, whose occluders then include the instances' shells) see them.
+
+    live: the first bake of live AO, whose frames keep its GROUND patches only where a wall is
+    (walls.build's every_ground=False: a ground alone costs each frame no patch)."""
     native.require()
     validate(settings)
     items = list(items)
@@ -54,7 +57,8 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
     whole, items = items, split_trees(items)  # the rays see whole meshes, the rest per tree
     plan.notes.extend(opacity.notes(whole))
     proxies.fit_scene(plan, items)
-    plan.walls = walls.build(whole)  # GROUND surfaces occluding in the proxy rungs
+    plan.every_ground = not live
+    plan.walls = walls.build(whole, plan.every_ground)  # GROUND surfaces occluding (proxies)
     plan.timings["fit"] = time.perf_counter() - t0
     rung = rungs.get(settings.method)
     if (rung.scene_plan or rung.chooses) and (plan.fits or plan.trunks):

@@ -72,9 +72,11 @@ def refit(base: Plan, items) -> Plan:
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried)
-    # The GROUND surfaces as they stand at this frame, where the first bake found a wall; a
-    # ground the first bake found none in keeps none (no hashing of a still ground per frame).
-    plan.walls = walls.build(items) if base.walls else []
+    # The GROUND surfaces as they stand at this frame, where the first bake made patches (a
+    # live bake: only where it found a wall); where it made none, none (no hashing of a still
+    # ground per frame).
+    plan.every_ground = base.every_ground
+    plan.walls = walls.build(items, base.every_ground) if base.walls else []
     parts = split_trees(items)
     proxies.fit_scene(plan, parts)
     if base.regression is not None and rungs.get(base.method).needs_regression:

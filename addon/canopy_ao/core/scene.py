@@ -13,9 +13,12 @@ from .native import CanopyAOError
 RECEIVER_ROLES = ("CANOPY", "TRUNK", "GROUND", "GRASS")
 # Receivers whose τ calibration fits apart from the leaves' (ladder.calibrate), each group one
 # factor on every tree's τ (Plan.role_scale): the ground and grass see the crowns from outside,
-# through their whole depth. (The branches as a group of their own moved the Sapling trees'
-# MAE by -0.004 to +0.002: they stay with the leaves.)
-SCALED_ROLES = (("GROUND", "GRASS"),)
+# through their whole depth; the trunk and branches from within, where the in-shell medium is
+# uniform and a crown may not be: cards scattered over a crown's surface leave it hollow, and
+# the leaves' τ (fitted on the shell, where they are) made its inside 0.17 too dark
+# (docs/studies/foliage.md). On the Sapling trees the trunk's own factor moves the MAE by
+# -0.002 to +0.002 (bench/probes/ground_patch.py --trunk-scale).
+SCALED_ROLES = (("GROUND", "GRASS"), ("TRUNK",))
 
 
 @dataclass
@@ -117,6 +120,7 @@ class Plan:
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
     grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     walls: list = field(default_factory=list)  # walls.Patch: the GROUND surfaces as occluders
+    every_ground: bool = True  # walls.build's: every GROUND a patch (False: live, walls only)
     tracer: object = None
     tracer_items: list = field(default_factory=list)  # the items the tracer's mesh holds
     # item name -> (its first vertex, its first triangle) in the tracer's mesh, or None when two

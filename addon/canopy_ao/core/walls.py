@@ -17,10 +17,11 @@ of the patch's size) is moved that hair off it to the patch's front (its triangl
 a flat ground sees itself edge-on (F = 0) and the wall's foot sees the ground fill the lower
 half of its hemisphere.
 
-Patches are made only when a GROUND surface holds a wall (a solid plane steeper than 45°,
-STEEP); then every plane is a patch, the flat ground too, which occludes what stands above it
-(leaves facing down) as it does for rays. A ground alone gives no patches: the proxy rungs'
-model without them, at no cost.
+A bake makes every GROUND plane a patch, a flat ground alone too: it occludes what stands above
+it (leaves facing down, a trunk's foot) as it does for rays. Live frames (every_ground=False)
+make patches only when a GROUND surface holds a wall (a solid plane steeper than 45°, STEEP),
+then of every plane: a ground alone gives none there, the proxy rungs' model without them at no
+cost per frame (its patch costs a frame tens of times a rung's own evaluation: DESIGN).
 """
 
 from __future__ import annotations
@@ -38,10 +39,10 @@ COVERAGE = 0.5          # a plane's triangles cover at least this share of their
 DISC_SIDES = 8          # the AO distance's disc as a regular polygon of its area
 EPS = 1e-5              # on a patch's plane: this share of the patch's diameter from it
 CHUNK = 8192            # receivers per numpy block
-# Patches are made only where a GROUND surface has a wall: a solid plane steeper than 45°
-# (Blender's Z up). A ground alone (flat, or a slope) keeps the model without patches: the
-# patches' evaluation costs ~0.13-0.25 µs per receiver and patch natively (numpy 0.8-5 µs),
-# tens of times an analytic rung's own (docs/DESIGN.md), for an accuracy the rays already give.
+# Live frames make patches only where a GROUND surface has a wall: a solid plane steeper than
+# 45° (Blender's Z up). There a ground alone (flat, or a slope) keeps the model without
+# patches: their evaluation costs ~0.13-0.25 µs per receiver and patch natively (numpy 0.8-5
+# µs), tens of times an analytic rung's own (docs/DESIGN.md), each frame.
 STEEP = np.cos(np.pi / 4)
 
 
@@ -86,13 +87,15 @@ class Patch:
 _LAST = [None, []]  # the last build's (key, patches): live frames over a still ground
 
 
-def build(items) -> list:
-    """The patches of every GROUND item with triangles (an empty list when there are none).
-    The same GROUND geometry as the last call's (a live frame's) returns its patches."""
+def build(items, every_ground=True) -> list:
+    """The patches of every GROUND item with triangles (an empty list when there are none);
+    every_ground=False (live frames): none unless some plane is a wall (STEEP). The same
+    GROUND geometry as the last call's (a live frame's) returns its patches."""
     ground = [it for it in items if it.role == "GROUND" and len(it.triangles)]
     if not ground:
         return []
     h = hashlib.blake2b(digest_size=16)
+    h.update(b"every" if every_ground else b"walls")
     for it in ground:
         for a in (it.positions, it.triangles):
             a = np.ascontiguousarray(a)
@@ -100,11 +103,11 @@ def build(items) -> list:
             h.update(memoryview(a).cast("B"))
     key = h.digest()
     if _LAST[0] != key:
-        _LAST[:] = [key, _build(ground)]
+        _LAST[:] = [key, _build(ground, every_ground)]
     return list(_LAST[1])
 
 
-def _build(ground) -> list:
+def _build(ground, every_ground) -> list:
     first = np.cumsum([0] + [len(it.positions) for it in ground])
     pos = np.concatenate([it.positions for it in ground]).astype(np.float64)
     tri = np.concatenate([it.triangles + f for it, f in zip(ground, first)])
@@ -116,7 +119,7 @@ def _build(ground) -> list:
     if not len(t):
         return []
     m = cross / dbl[:, None]
-    if not np.any(np.abs(m[:, 2]) < STEEP):  # no wall: a ground alone keeps the old model
+    if not every_ground and not np.any(np.abs(m[:, 2]) < STEEP):  # no wall: none live
         return []
     lo, hi = t.reshape(-1, 3).min(0), t.reshape(-1, 3).max(0)
     diag = max(float(np.linalg.norm(hi - lo)), 1e-30)
@@ -160,7 +163,7 @@ def _build(ground) -> list:
         # piece of it: their hull would be a sheet where there is none
         if covered >= COVERAGE * hull_area:
             patches.append(Patch(hull, normal, covered))
-    if not any(abs(pt.normal[2]) < STEEP for pt in patches):
+    if not every_ground and not any(abs(pt.normal[2]) < STEEP for pt in patches):
         return []
     return patches
 
