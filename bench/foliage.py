@@ -178,7 +178,7 @@ def speed(repeats=3):
     import time
     import bpy
     import foliage_scenes
-    from canopy_ao.core import card_ao
+    from canopy_ao.core import card_carry
     foliage_scenes.build("card_tree")  # an empty file with its World, then the bigger tree
     for ob in list(bpy.data.objects):
         bpy.data.objects.remove(ob)
@@ -187,16 +187,16 @@ def speed(repeats=3):
     foliage_scenes.sapling_card_tree(col, leaf_factor=1.0)
     foliage_scenes.ground(col)
     bpy.context.view_layer.update()
-    carry, out = card_ao.carry, []
+    carry, out = card_carry.carry, []
     for m in ("ellipsoid", "grid", "raytrace"):
         best = {}
         for on in (True, False):
-            card_ao.carry = carry if on else (lambda *a, **k: None)
+            card_carry.carry = carry if on else (lambda *a, **k: None)
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 _bake(m)
                 best[on] = min(best.get(on, 1e9), time.perf_counter() - t0)
-        card_ao.carry = carry
+        card_carry.carry = carry
         out.append(f"| {m} | {best[True]:.2f} | {best[False]:.2f} | "
                    f"{best[True] / best[False]:.2f} |")
     return ["### Card vertices' AO: cost", "", "| rung | with (s) | without (s) | ratio |",

@@ -9,7 +9,7 @@ HERE = os.path.dirname(__file__)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import card_ao, opacity  # noqa: E402
+from canopy_ao.core import card_ao, card_carry, opacity  # noqa: E402
 from canopy_ao.core.scene import SceneItem  # noqa: E402
 
 
@@ -60,7 +60,7 @@ def test_carried_ao_is_the_opaque_parts():
     own = core.evaluate_receivers(plan, card, card.positions[:4], card.normals[:4],
                                   vertices=slice(0, 4))
     carried = own.copy()
-    card_ao.carry(plan, card, carried, slice(0, 4))
+    card_carry.carry(plan, card, carried, slice(0, 4))
     leaf = core.evaluate_receivers(plan, card, np.float32([[0.5, 0, 0.75]]),
                                    np.float32([[0, -1, 0]]), triangles=np.int32([1]))
     assert carried[:2].mean() > own[:2].mean() + 0.05, (own, carried)

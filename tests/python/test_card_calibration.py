@@ -16,7 +16,7 @@ HERE = os.path.dirname(__file__)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "addon"))
 
 from canopy_ao import core  # noqa: E402
-from canopy_ao.core import card_ao, ladder, opacity  # noqa: E402
+from canopy_ao.core import card_ao, card_carry, ladder, opacity  # noqa: E402
 from canopy_ao.core.scene import SceneItem  # noqa: E402
 
 LEAF = 0.75  # a card is opaque above this fraction of its height
@@ -69,7 +69,7 @@ def _carried(items, **settings):
     plan = core.prepare(items, core.BakeSettings(distance=10.0, **settings), carry_cards=True)
     every = slice(0, len(cards.positions))
     ao = core.evaluate_receivers(plan, cards, cards.positions, cards.normals, vertices=every)
-    card_ao.carry(plan, cards, ao, every)
+    card_carry.carry(plan, cards, ao, every)
     return ao
 
 

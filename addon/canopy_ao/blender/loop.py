@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from .. import core
-from ..core import card_ao, maps
+from ..core import card_carry, maps
 from ..core.native import CanopyAOError
 from . import bent_io, parts_io
 from .targets import chunks, chunks_done, split_chunks
@@ -74,7 +74,7 @@ class Loop:
                     self.plan, t.item, t.positions[a:b], t.normals[a:b], group=t.group,
                     vertices=t.vertices(a, b), triangles=t.triangles_of(a, b))
                 if self.cards:
-                    card_ao.carry(self.plan, t.item, t.ao[a:b], t.vertices(a, b))
+                    card_carry.carry(self.plan, t.item, t.ao[a:b], t.vertices(a, b))
                 if bent:
                     self._bent_step(t, a, b)
         except CanopyAOError as exc:

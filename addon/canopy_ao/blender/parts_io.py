@@ -6,7 +6,7 @@ evaluates each part's receivers with that part's item and writes one result onto
 import numpy as np
 
 from .. import core
-from ..core import card_ao, mesh_parts
+from ..core import card_carry, mesh_parts
 from . import opacity_io
 
 # Options under which an object keeps one role: their per-object maps (bent normals,
@@ -142,7 +142,7 @@ def evaluate(plan, t, a, b, cards=True):
                 ao = core.evaluate_receivers(plan, p, p.positions[lo:hi], p.normals[lo:hi],
                                              vertices=slice(int(lo), int(hi)))
                 if cards:  # its leaf cards' vertices
-                    card_ao.carry(plan, p, ao, slice(int(lo), int(hi)))
+                    card_carry.carry(plan, p, ao, slice(int(lo), int(hi)))
                 pieces.append((idx[lo:hi] - a, ao))
         return mesh_parts.merge(b - a, pieces)
     part, local = _texel_parts(t)

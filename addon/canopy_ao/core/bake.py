@@ -33,7 +33,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
     evaluate (an item's vertices, or the texels of its image: one face corner each, `group`
     receivers a texel, its anti-aliasing sub-samples, sharing its rays); None = every receiver
     item at its vertices. Auto's cost model counts them (cost.py). carry_cards: the bake's
-    card vertices will carry their opaque part's AO (card_ao.carry, as the add-on's bake loop
+    card vertices will carry their opaque part's AO (card_carry.carry, as the add-on's bake loop
     does; evaluate_item does not), so the calibration samples take them there (Plan.carry_cards).
 
     prototypes: instanced trees (forest.Prototype list, see attach_forest) that occlude every

@@ -7,7 +7,8 @@ opaque part receives: the AO at the opaque point of each of its card triangles n
 (card_area.opaque_corners: on the card, the rays skipping that triangle, as a texel on it
 would), a vertex shared by several card triangles taking the mean. A vertex that also
 belongs to an opaque triangle, or to none with an opaque point, keeps its own AO. The
-calibration samples take a card vertex at one of the same points (sample_points). No bpy.
+calibration samples take a card vertex at one of the same points (sample_points); the bake's
+carry is core/card_carry.py (it evaluates, so it imports bake, which this module must not). No bpy.
 """
 
 from __future__ import annotations
@@ -89,25 +90,3 @@ def move_to_cards(items, owner, rows, points, normals, own, ids):
         if t_ids is not None:
             own_tri[c] = t_ids
     return tri, own_tri
-
-
-def carry(plan, item, ao, vertices):
-    """Set ao (float32, the AO of the item's vertices ``vertices``, a slice a:b) at its card
-    vertices to the AO of their card's opaque part (above). vertices None or False (texels):
-    nothing to do."""
-    if not isinstance(vertices, slice):
-        return
-    from .bake import evaluate_receivers
-    a, b, _step = vertices.indices(len(item.positions))
-    cv = card_vertices(item)
-    lo, hi = np.searchsorted(cv.vertex, [a, b])
-    if hi <= lo:
-        return
-    got = evaluate_receivers(plan, item, cv.points[lo:hi], cv.normals[lo:hi],
-                             triangles=cv.triangle[lo:hi])
-    v = cv.vertex[lo:hi] - a
-    total = np.bincount(v, got, b - a)
-    count = np.bincount(v, None, b - a)
-    has = count > 0
-    ao[has] = (total[has] / count[has]).astype(ao.dtype)
-

@@ -136,7 +136,7 @@ class Plan:
     # role -> factor on every tree's τ with which the analytic rungs light that role's
     # receivers (SCALED_ROLES; calibrated apart from the leaves: ladder.calibrate); absent = 1
     role_scale: dict = field(default_factory=dict)
-    # The bake's card vertices carry their opaque part's AO (card_ao.carry: the add-on's bake
+    # The bake's card vertices carry their opaque part's AO (card_carry.carry: the add-on's bake
     # loop, not evaluate_item, live AO, a frame range or bent normals): the calibration
     # samples take them there too.
     carry_cards: bool = False
