@@ -162,6 +162,7 @@ def table(scene, res):
 
 def write_csv(path, res):
     import csv
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with open(path, "w", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, ["scene", "method", "role", "mae_all", "mae_unburied", "bias",
                                "seconds"])
