@@ -1,14 +1,19 @@
 // Canopy AO — per-vertex occlusion features and their linear model (occlusion_features.h).
+// No trapping math: the per-direction fast_exp loop must vectorise (fast_math.h's caveat).
+#pragma GCC optimize("no-trapping-math")
 #include "canopy_ao/occlusion_features.h"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
+#include "canopy_ao/fast_math.h"
 #include "canopy_ao/parallel.h"
 
 namespace canopy_ao {
@@ -80,7 +85,8 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
   const int* n = f.n;
   const std::size_t stride[3] = {1, static_cast<std::size_t>(n[0]),
                                  static_cast<std::size_t>(n[0]) * n[1]};
-  std::vector<std::vector<float>> per_dir(K);
+  // Every voxel of every direction is written by its sweep below: no zero fill.
+  std::vector<std::unique_ptr<float[]>> per_dir(K);
   parallel_for_blocks(K, 1, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
       const Vec3 dk = dirs[k];
@@ -99,10 +105,9 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
       const float fa = da - oa, fb = db - ob;
       const float wq[4] = {(1 - fa) * (1 - fb), fa * (1 - fb), (1 - fa) * fb, fa * fb};
       const std::size_t sa = stride[a1], sb = stride[a2];
-      std::vector<float>& tau = per_dir[k];
-      tau.assign(V, 0.0f);
+      per_dir[k].reset(new float[V]);
       const float* sg = f.sigma.data();
-      float* tp = tau.data();
+      float* tp = per_dir[k].get();
       // Columns ia whose four upstream corners all lie inside the slice: no bounds checks.
       const int ia_lo = std::max(0, -oa), ia_hi = std::min(n[a1] - 1, n[a1] - 2 - oa);
       // INV: every slice upstream of `im` (the side d_k points to) is final.
@@ -154,10 +159,19 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
       }
     }
   });
+  // [direction][voxel] -> [voxel][direction], in tiles of kTile voxels: each direction's tile
+  // read contiguously, the K × kTile output tile (24 KB for K = 24) staying in L1.
   f.tau.resize(V * K);
+  constexpr std::size_t kTile = 256;
   parallel_for_blocks(V, 4096, [&](std::size_t b, std::size_t e) {
-    for (std::size_t v = b; v < e; ++v)
-      for (std::size_t k = 0; k < K; ++k) f.tau[v * K + k] = per_dir[k][v];
+    float* dst = f.tau.data();
+    for (std::size_t t0 = b; t0 < e; t0 += kTile) {
+      const std::size_t t1 = std::min(e, t0 + kTile);
+      for (std::size_t k = 0; k < K; ++k) {
+        const float* src = per_dir[k].get();
+        for (std::size_t v = t0; v < t1; ++v) dst[v * K + k] = src[v];
+      }
+    }
   });
   return f;
 }
@@ -260,39 +274,47 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
   const Vec3 mid = {frame.center.x, frame.center.y, 0.5f * (frame.z_min + frame.z_max)};
   const float half_diag = std::max(0.5f * std::sqrt(4 * frame.radius * frame.radius +
                                                     height * height), 1e-12f);
+  // The directions as columns, and the sky weights (d_k·z where upward), for the per-point loop.
+  std::vector<float> dx(K), dy(K), dz(K), up(K);
+  float w_sky = 0;
+  for (int k = 0; k < K; ++k) {
+    dx[k] = dirs_[k].x, dy[k] = dirs_[k].y, dz[k] = dirs_[k].z;
+    up[k] = dirs_[k].z > 0 ? dirs_[k].z : 0.0f;
+    w_sky += up[k];
+  }
+  const std::vector<std::uint32_t> order = coherent_order(positions);
   parallel_for_blocks(positions.size, 256, [&](std::size_t b, std::size_t e) {
-    std::vector<float> taus(K);
-    for (std::size_t i = b; i < e; ++i) {
+    std::vector<float> taus(K), tr(K), sq(K);
+    for (std::size_t j = b; j < e; ++j) {
+      const std::size_t i = order[j];
       const Vec3 p = positions[i];
       const Vec3 nn = normalize(normals[i]);
-      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
-      float w_opp = 0, ao_opp = 0, w_sky = 0, sky = 0;
       taus_at(p, taus.data());
+      // exp(−τ) and its square root exp(−τ/2) for every direction: straight-line code that
+      // GCC vectorises (libm's expf is a call it cannot).
       for (int k = 0; k < K; ++k) {
-        const Vec3 d = dirs_[k];
-        const float t = taus[k];
-        const float tr = std::exp(-t);
-        if (d.z > 0) {
-          sky += d.z * tr;
-          w_sky += d.z;
-        }
-        const float w = dot(nn, d);
-        if (w > 0) {
-          w_sum += w;
-          const float sq = std::sqrt(tr);
-          ao_s[0] += w * sq;
-          ao_s[1] += w * tr;
-          ao_s[2] += w * tr * tr;
-          mean_tau += w * t;
-        } else if (w < 0) {
-          w_opp -= w;
-          ao_opp -= w * tr;
-        }
+        tr[k] = fast_exp(-taus[k]);
+        sq[k] = fast_exp(-0.5f * taus[k]);
+      }
+      // Branch-free sums in direction order: a direction adds 0 where its weight is not > 0.
+      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
+      float w_opp = 0, ao_opp = 0, sky = 0;
+      for (int k = 0; k < K; ++k) {
+        const float w = nn.x * dx[k] + nn.y * dy[k] + nn.z * dz[k];
+        const float wp = w > 0 ? w : 0.0f, wn = w < 0 ? -w : 0.0f;
+        sky += up[k] * tr[k];
+        w_sum += wp;
+        ao_s[0] += wp * sq[k];
+        ao_s[1] += wp * tr[k];
+        ao_s[2] += wp * tr[k] * tr[k];
+        mean_tau += wp * taus[k];
+        w_opp += wn;
+        ao_opp += wn * tr[k];
       }
       float* o = out + i * kCount;
       if (w_sum > 0) {
         for (int s = 0; s < 3; ++s) o[s] = ao_s[s] / w_sum;
-        o[4] = std::log1p(mean_tau / w_sum);
+        o[4] = std::log(1.0f + mean_tau / w_sum);  // logf: log1pf costs ~30 ns a call
       } else {  // zero normal: an open receiver
         o[0] = o[1] = o[2] = 1.0f;
         o[4] = 0.0f;
@@ -300,7 +322,7 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
       o[3] = w_sky > 0 ? sky / w_sky : 1.0f;
       const Vec3 gf = lattice(fine_.origin, fine_.h, p);
       const float sf = lerp3(fine_, fine_.sigma, gf) * fine_.h;
-      o[5] = std::log1p(inside_box(fine_.n, gf) ? sf : 0.0f);
+      o[5] = std::log(1.0f + (inside_box(fine_.n, gf) ? sf : 0.0f));
       const Vec3 r = {p.x - frame.center.x, p.y - frame.center.y, 0.0f};
       const float rl = length(r);
       o[6] = nn.z;
@@ -314,6 +336,33 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
       o[12] = o[1] - (w_opp > 0 ? ao_opp / w_opp : 1.0f);
     }
   });
+}
+
+std::vector<std::uint32_t> OcclusionFeatures::coherent_order(PointsView positions) const {
+  // Buckets of kBucket³ voxels (the lattice clamped, so points outside share the border's):
+  // a counting sort by bucket, stable, so the order is deterministic. Points of a mesh come in
+  // no spatial order (a crown's leaves anywhere), and each lookup reads 8 × K floats of a τ
+  // field larger than the caches (24 MB for a 64³ grid); in bucket order consecutive points
+  // read the same few voxels.
+  constexpr int kBucket = 4;
+  const Field& f = fine_;
+  int nb[3];
+  for (int a = 0; a < 3; ++a) nb[a] = (f.n[a] + kBucket - 1) / kBucket;
+  const std::size_t N = positions.size, B = static_cast<std::size_t>(nb[0]) * nb[1] * nb[2];
+  std::vector<std::uint32_t> key(N), count(B + 1, 0), order(N);
+  for (std::size_t i = 0; i < N; ++i) {
+    const Vec3 g = lattice(f.origin, f.h, positions[i]);
+    int c[3];
+    for (int a = 0; a < 3; ++a) {
+      const float x = std::clamp(g[a], 0.0f, static_cast<float>(f.n[a] - 1));
+      c[a] = std::min(static_cast<int>(x) / kBucket, nb[a] - 1);
+    }
+    key[i] = static_cast<std::uint32_t>(vidx(nb, c[0], c[1], c[2]));
+    ++count[key[i] + 1];
+  }
+  for (std::size_t b = 0; b < B; ++b) count[b + 1] += count[b];
+  for (std::size_t i = 0; i < N; ++i) order[count[key[i]]++] = static_cast<std::uint32_t>(i);
+  return order;
 }
 
 const char* OcclusionFeatures::feature_name(int f) {
@@ -369,12 +418,37 @@ void expand_features(const float* features, std::size_t n, int f, const float* m
 
 void predict_features(const float* features, std::size_t n, int f, const float* mean,
                       const float* scale, const float* weights, float* out) {
+  predict_model(features, n, f, f, mean, scale, weights, nullptr, nullptr, out);
+}
+
+int model_size(int features, int native_features) {
+  return expanded_size(native_features) + 3 * (features - native_features);
+}
+
+void predict_model(const float* features, std::size_t n, int f, int f_native, const float* mean,
+                   const float* scale, const float* weights, const float* lo, const float* hi,
+                   float* out) {
+  if (f_native < 1 || f_native > f)
+    throw std::invalid_argument("native_features must be in [1, features], got " +
+                                std::to_string(f_native));
   check_model(f, scale);
-  const int P = expanded_size(f);
+  const int P = model_size(f, f_native);
+  const int g = std::min(kGridAO, f_native - 1);
   parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
-    std::vector<float> z(f), phi(P);
+    std::vector<float> x(f), z(f), phi(P);
     for (std::size_t i = b; i < e; ++i) {
-      expand_row(features + i * f, f, mean, scale, z.data(), phi.data());
+      const float* row = features + i * f;
+      for (int j = 0; j < f; ++j)
+        x[j] = lo != nullptr ? std::min(std::max(row[j], lo[j]), hi[j]) : row[j];
+      expand_row(x.data(), f_native, mean, scale, z.data(), phi.data());
+      // The extra columns: [z_e, z_e², z_grid·z_e], each group over the extra features.
+      const int E = f - f_native, base = expanded_size(f_native);
+      for (int j = 0; j < E; ++j) {
+        const float ze = (x[f_native + j] - mean[f_native + j]) / scale[f_native + j];
+        phi[base + j] = ze;
+        phi[base + E + j] = ze * ze;
+        phi[base + 2 * E + j] = ze * z[g];
+      }
       double acc = 0;
       for (int p = 0; p < P; ++p) acc += static_cast<double>(weights[p]) * phi[p];
       out[i] = std::isfinite(acc) ? static_cast<float>(std::clamp(acc, 0.0, 1.0)) : 1.0f;

@@ -65,13 +65,15 @@ def frame_items(template, positions, normals) -> list:
 
 @refusals_are_user_errors
 def refit(base: Plan, items) -> Plan:
-    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted;
+    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted
+    (each ellipsoid from the previous frame's when base.fit_warm holds a dict: proxies.fit_tree);
     the ray-free rung's features moved to the frame, its fit kept (RegressionRung.at_frame)."""
     check_method(base.method)
     plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
-                shell_labels=dict(base.shell_labels), buried=base.buried)
+                shell_labels=dict(base.shell_labels), buried=base.buried,
+                fit_warm=base.fit_warm)
     # The GROUND surfaces as they stand at this frame, where the first bake made patches (a
     # live bake: only where it found a wall); where it made none, none (no hashing of a still
     # ground per frame).
