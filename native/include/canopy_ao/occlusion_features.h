@@ -41,6 +41,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -87,7 +88,7 @@ class OcclusionFeatures {
     float h = 1;
     int n[3] = {0, 0, 0};
     std::vector<float> sigma;
-    std::vector<float> tau;  // [voxel][direction]: a lookup reads K contiguous values per corner
+    std::unique_ptr<float[]> tau;  // [direction][voxel], K × (n0 n1 n2) values
   };
   static Field sweep(const DensityGrid& g, int level, const std::vector<Vec3>& dirs);
   static float lerp3(const Field& f, const std::vector<float>& v, Vec3 p);
