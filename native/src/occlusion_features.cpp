@@ -287,20 +287,40 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
         tr[k] = fast_exp(-taus[k]);
         sq[k] = fast_exp(-0.5f * taus[k]);
       }
-      // Branch-free sums in direction order: a direction adds 0 where its weight is not > 0.
-      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
-      float w_opp = 0, ao_opp = 0, sky = 0;
-      for (int k = 0; k < K; ++k) {
+      // Branch-free sums (a direction adds 0 where its weight is not > 0) in kLanes partial
+      // sums, direction k into lane k mod kLanes, added up in lane order at the end: a fixed
+      // order (deterministic), and one GCC vectorises (a single running sum it may not
+      // reorder).
+      constexpr int kLanes = 8;
+      float l_w[kLanes] = {}, l_s0[kLanes] = {}, l_s1[kLanes] = {}, l_s2[kLanes] = {},
+            l_t[kLanes] = {}, l_ow[kLanes] = {}, l_o[kLanes] = {}, l_sky[kLanes] = {};
+      auto add = [&](int l, int k) {
         const float w = nn.x * dx[k] + nn.y * dy[k] + nn.z * dz[k];
         const float wp = w > 0 ? w : 0.0f, wn = w < 0 ? -w : 0.0f;
-        sky += up[k] * tr[k];
-        w_sum += wp;
-        ao_s[0] += wp * sq[k];
-        ao_s[1] += wp * tr[k];
-        ao_s[2] += wp * tr[k] * tr[k];
-        mean_tau += wp * taus[k];
-        w_opp += wn;
-        ao_opp += wn * tr[k];
+        l_sky[l] += up[k] * tr[k];
+        l_w[l] += wp;
+        l_s0[l] += wp * sq[k];
+        l_s1[l] += wp * tr[k];
+        l_s2[l] += wp * tr[k] * tr[k];
+        l_t[l] += wp * taus[k];
+        l_ow[l] += wn;
+        l_o[l] += wn * tr[k];
+      };
+      int k = 0;
+      for (; k + kLanes <= K; k += kLanes)
+        for (int l = 0; l < kLanes; ++l) add(l, k + l);
+      for (int l = 0; k < K; ++k, ++l) add(l, k);
+      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
+      float w_opp = 0, ao_opp = 0, sky = 0;
+      for (int l = 0; l < kLanes; ++l) {
+        w_sum += l_w[l];
+        ao_s[0] += l_s0[l];
+        ao_s[1] += l_s1[l];
+        ao_s[2] += l_s2[l];
+        mean_tau += l_t[l];
+        w_opp += l_ow[l];
+        ao_opp += l_o[l];
+        sky += l_sky[l];
       }
       float* o = out + i * kCount;
       if (w_sum > 0) {

@@ -8,10 +8,12 @@ and tree (and the tree labels of a mesh holding several), the triangles (the top
 deformed mesh does not change; grass blades and the ray-free rung's grid need them), the
 leaves' partition into k-means shells and the ray-free rung's fitted models. It redoes what
 moves: the fits (sphere, ellipsoid, each shell to its own leaves, trunks, grass heights), the
-ray-free rung's features and the evaluation. For the one-proxy rungs a frame's AO is
-therefore the AO of a full bake of that frame with the same rung and τ; for shells and the
-medium it is that bake with the first frame's partition (clustering every frame afresh flips
-leaves between shells: up to 0.6 AO from one frame to the next on the test tree).
+ray-free rung's features and the evaluation; each ellipsoid's fit starts from the previous
+frame's (a session's plan.fit_warm: proxies.fit_tree). For the one-proxy rungs a frame's AO is
+therefore the AO of a full bake of that frame with the same rung and τ (within the ellipsoid
+fit's tolerance); for shells and the medium it is that bake with the first frame's partition
+(clustering every frame afresh flips leaves between shells: up to 0.6 AO from one frame to
+the next on the test tree).
 """
 
 from __future__ import annotations
