@@ -10,8 +10,8 @@ leaves' partition into k-means shells and the ray-free rung's fitted models. It 
 moves: the fits (sphere, ellipsoid, each shell to its own leaves, trunks, grass heights), the
 ray-free rung's features and the evaluation; each ellipsoid's fit starts from the previous
 frame's (a session's plan.fit_warm: proxies.fit_tree). For the one-proxy rungs a frame's AO is
-therefore the AO of a full bake of that frame with the same rung and τ (within the ellipsoid
-fit's tolerance); for shells and the medium it is that bake with the first frame's partition
+therefore the AO of a full bake of that frame with the same rung and τ (the ellipsoids within
+a bake's fit tolerance: live fits solve to proxies.LIVE_TOLERANCE); for shells and the medium it is that bake with the first frame's partition
 (clustering every frame afresh flips leaves between shells: up to 0.6 AO from one frame to
 the next on the test tree).
 """

@@ -13,9 +13,12 @@ from .rungs import base as rungs
 from .rungs.base import Proxy
 from .scene import Plan, SceneItem
 
-# Khachiyan's tolerance of a fit started from the previous frame's support (fit_tree's warm);
-# a fresh fit's is the native default, 1e-3.
-WARM_TOLERANCE = 1e-4
+# Khachiyan's tolerance of live AO's ellipsoid fits (fit_tree's warm), against a bake's 1e-3:
+# tight enough that a frame's fit no longer depends on the frame it started from (the same
+# points reached from two histories: centres and radii within 5e-7), so playback order, a
+# render farm's chunks and a reloaded file give the same AO; warm-started it still costs half
+# a fresh fit at 1e-3 (5 against 10 ms of one core per 100k points, loaded machine).
+LIVE_TOLERANCE = 1e-6
 
 
 def fit_tree(points: np.ndarray, settings, labels=None, warm=None):
@@ -29,9 +32,8 @@ def fit_tree(points: np.ndarray, settings, labels=None, warm=None):
     AO').
 
     ``warm`` (live AO: {key: _core.EllipsoidWarmStart}, kept between frames) starts each
-    ellipsoid's fit from the previous frame's (its Khachiyan support and weights: 7 -> 3.4 ms
-    of one core per 100k points), within the fit's tolerance of a fresh one; None = a fresh
-    fit, as a bake's."""
+    ellipsoid's fit from the previous frame's (its Khachiyan support and weights) and solves
+    it to LIVE_TOLERANCE; None = a fresh fit at the bake's tolerance."""
     rung = rungs.get(settings.method)
 
     def fit(pts, key):
@@ -40,12 +42,8 @@ def fit_tree(points: np.ndarray, settings, labels=None, warm=None):
         if key not in warm:
             warm[key] = _core.EllipsoidWarmStart()
         st = warm[key]
-        # From a support, a tighter tolerance (at no measurable cost: the optimum moved
-        # little): the warm fit lands as near a full bake's as a fresh fit at 1e-4 does, AO
-        # within 0.0085 of it on tests/python/test_live_core.py's swaying tree (0.0068 for the
-        # fresh fit at 1e-4; 0.018 for a warm fit at the fresh one's 1e-3).
-        tol = WARM_TOLERANCE if st.support else 1e-3
-        return _core.fit_ellipsoid(pts, trim=settings.trim, tolerance=tol, warm=st)
+        return _core.fit_ellipsoid(pts, trim=settings.trim, tolerance=LIVE_TOLERANCE,
+                                   warm=st)
     sphere = _core.fit_sphere(points, trim=settings.trim)
     if rung.proxy is Proxy.SPHERE:
         # The sphere model uses no ellipsoid: skip its fit (~40 ms per million points); the
