@@ -88,7 +88,7 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
   // [direction][voxel]: each sweep writes its own direction's block, every voxel of it (no
   // zero fill). Lookups read the 8 corners of each direction's block (taus_at); with the
   // receivers in bucket order (coherent_order) those stay in cache, and no transpose to
-  // [voxel][direction] (a pass over all K·V values, 30 % of the sweeps) is needed.
+  // [voxel][direction] (a pass over all K·V values, 40 % of the sweeps) is needed.
   f.tau.reset(new float[V * K]);
   parallel_for_blocks(K, 1, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
