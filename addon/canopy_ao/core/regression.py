@@ -28,7 +28,7 @@ import numpy as np
 
 from . import buried as _buried
 from . import card_ao, card_area, native
-from .leaf_features import LeafTable
+from .leaf_features import LeafTable, tree_frame  # noqa: F401 (tree_frame: tests)
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
 from .regression_fit import NATIVE, PIECES_GAIN, fit_group as _fit  # noqa: F401 (tests)
@@ -46,21 +46,6 @@ POINTS = 1024            # calibration points of the rung (the ray-free contract
 RAYS_PER_RECEIVER = 8    # calibration samples per receiver at most: 1/8 of a 64-sample bake
 MIN_SAMPLES = 32         # rays per calibration point at least
 MIN_POINTS = 256         # calibration points at least (when the scene has them)
-
-
-def tree_frame(points):
-    """(center (3,), radius, z_min, z_max) of a tree from its points: the vertical axis through
-    the median xy, the 95th-percentile horizontal distance from it."""
-    p = np.asarray(points, np.float64).reshape(-1, 3)
-    # Column by column (contiguous): np.median along axis 0 of an (N, 3) array costs 1.6 x.
-    x, y, z = (np.ascontiguousarray(p[:, a]) for a in range(3))
-    c = np.array([np.median(x), np.median(y), np.median(z)])
-    r = np.hypot(x - c[0], y - c[1])
-    radius = float(np.percentile(r, 95))
-    lo = np.array([x.min(), y.min(), z.min()])
-    hi = np.array([x.max(), y.max(), z.max()])
-    radius = max(radius, 1e-3 * float(np.linalg.norm(hi - lo)), 1e-9)
-    return c.astype(np.float32), radius, float(lo[2]), float(hi[2])
 
 
 def _sample(groups, count, seed):
