@@ -115,24 +115,43 @@ void bind_features(py::module_& m) {
   m.def(
       "predict_features",
       [](const py::array& features, const py::array& mean, const py::array& scale,
-         const py::array& weights) {
+         const py::array& weights, const py::object& lo, const py::object& hi,
+         int native_features) {
         const int f = feature_count(features);
         const std::size_t n = features_arg(features, f);
+        const int fn = native_features < 0 ? f : native_features;
+        if (fn < 1 || fn > f) {
+          throw py::value_error("native_features must be in [1, " + std::to_string(f) +
+                                "], got " + std::to_string(native_features));
+        }
         const float* mu = floats_arg(mean, "mean", f);
         const float* sc = floats_arg(scale, "scale", f);
-        const float* w = floats_arg(weights, "weights", expanded_size(f));
+        const float* w = floats_arg(weights, "weights", model_size(f, fn));
+        if (lo.is_none() != hi.is_none()) throw py::value_error("give both lo and hi, or neither");
+        py::array lo_a, hi_a;
+        const float *l = nullptr, *h = nullptr;
+        if (!lo.is_none()) {
+          lo_a = py::array::ensure(lo), hi_a = py::array::ensure(hi);
+          l = floats_arg(lo_a, "lo", f);
+          h = floats_arg(hi_a, "hi", f);
+        }
         py::array_t<float> out = new_floats(n);
         const float* x = static_cast<const float*>(features.data());
         float* dst = out.mutable_data();
         {
           py::gil_scoped_release release;
-          predict_features(x, n, f, mu, sc, w, dst);
+          predict_model(x, n, f, fn, mu, sc, w, l, h, dst);
         }
         return out;
       },
       py::arg("features"), py::arg("mean"), py::arg("scale"), py::arg("weights"),
-      "predict_features(features, mean, scale, weights) -> float32 (N,)\n\n"
-      "AO = clip(expand_features(...) @ weights, 0, 1): the fitted regression evaluated.");
+      py::arg("lo") = py::none(), py::arg("hi") = py::none(), py::arg("native_features") = -1,
+      "predict_features(features, mean, scale, weights, lo=None, hi=None, native_features=-1)"
+      " -> float32 (N,)\n\n"
+      "AO = clip(phi @ weights, 0, 1): the fitted regression evaluated. phi: the first "
+      "native_features columns (-1: all) expanded as expand_features does, then the rest "
+      "(the leaf-piece columns) as [z_e, z_e**2, z[:, 1] * z_e]. lo, hi: float32 (F,) bounds "
+      "each feature is clipped to first (a live frame's), or None.");
 }
 
 }  // namespace canopy_ao::py_bind

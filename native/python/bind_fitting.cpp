@@ -290,21 +290,33 @@ void bind_fitting(py::module_& m) {
       "trim in [0, 0.5): that fraction of points farthest from the coordinate-wise median is "
       "ignored (outlier branches); the sphere then contains the kept points only.");
 
+  py::class_<EllipsoidWarmStart>(
+      m, "EllipsoidWarmStart",
+      "What an ellipsoid fit leaves for the next fit of the same points moved a little (its "
+      "Khachiyan support and weights); pass it as fit_ellipsoid(..., warm=state).")
+      .def(py::init<>())
+      .def_property_readonly("support",
+                             [](const EllipsoidWarmStart& w) { return w.active.size(); },
+                             "Number of support points kept (0: none yet, a fresh fit).");
+
   m.def(
       "fit_ellipsoid",
       [](const py::array& points, double trim, const std::string& method, double tolerance,
-         const py::object& max_points, double min_radius_ratio) {
+         const py::object& max_points, double min_radius_ratio, EllipsoidWarmStart* warm) {
         const PointsView p = points_arg(points, "points");
         const EllipsoidFitOptions o =
             ellipsoid_options(trim, method, tolerance, max_points, min_radius_ratio);
         py::gil_scoped_release release;
-        return fit_min_ellipsoid(p, o);
+        return fit_min_ellipsoid(p, o, nullptr, warm);
       },
       py::arg("points"), py::arg("trim") = 0.0, py::arg("method") = "auto",
       py::arg("tolerance") = 1e-3, py::arg("max_points") = 20000,
-      py::arg("min_radius_ratio") = 1e-2,
+      py::arg("min_radius_ratio") = 1e-2, py::arg("warm") = nullptr,
       "fit_ellipsoid(points, trim=0.0, method='auto', tolerance=1e-3, max_points=20000, "
-      "min_radius_ratio=0.01) -> Ellipsoid\n\n"
+      "min_radius_ratio=0.01, warm=None) -> Ellipsoid\n\n"
+      "warm: an EllipsoidWarmStart, read when it is a fit of as many points (Khachiyan then "
+      "starts from its support and weights: the same points moved a little, a live frame) and "
+      "refilled; the result is within the tolerance of a fresh fit's.\n"
       "Minimum-volume enclosing ellipsoid of points, float32 (N, 3), N >= 1, finite.\n"
       "method: 'khachiyan' (Khachiyan/Todd-Yildirim on at most max_points points, then scaled "
       "to contain every point; volume within (1 + tolerance)^(3/2) of optimal on that sample), "

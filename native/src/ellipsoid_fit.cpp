@@ -96,11 +96,14 @@ struct LocalEllipsoid {
 // Khachiyan's algorithm with Todd–Yildirim away steps on points z (first d coordinates used).
 // Lifted points q = (z, 1); weights u on the simplex; X(u) = Σ uᵢ qᵢ qᵢᵀ; Mᵢ = qᵢᵀ X⁻¹ qᵢ.
 // INV: Σ u = 1, u ≥ 0. Returns false if X became singular (affinely dependent active set).
+// u_io: null (start from equal weights), or the start weights (m values, sum 1), which are
+// replaced by the final ones.
 bool khachiyan(const std::vector<P3>& z, int d, double tol, int max_iter, LocalEllipsoid* out,
-               int* iterations, bool* converged) {
+               int* iterations, bool* converged, std::vector<double>* u_io = nullptr) {
   const int m = static_cast<int>(z.size());
   const int D = d + 1;
   std::vector<double> u(m, 1.0 / m), M(m);
+  if (u_io != nullptr && static_cast<int>(u_io->size()) == m) u = *u_io;
   *converged = false;
   int it = 0;
   for (;; ++it) {
@@ -146,6 +149,7 @@ bool khachiyan(const std::vector<P3>& z, int d, double tol, int max_iter, LocalE
     }
   }
   *iterations += it;
+  if (u_io != nullptr) *u_io = u;
   // Centre c = Σ uᵢ zᵢ; shape A = (Σ uᵢ zᵢ zᵢᵀ − c cᵀ)⁻¹ / d.
   double c[3] = {0, 0, 0}, S[4][4] = {}, Si[4][4];
   for (int i = 0; i < m; ++i)
@@ -347,7 +351,7 @@ std::vector<std::size_t> ellipsoid_trimmed_indices(PointsView points, double tri
 }
 
 Ellipsoid fit_min_ellipsoid(PointsView points, const EllipsoidFitOptions& options,
-                            EllipsoidFitInfo* info) {
+                            EllipsoidFitInfo* info, EllipsoidWarmStart* warm) {
   check_fit_points(points);
   check_options(options);
   std::vector<std::size_t> idx;
@@ -359,11 +363,12 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const EllipsoidFitOptions& option
   }
   EllipsoidFitOptions o = options;
   o.trim = 0;
-  return fit_min_ellipsoid(points, idx, o, info);
+  return fit_min_ellipsoid(points, idx, o, info, warm);
 }
 
 Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& indices,
-                            const EllipsoidFitOptions& options, EllipsoidFitInfo* info_out) {
+                            const EllipsoidFitOptions& options, EllipsoidFitInfo* info_out,
+                            EllipsoidWarmStart* warm) {
   check_options(options);
   if (indices.empty()) throw std::invalid_argument("points is empty");
   for (std::size_t i : indices) {
@@ -471,7 +476,18 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
       for (std::size_t j = 0; j < np; ++j) pool.push_back(j * n / np);
       std::vector<P3> zp(np);
       for (std::size_t j = 0; j < np; ++j) zp[j] = frame_z(pool[j]);
-      std::vector<int> active = extreme_points(zp, d);
+      // A warm start (the previous frame's support and weights) where it fits these points;
+      // else the extreme points with equal weights.
+      bool warmed = warm != nullptr && warm->points == n && warm->pool == np &&
+                          warm->dimension == d && warm->active.size() > static_cast<std::size_t>(d) &&
+                          warm->weights.size() == warm->active.size() &&
+                          std::all_of(warm->active.begin(), warm->active.end(),
+                                      [&](int a) { return a >= 0 && static_cast<std::size_t>(a) < np; });
+      std::vector<int> active = warmed ? warm->active : extreme_points(zp, d);
+      // Weights over `active`: the warm path carries them between rounds; the cold one starts
+      // each round from equal ones (1/m, as khachiyan would) and keeps only the last round's.
+      std::vector<double> u;
+      if (warmed) u = warm->weights;
       std::vector<char> in_active(np, 0);
       for (int a : active) in_active[a] = 1;
       LocalEllipsoid kh;
@@ -480,9 +496,18 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
       for (int round = 0; round < 50; ++round) {
         std::vector<P3> za;
         for (int a : active) za.push_back(zp[a]);
+        if (!warmed) u.assign(za.size(), 1.0 / std::max<std::size_t>(za.size(), 1));
         ok = static_cast<int>(za.size()) > d &&
              khachiyan(za, d, options.tolerance, options.max_iterations, &kh, &info.iterations,
-                       &conv);
+                       &conv, &u);
+        if (!ok && warmed) {  // a support that no longer spans: start afresh
+          warmed = false;
+          active = extreme_points(zp, d);
+          std::fill(in_active.begin(), in_active.end(), 0);
+          for (int a : active) in_active[a] = 1;
+          round = -1;
+          continue;
+        }
         if (!ok) break;
         // The subsample's worst violators join the active set (≤ 64 a round).
         std::vector<std::pair<double, int>> viol;
@@ -497,8 +522,26 @@ Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& i
         for (std::size_t t = 0; t < take; ++t) {
           active.push_back(viol[t].second);
           in_active[viol[t].second] = 1;
+          if (warmed) u.push_back(0.0);  // joins with no weight: u stays on the simplex
         }
-        std::sort(active.begin(), active.end());
+        if (!warmed) std::sort(active.begin(), active.end());
+      }
+      if (warm != nullptr) {  // the support for the next fit (weights > 0, renormalised)
+        *warm = EllipsoidWarmStart{};
+        if (ok && u.size() == active.size()) {  // u: the last round's weights
+          const std::vector<double>& uf = u;
+          double sum = 0;
+          for (std::size_t a = 0; a < uf.size(); ++a)
+            if (uf[a] > 1e-12) sum += uf[a];
+          if (sum > 0) {
+            warm->points = n, warm->pool = np, warm->dimension = d;
+            for (std::size_t a = 0; a < uf.size(); ++a)
+              if (uf[a] > 1e-12) {
+                warm->active.push_back(active[a]);
+                warm->weights.push_back(uf[a] / sum);
+              }
+          }
+        }
       }
       info.active_points = active.size();
       info.converged = ok && conv;

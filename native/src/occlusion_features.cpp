@@ -1,14 +1,19 @@
 // Canopy AO — per-vertex occlusion features and their linear model (occlusion_features.h).
+// No trapping math: the per-direction fast_exp loop must vectorise (fast_math.h's caveat).
+#pragma GCC optimize("no-trapping-math")
 #include "canopy_ao/occlusion_features.h"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
+#include "canopy_ao/fast_math.h"
 #include "canopy_ao/parallel.h"
 
 namespace canopy_ao {
@@ -80,7 +85,11 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
   const int* n = f.n;
   const std::size_t stride[3] = {1, static_cast<std::size_t>(n[0]),
                                  static_cast<std::size_t>(n[0]) * n[1]};
-  std::vector<std::vector<float>> per_dir(K);
+  // [direction][voxel]: each sweep writes its own direction's block, every voxel of it (no
+  // zero fill). Lookups read the 8 corners of each direction's block (taus_at); with the
+  // receivers in bucket order (coherent_order) those stay in cache, and no transpose to
+  // [voxel][direction] (a pass over all K·V values, 40 % of the sweeps) is needed.
+  f.tau.reset(new float[V * K]);
   parallel_for_blocks(K, 1, [&](std::size_t b, std::size_t e) {
     for (std::size_t k = b; k < e; ++k) {
       const Vec3 dk = dirs[k];
@@ -99,10 +108,8 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
       const float fa = da - oa, fb = db - ob;
       const float wq[4] = {(1 - fa) * (1 - fb), fa * (1 - fb), (1 - fa) * fb, fa * fb};
       const std::size_t sa = stride[a1], sb = stride[a2];
-      std::vector<float>& tau = per_dir[k];
-      tau.assign(V, 0.0f);
       const float* sg = f.sigma.data();
-      float* tp = tau.data();
+      float* tp = f.tau.get() + k * V;
       // Columns ia whose four upstream corners all lie inside the slice: no bounds checks.
       const int ia_lo = std::max(0, -oa), ia_hi = std::min(n[a1] - 1, n[a1] - 2 - oa);
       // INV: every slice upstream of `im` (the side d_k points to) is final.
@@ -153,11 +160,6 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
         }
       }
     }
-  });
-  f.tau.resize(V * K);
-  parallel_for_blocks(V, 4096, [&](std::size_t b, std::size_t e) {
-    for (std::size_t v = b; v < e; ++v)
-      for (std::size_t k = 0; k < K; ++k) f.tau[v * K + k] = per_dir[k][v];
   });
   return f;
 }
@@ -214,10 +216,12 @@ void OcclusionFeatures::taus_at(Vec3 p, float* tau) const {
   float w[8];
   if (inside_box(f.n, g)) {
     trilinear_stencil(f.n, g, idx, w);
-    for (int k = 0; k < K; ++k) tau[k] = 0;
-    for (int c = 0; c < 8; ++c) {
-      const float* src = f.tau.data() + idx[c] * K;
-      for (int k = 0; k < K; ++k) tau[k] += w[c] * src[k];
+    const std::size_t V = static_cast<std::size_t>(f.n[0]) * f.n[1] * f.n[2];
+    for (int k = 0; k < K; ++k) {
+      const float* src = f.tau.get() + k * V;
+      float acc = 0;
+      for (int c = 0; c < 8; ++c) acc += w[c] * src[idx[c]];
+      tau[k] = acc;
     }
     return;
   }
@@ -240,7 +244,8 @@ void OcclusionFeatures::taus_at(Vec3 p, float* tau) const {
     tau[k] = 0;
     if (miss || t0 > t1) continue;
     trilinear_stencil(f.n, g + d * t0, idx, w);
-    for (int c = 0; c < 8; ++c) tau[k] += w[c] * f.tau[idx[c] * K + k];
+    const std::size_t V = static_cast<std::size_t>(f.n[0]) * f.n[1] * f.n[2];
+    for (int c = 0; c < 8; ++c) tau[k] += w[c] * f.tau[k * V + idx[c]];
   }
 }
 
@@ -260,39 +265,67 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
   const Vec3 mid = {frame.center.x, frame.center.y, 0.5f * (frame.z_min + frame.z_max)};
   const float half_diag = std::max(0.5f * std::sqrt(4 * frame.radius * frame.radius +
                                                     height * height), 1e-12f);
+  // The directions as columns, and the sky weights (d_k·z where upward), for the per-point loop.
+  std::vector<float> dx(K), dy(K), dz(K), up(K);
+  float w_sky = 0;
+  for (int k = 0; k < K; ++k) {
+    dx[k] = dirs_[k].x, dy[k] = dirs_[k].y, dz[k] = dirs_[k].z;
+    up[k] = dirs_[k].z > 0 ? dirs_[k].z : 0.0f;
+    w_sky += up[k];
+  }
+  const std::vector<std::uint32_t> order = coherent_order(positions);
   parallel_for_blocks(positions.size, 256, [&](std::size_t b, std::size_t e) {
-    std::vector<float> taus(K);
-    for (std::size_t i = b; i < e; ++i) {
+    std::vector<float> taus(K), tr(K), sq(K);
+    for (std::size_t j = b; j < e; ++j) {
+      const std::size_t i = order[j];
       const Vec3 p = positions[i];
       const Vec3 nn = normalize(normals[i]);
-      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
-      float w_opp = 0, ao_opp = 0, w_sky = 0, sky = 0;
       taus_at(p, taus.data());
+      // exp(−τ) and its square root exp(−τ/2) for every direction: straight-line code that
+      // GCC vectorises (libm's expf is a call it cannot).
       for (int k = 0; k < K; ++k) {
-        const Vec3 d = dirs_[k];
-        const float t = taus[k];
-        const float tr = std::exp(-t);
-        if (d.z > 0) {
-          sky += d.z * tr;
-          w_sky += d.z;
-        }
-        const float w = dot(nn, d);
-        if (w > 0) {
-          w_sum += w;
-          const float sq = std::sqrt(tr);
-          ao_s[0] += w * sq;
-          ao_s[1] += w * tr;
-          ao_s[2] += w * tr * tr;
-          mean_tau += w * t;
-        } else if (w < 0) {
-          w_opp -= w;
-          ao_opp -= w * tr;
-        }
+        tr[k] = fast_exp(-taus[k]);
+        sq[k] = fast_exp(-0.5f * taus[k]);
+      }
+      // Branch-free sums (a direction adds 0 where its weight is not > 0) in kLanes partial
+      // sums, direction k into lane k mod kLanes, added up in lane order at the end: a fixed
+      // order (deterministic), and one GCC vectorises (a single running sum it may not
+      // reorder).
+      constexpr int kLanes = 8;
+      float l_w[kLanes] = {}, l_s0[kLanes] = {}, l_s1[kLanes] = {}, l_s2[kLanes] = {},
+            l_t[kLanes] = {}, l_ow[kLanes] = {}, l_o[kLanes] = {}, l_sky[kLanes] = {};
+      auto add = [&](int l, int k) {
+        const float w = nn.x * dx[k] + nn.y * dy[k] + nn.z * dz[k];
+        const float wp = w > 0 ? w : 0.0f, wn = w < 0 ? -w : 0.0f;
+        l_sky[l] += up[k] * tr[k];
+        l_w[l] += wp;
+        l_s0[l] += wp * sq[k];
+        l_s1[l] += wp * tr[k];
+        l_s2[l] += wp * tr[k] * tr[k];
+        l_t[l] += wp * taus[k];
+        l_ow[l] += wn;
+        l_o[l] += wn * tr[k];
+      };
+      int k = 0;
+      for (; k + kLanes <= K; k += kLanes)
+        for (int l = 0; l < kLanes; ++l) add(l, k + l);
+      for (int l = 0; k < K; ++k, ++l) add(l, k);
+      float w_sum = 0, ao_s[3] = {0, 0, 0}, mean_tau = 0;
+      float w_opp = 0, ao_opp = 0, sky = 0;
+      for (int l = 0; l < kLanes; ++l) {
+        w_sum += l_w[l];
+        ao_s[0] += l_s0[l];
+        ao_s[1] += l_s1[l];
+        ao_s[2] += l_s2[l];
+        mean_tau += l_t[l];
+        w_opp += l_ow[l];
+        ao_opp += l_o[l];
+        sky += l_sky[l];
       }
       float* o = out + i * kCount;
       if (w_sum > 0) {
         for (int s = 0; s < 3; ++s) o[s] = ao_s[s] / w_sum;
-        o[4] = std::log1p(mean_tau / w_sum);
+        o[4] = std::log(1.0f + mean_tau / w_sum);  // logf: log1pf costs ~30 ns a call
       } else {  // zero normal: an open receiver
         o[0] = o[1] = o[2] = 1.0f;
         o[4] = 0.0f;
@@ -300,7 +333,7 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
       o[3] = w_sky > 0 ? sky / w_sky : 1.0f;
       const Vec3 gf = lattice(fine_.origin, fine_.h, p);
       const float sf = lerp3(fine_, fine_.sigma, gf) * fine_.h;
-      o[5] = std::log1p(inside_box(fine_.n, gf) ? sf : 0.0f);
+      o[5] = std::log(1.0f + (inside_box(fine_.n, gf) ? sf : 0.0f));
       const Vec3 r = {p.x - frame.center.x, p.y - frame.center.y, 0.0f};
       const float rl = length(r);
       o[6] = nn.z;
@@ -314,6 +347,33 @@ void OcclusionFeatures::compute(PointsView positions, PointsView normals, const 
       o[12] = o[1] - (w_opp > 0 ? ao_opp / w_opp : 1.0f);
     }
   });
+}
+
+std::vector<std::uint32_t> OcclusionFeatures::coherent_order(PointsView positions) const {
+  // Buckets of kBucket³ voxels (the lattice clamped, so points outside share the border's):
+  // a counting sort by bucket, stable, so the order is deterministic. Points of a mesh come in
+  // no spatial order (a crown's leaves anywhere), and each lookup reads 8 × K floats of a τ
+  // field larger than the caches (24 MB for a 64³ grid); in bucket order consecutive points
+  // read the same few voxels.
+  constexpr int kBucket = 4;
+  const Field& f = fine_;
+  int nb[3];
+  for (int a = 0; a < 3; ++a) nb[a] = (f.n[a] + kBucket - 1) / kBucket;
+  const std::size_t N = positions.size, B = static_cast<std::size_t>(nb[0]) * nb[1] * nb[2];
+  std::vector<std::uint32_t> key(N), count(B + 1, 0), order(N);
+  for (std::size_t i = 0; i < N; ++i) {
+    const Vec3 g = lattice(f.origin, f.h, positions[i]);
+    int c[3];
+    for (int a = 0; a < 3; ++a) {
+      const float x = std::clamp(g[a], 0.0f, static_cast<float>(f.n[a] - 1));
+      c[a] = std::min(static_cast<int>(x) / kBucket, nb[a] - 1);
+    }
+    key[i] = static_cast<std::uint32_t>(vidx(nb, c[0], c[1], c[2]));
+    ++count[key[i] + 1];
+  }
+  for (std::size_t b = 0; b < B; ++b) count[b + 1] += count[b];
+  for (std::size_t i = 0; i < N; ++i) order[count[key[i]]++] = static_cast<std::uint32_t>(i);
+  return order;
 }
 
 const char* OcclusionFeatures::feature_name(int f) {
@@ -369,12 +429,37 @@ void expand_features(const float* features, std::size_t n, int f, const float* m
 
 void predict_features(const float* features, std::size_t n, int f, const float* mean,
                       const float* scale, const float* weights, float* out) {
+  predict_model(features, n, f, f, mean, scale, weights, nullptr, nullptr, out);
+}
+
+int model_size(int features, int native_features) {
+  return expanded_size(native_features) + 3 * (features - native_features);
+}
+
+void predict_model(const float* features, std::size_t n, int f, int f_native, const float* mean,
+                   const float* scale, const float* weights, const float* lo, const float* hi,
+                   float* out) {
+  if (f_native < 1 || f_native > f)
+    throw std::invalid_argument("native_features must be in [1, features], got " +
+                                std::to_string(f_native));
   check_model(f, scale);
-  const int P = expanded_size(f);
+  const int P = model_size(f, f_native);
+  const int g = std::min(kGridAO, f_native - 1);
   parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
-    std::vector<float> z(f), phi(P);
+    std::vector<float> x(f), z(f), phi(P);
     for (std::size_t i = b; i < e; ++i) {
-      expand_row(features + i * f, f, mean, scale, z.data(), phi.data());
+      const float* row = features + i * f;
+      for (int j = 0; j < f; ++j)
+        x[j] = lo != nullptr ? std::min(std::max(row[j], lo[j]), hi[j]) : row[j];
+      expand_row(x.data(), f_native, mean, scale, z.data(), phi.data());
+      // The extra columns: [z_e, z_e², z_grid·z_e], each group over the extra features.
+      const int E = f - f_native, base = expanded_size(f_native);
+      for (int j = 0; j < E; ++j) {
+        const float ze = (x[f_native + j] - mean[f_native + j]) / scale[f_native + j];
+        phi[base + j] = ze;
+        phi[base + E + j] = ze * ze;
+        phi[base + 2 * E + j] = ze * z[g];
+      }
       double acc = 0;
       for (int p = 0; p < P; ++p) acc += static_cast<double>(weights[p]) * phi[p];
       out[i] = std::isfinite(acc) ? static_cast<float>(std::clamp(acc, 0.0, 1.0)) : 1.0f;

@@ -75,6 +75,22 @@ def _assert_equal(got, want, names=NAMES):
         np.testing.assert_allclose(got[n], want[n], atol=2e-6, err_msg=n)
 
 
+def _assert_within_the_fit(got, want, names=NAMES):
+    """Equal within a bake's ellipsoid fit tolerance (1e-3): live fits solve to 1e-6
+    (proxies.LIVE_TOLERANCE; tests/python/test_live_core.py measures the bound; up to 0.016
+    on a vertex of this tree's eight small shells)."""
+    for n in names:
+        d = np.abs(got[n] - want[n])
+        assert d.max() < 0.02 and d.mean() < 0.002, (n, d.max(), d.mean())
+
+
+def _assert_same_fit(got, want, names=NAMES):
+    """Equal to the live fits' precision (1e-6): the same frame, whichever frame its fits
+    started from."""
+    for n in names:
+        np.testing.assert_allclose(got[n], want[n], atol=1e-4, err_msg=n)
+
+
 @pytest.mark.parametrize("method", ["sphere", "ellipsoid", "shells", "medium"])
 def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
     _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, live=True))
@@ -84,15 +100,21 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
     now = {n: _ao(n) for n in NAMES}
     assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
     assert np.abs(now["Ground"] - first["Ground"]).max() > 0.005  # and the shadow moved
-    if method in ("sphere", "ellipsoid"):
+    if method == "sphere":
         _assert_equal(now, _full(method, rep["tau"], live_ground=True))
+    elif method == "ellipsoid":  # live fits solve to 1e-6, a bake's to 1e-3
+        _assert_within_the_fit(now, _full(method, rep["tau"], live_ground=True))
+        animated.frame_set(4)  # its fit starts from frame 7's
+        _assert_within_the_fit({n: _ao(n) for n in NAMES},
+                               _full(method, rep["tau"], live_ground=True))
     else:
         # The shells keep the first bake's partition of the leaves (core/live.py): a full bake
-        # clusters afresh, so the check is the first frame, reached again.
+        # clusters afresh, so the check is the first frame, reached again (the bake's fits
+        # at 1e-3, the frame's at 1e-6), then frame 7 again, its fits started elsewhere.
         animated.frame_set(1)
-        _assert_equal({n: _ao(n) for n in NAMES}, first)
+        _assert_within_the_fit({n: _ao(n) for n in NAMES}, first)
         animated.frame_set(7)
-        _assert_equal({n: _ao(n) for n in NAMES}, now)
+        _assert_same_fit({n: _ao(n) for n in NAMES}, now)
 
 
 def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated):
@@ -171,7 +193,8 @@ def test_live_keeps_the_first_bakes_calibrated_tau(animated):
             want[name][mask] = 0.0
         # ... and the ground, grass and trunk, lit with τ × their factor (a given τ has none)
         scaled = {n for n in NAMES if ROLES[n] in rep["tau_role_scale"]}
-        _assert_equal({n: _ao(n) for n in NAMES}, want, [n for n in NAMES if n not in scaled])
+        _assert_within_the_fit({n: _ao(n) for n in NAMES}, want,
+                               [n for n in NAMES if n not in scaled])
 
 
 @pytest.mark.parametrize("kw, words", [
@@ -196,7 +219,7 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
     animated.canopy_ao.live = True
     live._forget()
     animated.frame_set(9)
-    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
+    _assert_within_the_fit({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
     # Saved and loaded: re-armed from the file's record by the persistent handler.
     path = str(tmp_path / "live.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
@@ -204,7 +227,7 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
     scene = bpy.context.scene
     assert scene.canopy_ao.live and live.session_of(scene) is None
     scene.frame_set(3)
-    _assert_equal({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
+    _assert_within_the_fit({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
     # The user's own attribute of that name is never overwritten: live AO stops instead.
     leaves = scene.objects["Leaves"]
     mesh_io.remove_owned_attribute(leaves, "CanopyAO")
@@ -250,12 +273,16 @@ def test_a_frame_range_bake_matches_per_frame_full_bakes_and_is_read_back(animat
             attr = animated.objects[n].data.attributes[f"CanopyAO_{f}"]
             vals = np.empty(len(attr.data), np.float32)
             attr.data.foreach_get("value", vals)
-            np.testing.assert_allclose(vals, full[n], atol=2e-6, err_msg=f"{n} at {f}")
+            d = np.abs(vals - full[n])  # live fits solve to 1e-6, a bake's to 1e-3
+            assert d.max() < 0.012 and d.mean() < 0.002, (n, f, d.max(), d.mean())
     # The geometry-nodes read-back: the frame's cache, clamped to the baked range.
     leaves = animated.objects["Leaves"]
     for frame, cached in ((4, 4), (6, 6), (1, 2), (40, 6)):
         animated.frame_set(frame)
-        np.testing.assert_allclose(_evaluated_ao(leaves), want[cached]["Leaves"], atol=2e-6)
+        attr = leaves.data.attributes[f"CanopyAO_{cached}"]
+        vals = np.empty(len(attr.data), np.float32)
+        attr.data.foreach_get("value", vals)
+        np.testing.assert_allclose(_evaluated_ao(leaves), vals, atol=2e-6)
     # Clearing removes the modifier, the cache and the node group.
     assert bpy.ops.canopy_ao.clear_frames() == {'FINISHED'}
     assert not any(a.name.startswith("CanopyAO_") for a in leaves.data.attributes)
@@ -416,4 +443,4 @@ def test_a_reloaded_file_keeps_the_shell_partition_of_the_session_that_saved_it(
     scene = bpy.context.scene
     scene.frame_set(6)
     scene.frame_set(5)
-    _assert_equal({n: _ao(n) for n in NAMES}, at5)
+    _assert_same_fit({n: _ao(n) for n in NAMES}, at5)

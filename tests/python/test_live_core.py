@@ -187,3 +187,59 @@ def test_a_live_bake_keeps_a_ground_alone_out_of_its_frames():
     assert ao["baked"].mean() < ao["live"].mean() - 0.05, ao
     assert frame_plan(first, 0.15)[1].walls == []
     assert len(frame_plan(baked, 0.15)[1].walls) == 1
+
+
+def test_warm_started_frames_match_a_full_bake_and_not_their_history():
+    """A live session's frames start each ellipsoid's fit from the previous frame's support
+    (plan.fit_warm, proxies.fit_tree) and solve it to LIVE_TOLERANCE: over a sway in 8 steps
+    every frame's AO stays within a bake's own fit tolerance of a full bake of that frame
+    (0.012, 0.002 on average: a bake fits to 1e-3), and the last frame is the same reached
+    step by step or at once (a farm task starting there, a reloaded file): the fit no longer
+    depends on where it started."""
+    settings = core.BakeSettings(method="ellipsoid", tau=1.7)
+    first = core.prepare(scene_items(0.0), settings)
+    first.fit_warm = {}
+    worst, mean = 0.0, []
+    for sway in np.linspace(0.0, 0.2, 8):
+        frame, plan = frame_plan(first, sway)
+        full = core.prepare(scene_items(sway), settings)
+        for it in frame:
+            got = core.evaluate_receivers(plan, it, it.positions, it.normals,
+                                          vertices=slice(None))
+            want = core.evaluate_receivers(full, it, it.positions, it.normals,
+                                           vertices=slice(None))
+            worst = max(worst, float(np.abs(got - want).max()))
+            mean.append(float(np.abs(got - want).mean()))
+    assert worst < 0.012 and max(mean) < 0.002, (worst, mean)
+    assert first.fit_warm["Oak"][-1].support >= 4  # a 3-D fit's support: at least d + 1
+    stepped = leaves_ao(plan, frame)
+    first.fit_warm = {}  # a new session, its first frame the last one
+    frame, at_once = frame_plan(first, 0.2)
+    np.testing.assert_allclose(leaves_ao(at_once, frame), stepped, atol=1e-5)
+    assert np.abs(stepped - leaves_ao(full, frame)).max() > 1e-4  # not the bake's 1e-3 fit
+
+
+def test_a_warm_state_of_other_points_is_ignored():
+    """What a fit keeps for the next frame applies only to as many points (the same mesh
+    moved): a state from another count (the topology changed, another object) gives exactly
+    a fresh fit, and an empty state the fresh fit too (a bake's fits are unchanged)."""
+    pts = {i.name: np.ascontiguousarray(i.positions) for i in scene_items(0.0)}
+    leaves, trunk = pts["Leaves"], pts["Trunk"]
+
+    def same(a, b):
+        return (np.array_equal(a.center, b.center) and np.array_equal(a.radii, b.radii)
+                and np.array_equal(a.axes, b.axes))
+
+    state = _core.EllipsoidWarmStart()
+    assert same(_core.fit_ellipsoid(leaves, warm=state), _core.fit_ellipsoid(leaves))
+    assert state.support >= 4
+    assert same(_core.fit_ellipsoid(trunk, warm=state), _core.fit_ellipsoid(trunk))
+    assert same(_core.fit_ellipsoid(leaves[:-7], warm=state), _core.fit_ellipsoid(leaves[:-7]))
+    # Refilled by the last fit (of leaves[:-7]): the leaves again start afresh, then moved
+    # they start from that fit's support, within its tolerance of a fresh fit.
+    assert same(_core.fit_ellipsoid(leaves, warm=state), _core.fit_ellipsoid(leaves))
+    moved = leaves + np.float32(0.01) * leaves[:, [2, 0, 1]]
+    warm = _core.fit_ellipsoid(moved, warm=state)
+    cold = _core.fit_ellipsoid(moved)
+    vol = float(np.prod(np.asarray(warm.radii, np.float64) / np.asarray(cold.radii)))
+    assert abs(vol - 1.0) < 5e-3 and not same(warm, cold)

@@ -244,3 +244,22 @@ def test_ray_free_auto_never_picks_rays_and_weighs_the_regression():
     assert "raytrace" not in free["calibration"]["candidates"]
     _, full = bake(its, "auto", time_budget=0.0)
     assert "raytrace" in full["calibration"]["candidates"]
+
+
+@pytest.mark.parametrize("pieces", [False, True])
+def test_native_prediction_equals_the_expanded_model(pieces):
+    """Model.predict's one native pass (held to the sample's range, expanded and weighted row
+    by row, the leaf columns after the native ones) equals φ @ w on the expanded matrix, the
+    fit's own terms (Model.expand), clipped to [0, 1]."""
+    from canopy_ao.core.leaf_features import LeafTable
+    from canopy_ao.core.regression_fit import NATIVE, Model
+    rng = np.random.default_rng(7)
+    F = rng.normal(size=(600, NATIVE + (LeafTable.COUNT if pieces else 0))).astype(np.float32)
+    y = np.clip(0.5 + 0.1 * F[:, 0] - 0.05 * F[:, -1] + 0.02 * F[:, 1] * F[:, -1], 0, 1)
+    m = Model(F, y)
+    rows = rng.normal(scale=2.0, size=(300, F.shape[1])).astype(np.float32)
+    for bounded in (False, True):
+        x = np.clip(rows, m.lo, m.hi) if bounded else rows
+        want = np.clip(m.expand(x).astype(np.float64) @ m.weights.astype(np.float64), 0, 1)
+        np.testing.assert_allclose(m.predict(rows, bounded=bounded), want, atol=2e-5)
+    assert np.abs(m.predict(rows, bounded=True) - m.predict(rows)).max() > 0.01

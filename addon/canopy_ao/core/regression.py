@@ -28,7 +28,7 @@ import numpy as np
 
 from . import buried as _buried
 from . import card_ao, card_area, native
-from .leaf_features import LeafTable
+from .leaf_features import LeafTable, tree_frame  # noqa: F401 (tree_frame: tests)
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
 from .regression_fit import NATIVE, PIECES_GAIN, fit_group as _fit  # noqa: F401 (tests)
@@ -46,18 +46,6 @@ POINTS = 1024            # calibration points of the rung (the ray-free contract
 RAYS_PER_RECEIVER = 8    # calibration samples per receiver at most: 1/8 of a 64-sample bake
 MIN_SAMPLES = 32         # rays per calibration point at least
 MIN_POINTS = 256         # calibration points at least (when the scene has them)
-
-
-def tree_frame(points):
-    """(center (3,), radius, z_min, z_max) of a tree from its points: the vertical axis through
-    the median xy, the 95th-percentile horizontal distance from it."""
-    p = np.asarray(points, np.float64)
-    c = np.median(p, axis=0)
-    r = np.hypot(p[:, 0] - c[0], p[:, 1] - c[1])
-    radius = float(np.percentile(r, 95)) if len(r) else 1.0
-    extent = float(np.linalg.norm(p.max(0) - p.min(0))) if len(p) else 1.0
-    radius = max(radius, 1e-3 * extent, 1e-9)
-    return c.astype(np.float32), radius, float(p[:, 2].min()), float(p[:, 2].max())
 
 
 def _sample(groups, count, seed):
@@ -230,9 +218,12 @@ class RegressionRung:
         out = copy.copy(self)
         items = [it for it in items if it.role != "IGNORE"]
         occ = [it for it in items if it.role in OCCLUDER_ROLES]  # the first frame's: not none
+        # The leaf tables only where a model reads them (a fit that kept the piece columns):
+        # rebuilding them costs 5-10 ms per 100k vertices a frame.
+        pieces = any(m.pieces for m in self._models.values())
         out._features, out._leaves, out._scene_frame, out._frames = _geometry(
             items, occ, meshes, self.report["resolution"], self.report["directions"],
-            self._leaves)
+            self._leaves, tables=pieces)
         out._bounded = True  # features held to the first frame's sample (Model.predict)
         return out
 
@@ -278,17 +269,18 @@ class OpenSky:
         return self
 
 
-def _geometry(items, occ, meshes, resolution, directions, before=None):
+def _geometry(items, occ, meshes, resolution, directions, before=None, tables=True):
     """(OcclusionFeatures over the occluders' density grid, {mesh: LeafTable or None} of the
     CANOPY and TRUNK meshes (meshes: unsplit items; a name seen twice gets none; before: an
-    earlier frame's, pieces kept), the scene's tree frame, {tree: its frame})."""
+    earlier frame's, pieces kept; tables=False: none at all, {}), the scene's tree frame,
+    {tree: its frame})."""
     _core = native.require()
     grid = _core.DensityGrid(*merged([card_area.counted_item(it) for it in occ]),
                              resolution=resolution)  # cards by their opaque area
     features = _core.OcclusionFeatures(grid, directions=directions)
     whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
     leaves = {}
-    for it in whole:
+    for it in whole if tables else ():
         if it.role in LEAF_TABLE_ROLES:
             old = (before or {}).get(it.name)
             keep = old is not None and len(old.labels) == len(it.positions)

@@ -11,7 +11,6 @@ LAMBDAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
 CV_TOLERANCE = 0.005     # relative: CV errors closer than this are a tie (ridge)
 NATIVE = 13              # OcclusionFeatures' columns (occlusion_features.h); LeafTable's follow
 PIECES_GAIN = 0.02       # the piece columns must cut a fit's CV MAE by more than this (fit_group)
-CHUNK = 65536            # rows of φ expanded at a time (Model.predict)
 
 
 def ridge(X, y, lambdas=LAMBDAS, folds=5, seed=0):
@@ -84,19 +83,12 @@ class Model:
         ground point's shape feature under an unbent crown, which a swayed crown then moves
         thousands of standard deviations, and the fit extrapolates to nonsense)."""
         f = np.ascontiguousarray(feats, np.float32)
-        if bounded:
-            f = np.clip(f, self.lo, self.hi)
-        if f.shape[1] == NATIVE:
-            return np.asarray(native.require().predict_features(f, self.mean, self.scale,
-                                                                self.weights))
-        out = np.empty(len(f), np.float32)
-        for a in range(0, len(f), CHUNK):  # CHUNK rows at a time: bounded memory
-            rows = f[a:a + CHUNK]
-            X = np.asarray(native.require().expand_features(
-                np.ascontiguousarray(rows[:, :NATIVE]), self.mean[:NATIVE], self.scale[:NATIVE]))
-            k = X.shape[1]
-            out[a:a + CHUNK] = X @ self.weights[:k] + self._extra(rows) @ self.weights[k:]
-        return np.clip(out, 0.0, 1.0, out=out)
+        # One native pass (occlusion_features.h, predict_model): held to the range, expanded
+        # and weighted row by row, the leaf columns after the native ones; no (N, P) matrix.
+        lo, hi = (self.lo, self.hi) if bounded else (None, None)
+        return np.asarray(native.require().predict_features(
+            f, self.mean, self.scale, self.weights, lo, hi,
+            native_features=min(NATIVE, f.shape[1])))
 
 
 def fit_group(F, y):

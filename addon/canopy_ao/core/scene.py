@@ -142,6 +142,10 @@ class Plan:
     carry_cards: bool = False
     # tree -> int32 (N,): the k-means shell of each of its canopy points (kept by live AO)
     shell_labels: dict = field(default_factory=dict)
+    # tree -> {shell or -1: _core.EllipsoidWarmStart}: live AO's ellipsoid fits start from
+    # the previous frame's (proxies.fit_tree; a live session's own dict); None for a bake,
+    # which fits afresh
+    fit_warm: dict = None
     # lighting.Lights: the native scene plan of fits and trunks, built once (lighting.lights)
     lights: object = None
     # item name -> ("vertex" | "texel", count): the receivers the bake evaluates (its

@@ -67,18 +67,35 @@ struct EllipsoidFitInfo {
   double containment_scale = 1;  ///< factor applied to Khachiyan's radii to contain all points
 };
 
+/// What a Khachiyan fit leaves for the next fit of the same points moved a little (live AO's
+/// frames): the support points (indices into the stride subsample) and their weights. A fit
+/// given one starts Khachiyan from those weights instead of from the extreme points with equal
+/// weights: it stops at the same tolerance in a fraction of the iterations (the optimum moves
+/// little between frames), so its ellipsoid is within the tolerance of a fresh fit's, not bit
+/// for bit the same. A state from a different point count, subsample or dimension is ignored
+/// (a fresh fit); the fit then refills it.
+struct EllipsoidWarmStart {
+  std::size_t points = 0, pool = 0;  ///< the fit's point and subsample counts
+  int dimension = 0;
+  std::vector<int> active;           ///< subsample indices with weight > 0
+  std::vector<double> weights;       ///< their weights (sum 1)
+};
+
 // === Fitting
 /// Minimum-volume enclosing ellipsoid of `points` (N ≥ 1, finite). See the file comment.
 /// Throws std::invalid_argument: N == 0, non-finite coordinates, trim outside [0, 0.5),
 /// tolerance outside (0, 1), max_points < 4, min_radius_ratio outside (0, 1].
+/// warm: null, or a state read (when it fits) and rewritten (EllipsoidWarmStart).
 Ellipsoid fit_min_ellipsoid(PointsView points, const EllipsoidFitOptions& options = {},
-                            EllipsoidFitInfo* info = nullptr);
+                            EllipsoidFitInfo* info = nullptr,
+                            EllipsoidWarmStart* warm = nullptr);
 
 /// The same on points[indices] only (indices non-empty, each < points.size); options.trim is
 /// not applied here (the caller chose the points).
 Ellipsoid fit_min_ellipsoid(PointsView points, const std::vector<std::size_t>& indices,
                             const EllipsoidFitOptions& options = {},
-                            EllipsoidFitInfo* info = nullptr);
+                            EllipsoidFitInfo* info = nullptr,
+                            EllipsoidWarmStart* warm = nullptr);
 
 /// Indices (ascending) kept by the ellipsoid's percentile trim: a first Euclidean trim about the
 /// coordinate-wise median (trimmed_indices) gives a robust mean and covariance; then the

@@ -40,6 +40,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -86,13 +88,15 @@ class OcclusionFeatures {
     float h = 1;
     int n[3] = {0, 0, 0};
     std::vector<float> sigma;
-    std::vector<float> tau;  // [voxel][direction]: a lookup reads K contiguous values per corner
+    std::unique_ptr<float[]> tau;  // [direction][voxel], K × (n0 n1 n2) values
   };
   static Field sweep(const DensityGrid& g, int level, const std::vector<Vec3>& dirs);
   static float lerp3(const Field& f, const std::vector<float>& v, Vec3 p);
   // τ_k for every direction at p into tau (K values): one trilinear stencil for all directions
   // inside the grid; outside, each direction reads where it enters the grid.
   void taus_at(Vec3 p, float* tau) const;
+  // The receivers' indices in an order that walks the grid bucket by bucket (cache reuse).
+  std::vector<std::uint32_t> coherent_order(PointsView positions) const;
 
   std::vector<Vec3> dirs_;
   Field fine_;
@@ -111,5 +115,18 @@ void expand_features(const float* features, std::size_t n, int f, const float* m
 /// AO = clamp(w·φ(z), 0, 1) for N rows into out (N floats); weights: expanded_size(F) values.
 void predict_features(const float* features, std::size_t n, int f, const float* mean,
                       const float* scale, const float* weights, float* out);
+
+/// Number of terms of a model over F features whose first F_native expand as expand_features
+/// does for F_native and whose F − F_native extra ones (the leaf-piece columns) add
+/// [z_e, z_e², z_grid·z_e] each group in turn: expanded_size(F_native) + 3 (F − F_native).
+int model_size(int features, int native_features);
+
+/// AO = clamp(w·φ(z), 0, 1) of that model for N rows of F features into out (N floats;
+/// 1 where the sum is not finite); weights: model_size(F, F_native) values. lo, hi: null, or F
+/// bounds each feature is held to first (a live frame's features, the calibration sample's
+/// range). Throws std::invalid_argument on a bad F_native or scale.
+void predict_model(const float* features, std::size_t n, int f, int f_native, const float* mean,
+                   const float* scale, const float* weights, const float* lo, const float* hi,
+                   float* out);
 
 }  // namespace canopy_ao
