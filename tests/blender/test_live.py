@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import _clear_scene, add_oak_scene, add_wind_key
-from canopy_ao.blender import frames, live, mesh_io, properties
+from canopy_ao.blender import frames, live, live_session, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 from canopy_ao.core.native import CanopyAOError
 
@@ -53,10 +53,22 @@ def _ao(name, attribute="CanopyAO"):
     return mesh_io.read_ao_attribute(bpy.context.scene.objects[name], attribute)
 
 
+def held_ground(scene):
+    """{name: float32 (V,)}: the live session's ground occlusion held from its first bake, as
+    the scene stores it (live_session.HELD, in the record's object order)."""
+    import json
+    held, raw = scene.get(live_session.HELD), scene.get(live_session.RECORD)
+    if not held or not raw:
+        return {}
+    names = json.loads(raw)["objects"]
+    return {n: np.asarray(held[str(i)], np.float32) for i, n in enumerate(names)
+            if str(i) in held}
+
+
 def _full(method, tau, attribute="Full", live_ground=False):
     """A full bake of the current frame; {name: AO}. live_ground: with live AO's rule for the
-    GROUND surfaces (core/walls.py: patches only where a wall is; a bake makes the flat ground
-    one), as a live frame is lit."""
+    GROUND surfaces (core/walls.py): a frame makes patches only where a wall is, and a ground
+    alone's occlusion is the first bake's, held (core/live.held_ground)."""
     from canopy_ao.core import walls
     build = walls.build
     if live_ground:
@@ -67,7 +79,9 @@ def _full(method, tau, attribute="Full", live_ground=False):
     finally:
         walls.build = build
     assert rep["method"] == method
-    return {n: _ao(n, attribute) for n in NAMES}
+    got = {n: _ao(n, attribute) for n in NAMES}
+    held = held_ground(bpy.context.scene) if live_ground else {}
+    return {n: got[n] * held[n] if n in held else got[n] for n in NAMES}
 
 
 def _assert_equal(got, want, names=NAMES):
@@ -96,6 +110,11 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
     _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, live=True))
     first = {n: _ao(n) for n in NAMES}
     assert animated.canopy_ao.live and live.session_of(animated) is not None
+    if method == "sphere":
+        # The first frame is lit as any bake, the flat ground's patch included, which the
+        # frames then hold (held_ground): a live bake shows what a plain bake shows.
+        assert held_ground(animated) and held_ground(animated)["Leaves"].min() < 0.99
+        _assert_equal(first, _full(method, rep["tau"]))
     animated.frame_set(7)  # the handler re-evaluates
     now = {n: _ao(n) for n in NAMES}
     assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
@@ -352,10 +371,10 @@ def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_pa
     assert out.returncode == 0, out.stdout + out.stderr
     assert "canopy_ao: error" not in out.stderr, out.stderr
     # The leaves are keyed (a shape key): a render writes their AO into its own evaluated
-    # mesh (test_live_render.py checks the frames), the file's keeps the frame the CLI baked.
+    # mesh (test_live_render.py checks the frames), the file's keeps the frame the CLI baked,
+    # a plain bake of it (a live bake's first frame is lit as any bake, its ground included).
     kept = np.load(tmp_path / "ao.npy")
-    np.testing.assert_allclose(kept, _full("ellipsoid", 1.7, live_ground=True)["Leaves"],
-                               atol=2e-6)
+    np.testing.assert_allclose(kept, _full("ellipsoid", 1.7)["Leaves"], atol=2e-6)
     assert os.path.exists(str(tmp_path / "frame_0004.png"))
     # --frames: the cache written and saved.
     cmd = ["blender", "-b", "--factory-startup", path, "--python-expr",

@@ -19,6 +19,32 @@ LIVE_ARGS = ["--method", "ellipsoid", "--tau", "1.7", "--no-proxies"]
 PIXEL_TOL = 1.5 / 255
 
 
+def held_at_first_frame(scene, opts):
+    """{name: AO factor}: what a live bake at frame 1 with opts holds of a ground alone
+    (core/live.held_ground), as a live session started there holds it."""
+    from test_live import held_ground
+    scene.frame_set(1)
+    run_bake(bpy.context, [], dict(opts, live=True))
+    live.stop(scene)
+    return held_ground(scene)
+
+
+def bake_as_a_live_frame(opts, held):
+    """A full bake of this frame (not live) lit as a live frame is: patches only where a wall
+    is (core/walls.py), the ground alone's occlusion ``held`` from the first frame."""
+    from canopy_ao.core import walls
+    build = walls.build
+    walls.build = lambda items, every_ground=True: build(items, False)
+    try:
+        run_bake(bpy.context, [], opts)
+    finally:
+        walls.build = build
+    for name, factor in held.items():
+        ob = bpy.context.scene.objects[name]
+        ao = mesh_io.read_ao_attribute(ob, opts["attribute"])
+        mesh_io.write_ao_attribute(ob, opts["attribute"], ao * factor, overwrite=True)
+
+
 def _deforming_tree(how, persistent=False):
     """The tree scene, its leaves deformed over frames 1-3 by a keyed shape key or a keyed
     Simple Deform (bend); leaves and ground show CanopyAO through an emission material; a
@@ -97,20 +123,15 @@ def test_an_animation_render_with_live_ao_shows_each_frames_geometry_and_ao(
     assert "canopy_ao: error" not in out.stderr, out.stderr
     assert "canopy_ao: warning" not in out.stderr, out.stderr  # nothing a frame could keep
     # The reference: each frame baked in full (same rung and τ, not live, but with a live
-    # frame's GROUND rule: no patch for a ground alone, core/walls.py) and rendered here.
-    from canopy_ao.core import walls
+    # frame's GROUND rule, core/live.held_ground) and rendered here.
     opts = dict(properties.scene_options(scene), method="ellipsoid", tau=1.7,
                 show_proxies=False, live=False)
     first = _pixels(str(tmp_path / "live_0001.png"))
-    build = walls.build
+    held = held_at_first_frame(scene, opts)
     try:
         for frame in (1, 2, 3):
             scene.frame_set(frame)
-            walls.build = lambda items, every_ground=True: build(items, False)
-            try:
-                run_bake(bpy.context, [], opts)
-            finally:
-                walls.build = build
+            bake_as_a_live_frame(opts, held)
             scene.render.filepath = str(tmp_path / f"full_{frame}.png")
             bpy.ops.render.render(write_still=True)
             want = _pixels(str(tmp_path / f"full_{frame}.png"))

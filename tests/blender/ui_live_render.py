@@ -50,7 +50,8 @@ def steps():
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
     from canopy_ao.blender import live, properties
     from canopy_ao.blender.job import run_bake
-    from test_live_render import PIXEL_TOL, _deforming_tree, _pixels
+    from test_live_render import (PIXEL_TOL, _deforming_tree, _pixels, bake_as_a_live_frame,
+                                  held_at_first_frame)
     scene = _deforming_tree("simple_deform")
     done = []
 
@@ -91,18 +92,13 @@ def steps():
     check(ok, "the Eevee animation render did not complete in 60 s")
     live.stop(scene)
     # The reference: each frame baked in full (same rung and τ, and a live frame's GROUND
-    # rule: no patch for a ground alone, core/walls.py) and rendered in the foreground.
-    from canopy_ao.core import walls
+    # rule, core/live.held_ground) and rendered in the foreground.
     opts = dict(properties.scene_options(scene), method="ellipsoid", tau=1.7,
                 show_proxies=False, live=False)
-    build = walls.build
+    held = held_at_first_frame(scene, opts)
     for frame in (1, 2, 3):
         scene.frame_set(frame)
-        walls.build = lambda items, every_ground=True: build(items, False)
-        try:
-            run_bake(bpy.context, [], opts)
-        finally:
-            walls.build = build
+        bake_as_a_live_frame(opts, held)
         shots = {'CYCLES': [("Ctrl+F12", os.path.join(TMP, f"anim_{frame:04d}.png"))],
                  eevee: [("Eevee Ctrl+F12", os.path.join(TMP, f"eevee_{frame:04d}.png"))]}
         if frame == 3:

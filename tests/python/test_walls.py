@@ -227,28 +227,3 @@ def test_native_patch_visibility_refuses_bad_patches():
     with pytest.raises(ValueError, match="distance"):
         _core.patch_visibility(c, np.int32([3]), ok, p, n, 0.0)
 
-
-def test_face_normals_tell_where_a_wall_may_be():
-    """may_hold_wall is True for any face within the margin of steep, in any direction and at
-    any length, and False for flat or gently sloped faces and for zero (degenerate) ones: a
-    live bake then skips a GROUND's triangles, which its build() would find no wall in."""
-    flat = np.array([[0, 0, 1], [0, 0, -2.0], [0.1, 0, 1], [0, 0, 0]])
-    assert not walls.may_hold_wall(flat)
-    assert not walls.may_hold_wall(np.zeros((0, 3)))
-    tilt = np.cos(np.pi / 4) + walls.STEEP_MARGIN / 2  # just short of steep: within the margin
-    for n in ([1, 0, 0], [0, -3, 0.5], [np.sqrt(1 - tilt ** 2), 0, tilt]):
-        assert walls.may_hold_wall(np.vstack([flat, n]))
-    # What may_hold_wall rules out, a live build() finds no wall in.
-    p, t = plane(4.0, 10)
-    ground = core.SceneItem("G", "GROUND", "", p, vertex_normals(p, t), t)
-    cross = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
-    assert not walls.may_hold_wall(cross) and walls.build([ground], every_ground=False) == []
-
-
-def test_a_level_ground_is_told_by_its_vertex_normals():
-    """level(): vertex normals all (anti)vertical say a level ground, whose triangles a live
-    bake then never reads; one tilted corner (a face rising from it) says it may not be."""
-    up = np.tile([0.0, 0.0, 1.0], (5, 1)).astype(np.float32)
-    assert walls.level(up) and walls.level(-up) and walls.level(np.zeros((0, 3)))
-    up[2] = [0.1, 0.0, 0.995]
-    assert not walls.level(up)

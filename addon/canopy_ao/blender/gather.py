@@ -258,7 +258,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             continue
         bent = opts.get("bent_normals", "OFF") != "OFF"  # ray-traced: every triangle counts
         tris_needed = declared is None or bent or ladder.triangles_needed(
-            opts["method"], opts["tau"], declared[0], opts.get("live", False))
+            opts["method"], opts["tau"], declared[0])
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
         faces = []
@@ -278,7 +278,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             else None
         kept = {id(it) for it, _idx in cut or [(item, None)]
                 if declared is not None or bent or ladder.triangles_needed(
-                    opts["method"], opts["tau"], it.role, opts.get("live", False))}
+                    opts["method"], opts["tau"], it.role)}
         if len(tris) and kept:  # which triangles rays pass (the materials' alpha)
             parts_io.set_opacity(item, cut, opacity_io.item_opacity(obj, depsgraph, len(tris),
                                                                     alphas))
@@ -290,19 +290,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             how[it.name] = f"part of {name}: {it.part_why}" if cut else why
         objects[name] = obj
         how[name] = parts_io.describe(cut) if cut else why
-    _walls_whole(items, objects, depsgraph, timings)
     return items, objects, how
-
-
-def _walls_whole(items, objects, depsgraph, timings):
-    """Once a GROUND surface may hold a wall, every GROUND surface is one of its patches
-    (core/walls.py), the flat ones too: fetch the triangles that the faces' normals spared."""
-    ground = [it for it in items if it.role == "GROUND"]
-    if any(len(it.triangles) for it in ground):
-        for it in ground:
-            if not len(it.triangles) and it.name in objects:
-                it.triangles = mesh_io.evaluated_arrays(objects[it.name], depsgraph, False,
-                                                        timings=timings)[2]
 
 
 def cycles_distance(depsgraph, distance):

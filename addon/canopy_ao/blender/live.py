@@ -31,7 +31,7 @@ from . import live_session
 from .job import BakeJob
 from .live_render import is_render
 # The session's state is live_session's; these names are the handlers' and the scripts'.
-from .live_session import RECORD, SHELLS, Session, session_of, stop
+from .live_session import HELD, RECORD, SHELLS, Session, session_of, stop
 from ..core.native import CanopyAOError
 
 
@@ -67,7 +67,14 @@ def _rebuild(scene, depsgraph):
         job.plan.shell_labels = {t: np.asarray(stored[str(i)], dtype=np.int32)
                                  for i, t in enumerate(rec.get("shell_trees", []))
                                  if str(i) in stored}
-        return live_session.keep(scene.name, Session(job))
+        session = Session(job)
+        # ... and its ground's occlusion, not this frame's: every frame shades the same
+        # whichever frame the session was rebuilt at (a farm task's chunk, a reload).
+        held = scene.get(HELD)
+        if held is not None:
+            session.held = {n: np.asarray(held[str(i)], dtype=np.float32)
+                            for i, n in enumerate(session.targets) if str(i) in held}
+        return live_session.keep(scene.name, session)
     if is_render(depsgraph):
         raise CanopyAOError("live AO is on but was never baked in this file: bake once with "
                             "Live on (or the CLI's --live) before rendering")

@@ -20,6 +20,7 @@ from ..core.native import CanopyAOError
 
 RECORD = "canopy_ao_live"  # the scene's custom property: JSON of what a rebuild needs
 SHELLS = "canopy_ao_live_shells"  # ... and the shell partition per tree: {"0": int32 array}
+HELD = "canopy_ao_live_held"  # a ground alone's occlusion at the first bake, per target
 _SESSIONS = {}  # scene name -> Session
 _SUSPENDED = []  # non-empty while a frame-range bake steps the frames itself
 
@@ -54,6 +55,8 @@ class Session:
         self.plan.fit_warm = {}  # the frames' ellipsoid fits start from the previous frame's
         self.template = core_live.template_items(job.items, job.plan.method)
         self.targets = [t.item.name for t in job.targets]
+        # a ground alone's occlusion at the first bake, multiplied into every frame
+        self.held = core_live.held_ground(job.plan, job.items, set(self.targets))
         self.attribute = job.opts["attribute"]
         self.frames = 0
         self.timings = {}  # the last frame's seconds per stage
@@ -110,6 +113,9 @@ class Session:
         loop.start(plan)
         loop.run()
         aos = {t.item.name: t.ao for t in targets}
+        for name, held in self.held.items():
+            if name in aos and len(aos[name]) == len(held):
+                aos[name] = aos[name] * held
         tm["evaluate"] = time.perf_counter() - t2
         tm["total"] = time.perf_counter() - t0
         return aos, tm
@@ -124,6 +130,8 @@ def begin(job):
     # as tree names may be longer than an ID property key.
     job.scene[SHELLS] = {str(i): np.ascontiguousarray(job.plan.shell_labels[t], np.int32)
                          for i, t in enumerate(session.shell_trees)}
+    job.scene[HELD] = {str(i): np.ascontiguousarray(session.held[n], np.float32)
+                       for i, n in enumerate(session.targets) if n in session.held}
     job.scene.canopy_ao.live = True
     return session
 

@@ -10,7 +10,7 @@ import time
 import bpy
 import numpy as np
 
-from ..core import native, walls
+from ..core import native
 from ..core.native import CanopyAOError
 from .ownership import mark_owned, owned_attributes, ownership, set_record  # noqa: F401
 
@@ -26,20 +26,6 @@ def _vertex_normals(mesh, n):
     else:
         mesh.vertices.foreach_get("normal", out.reshape(-1))
     return out
-
-
-def _face_normals(mesh, matrix):
-    """float64 (F, 3): the faces' normals in world space (not unit: their direction counts)."""
-    out = np.empty((len(mesh.polygons), 3), dtype=np.float32)
-    if hasattr(mesh, "polygon_normals"):  # 4.1+: polygons' normal is computed from it
-        mesh.polygon_normals.foreach_get("vector", out.reshape(-1))
-    else:
-        mesh.polygons.foreach_get("normal", out.reshape(-1))
-    linear = np.asarray(matrix, dtype=np.float64)[:3, :3]
-    try:
-        return out @ np.linalg.inv(linear)  # normals go by the inverse transpose
-    except np.linalg.LinAlgError:  # a flat transform: every face seen edge-on, steep enough
-        return np.array([[1.0, 0.0, 0.0]])
 
 
 def evaluated_is_original(obj):
@@ -67,8 +53,7 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
 
     Returns (positions float32 (V, 3), normals float32 (V, 3) unit, triangles int32 (F, 3)).
     triangles=False skips the loop triangulation (the analytic models need none; it costs more
-    than positions and normals together) and returns an empty (0, 3) array; "walls" reads
-    them only where a face may be part of a wall (core/walls.may_hold_wall: a GROUND's).
+    than positions and normals together) and returns an empty (0, 3) array.
     With same_count, raises MeshIOError when the evaluated mesh has a different vertex count
     from the original (a per-vertex result could not be stored on the original mesh); always,
     when a vertex's world position is not finite or outside the native module's range.
@@ -109,9 +94,6 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
         t = _lap(timings, "normals", t)
         co, nor = _to_world(co, nor, matrix)
         t = _lap(timings, "transform", t)
-        if triangles == "walls":  # a GROUND's: only where a face may be part of a wall
-            triangles = not walls.level(nor) and walls.may_hold_wall(_face_normals(mesh,
-                                                                                  matrix))
         if triangles:
             mesh.calc_loop_triangles()
             tris = np.empty((len(mesh.loop_triangles), 3), dtype=np.int32)

@@ -41,8 +41,9 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
     at every instance, so the exact rung and auto's calibration (the reference rays and every
     candidate, whose occluders then include the instances' shells) see them.
 
-    live: the first bake of live AO, whose frames keep its GROUND patches only where a wall is
-    (walls.build's every_ground=False: a ground alone costs each frame no patch)."""
+    live: the first bake of live AO. It is lit as any bake (every GROUND plane a patch); its
+    frames rebuild the patches only where a wall is and hold a ground alone's occlusion from
+    this bake (Plan.every_ground False; core/live.py, held_ground)."""
     native.require()
     validate(settings)
     items = list(items)
@@ -58,7 +59,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
     plan.notes.extend(opacity.notes(whole))
     proxies.fit_scene(plan, items)
     plan.every_ground = not live
-    plan.walls = walls.build(whole, plan.every_ground)  # GROUND surfaces occluding (proxies)
+    plan.walls = walls.build(whole)  # GROUND surfaces occluding (proxies), every plane a patch
     plan.timings["fit"] = time.perf_counter() - t0
     rung = rungs.get(settings.method)
     if (rung.scene_plan or rung.chooses) and (plan.fits or plan.trunks):

@@ -39,23 +39,18 @@ def available_methods() -> tuple[str, ...]:
         r.name for r in rungs.ladder() if r.chooses)
 
 
-def triangles_needed(method: str, tau, role: str, live=False):
+def triangles_needed(method: str, tau, role: str) -> bool:
     """Whether an item's triangles take part in a bake (the add-on skips fetching them
     otherwise: Blender's loop triangulation costs more than positions and normals together).
     They are rays' targets (the exact rung, and the calibration of auto or of any method with
-    tau None), the density grid's input and grass blades (connected components): True. The
-    analytic models with a given τ need the other roles' positions and normals only
-    (Rung.needs_triangles), but for GROUND surfaces, which are every proxy rung's opaque
-    patches (core/walls.py): True, or for a live bake, whose patches are made only where a
-    wall is, "walls": the triangles only where a face is steep enough to be part of a wall
-    (walls.may_hold_wall, from the face normals, which cost far less)."""
+    tau None), the density grid's input, grass blades (connected components) and GROUND
+    surfaces (every proxy rung's opaque patches: core/walls.py); the analytic models with a
+    given τ need the other roles' positions and normals only (Rung.needs_triangles)."""
     if role == "IGNORE":
         return False
     if rungs.get(method).needs_triangles or tau is None:
         return True
-    if role == "GROUND":
-        return "walls" if live else True
-    return role == "GRASS"
+    return role in ("GRASS", "GROUND")
 
 
 def sample_receivers(items, count, seed):

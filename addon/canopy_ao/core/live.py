@@ -23,7 +23,7 @@ import numpy as np
 from . import proxies, walls
 from .native import CanopyAOError, refusals_are_user_errors
 from .rungs import base as rungs
-from .scene import Plan, SceneItem, split_trees
+from .scene import Plan, SceneItem, ray_length, split_trees
 
 
 
@@ -76,17 +76,32 @@ def refit(base: Plan, items) -> Plan:
                 forest=base.forest,
                 shell_labels=dict(base.shell_labels), buried=base.buried,
                 fit_warm=base.fit_warm)
-    # The GROUND surfaces as they stand at this frame, where the first bake made patches (a
-    # live bake: only where it found a wall); where it made none, none (no hashing of a still
-    # ground per frame).
+    # The GROUND surfaces as they stand at this frame where the first bake found a wall (then
+    # every plane a patch, as there); a ground alone makes none per frame, its occlusion held
+    # from the first bake (held_ground), and is not hashed per frame.
     plan.every_ground = base.every_ground
-    plan.walls = walls.build(items, base.every_ground) if base.walls else []
+    plan.walls = walls.build(items) if base.every_ground or walls.has_wall(base.walls) else []
     parts = split_trees(items)
     proxies.fit_scene(plan, parts)
     if base.regression is not None and rungs.get(base.method).needs_regression:
         plan.regression = base.regression.at_frame(parts, items)
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     return plan
+
+
+def held_ground(base: Plan, items, names) -> dict:
+    """{name: float32 (V,)}: what a ground alone occludes of each item named in ``names`` at the
+    first bake (its patches' visibility, walls.visibility), which live frames multiply in
+    rather than evaluate the patches per frame (tens of times a proxy rung's own cost: DESIGN,
+    'Live and per-frame AO'). Empty where frames make their own patches (a wall: refit), where
+    the first bake made none, and for rungs that do not use them (Rung.scene_plan: the
+    ray-free rung has no patch); a grass blade's law holds its ground (lighting.walls_ao)."""
+    if (base.every_ground or not base.walls or walls.has_wall(base.walls)
+            or not rungs.get(base.method).scene_plan):
+        return {}
+    distance = ray_length(base.settings.distance)
+    return {it.name: walls.visibility(base.walls, it.positions, it.normals, distance)
+            for it in items if it.name in names and it.role != "GRASS"}
 
 
 def template_items(items, method=None) -> list:

@@ -18,10 +18,11 @@ a flat ground sees itself edge-on (F = 0) and the wall's foot sees the ground fi
 half of its hemisphere.
 
 A bake makes every GROUND plane a patch, a flat ground alone too: it occludes what stands above
-it (leaves facing down, a trunk's foot) as it does for rays. Live frames (every_ground=False)
-make patches only when a GROUND surface holds a wall (a solid plane steeper than 45°, STEEP),
-then of every plane: a ground alone gives none there, the proxy rungs' model without them at no
-cost per frame (its patch costs a frame tens of times a rung's own evaluation: DESIGN).
+it (leaves facing down, a trunk's foot) as it does for rays. Live frames rebuild patches only
+when a GROUND surface holds a wall (a solid plane steeper than 45°, STEEP; has_wall), then of
+every plane; a ground alone's occlusion they hold from the first bake (core/live.held_ground:
+its patch costs a frame tens of times a rung's own evaluation, DESIGN). build(every_ground=
+False) gives the patches as such a frame sees them (the tests' reference).
 """
 
 from __future__ import annotations
@@ -39,37 +40,11 @@ COVERAGE = 0.5          # a plane's triangles cover at least this share of their
 DISC_SIDES = 8          # the AO distance's disc as a regular polygon of its area
 EPS = 1e-5              # on a patch's plane: this share of the patch's diameter from it
 CHUNK = 8192            # receivers per numpy block
-# Live frames make patches only where a GROUND surface has a wall: a solid plane steeper than
-# 45° (Blender's Z up). There a ground alone (flat, or a slope) keeps the model without
-# patches: their evaluation costs ~0.13-0.25 µs per receiver and patch natively (numpy 0.8-5
-# µs), tens of times an analytic rung's own (docs/DESIGN.md), each frame.
+# Live frames rebuild patches only where a GROUND surface has a wall: a solid plane steeper
+# than 45° (Blender's Z up). A ground alone's they hold from the first bake: their evaluation
+# costs ~0.13-0.25 µs per receiver and patch natively (numpy 0.8-5 µs), tens of times an
+# analytic rung's own (docs/DESIGN.md), each frame.
 STEEP = np.cos(np.pi / 4)
-
-
-# A face this close to steep may hold a wall: a non-planar quad's or n-gon's triangles lean
-# further than the face's own normal (may_hold_wall).
-STEEP_MARGIN = 0.05
-LEVEL = 0.9999  # vertex normals within ~0.8° of vertical: a level ground (level())
-
-
-def level(vertex_normals) -> bool:
-    """Whether unit vertex normals (V, 3) are all within LEVEL of vertical (up or down): a
-    level surface, each of whose faces is level too (a face's tilt shows in its corners'
-    normals, unless faces tilted opposite ways cancel at every corner). The add-on then reads
-    no more of a GROUND mesh to know it holds no wall."""
-    z = np.abs(np.asarray(vertex_normals, dtype=np.float32).reshape(-1, 3)[:, 2])
-    return bool(np.all(z >= LEVEL))
-
-
-def may_hold_wall(face_normals) -> bool:
-    """Whether faces with these world normals (F, 3) (any length; zero ones are no face) may
-    make a wall: one of them within STEEP_MARGIN of steep. False guarantees that build()
-    finds no wall in their triangles (up to faces bent more than the margin), so the add-on
-    reads a GROUND mesh's triangles only when this is True."""
-    m = np.asarray(face_normals, dtype=np.float64).reshape(-1, 3)
-    length = np.linalg.norm(m, axis=1)
-    ok = length > 1e-12
-    return bool(np.any(np.abs(m[ok, 2]) < (STEEP + STEEP_MARGIN) * length[ok]))
 
 
 class Patch:
@@ -87,9 +62,14 @@ class Patch:
 _LAST = [None, []]  # the last build's (key, patches): live frames over a still ground
 
 
+def has_wall(patches) -> bool:
+    """Whether some patch is a wall: steeper than 45° (STEEP)."""
+    return any(abs(pt.normal[2]) < STEEP for pt in patches)
+
+
 def build(items, every_ground=True) -> list:
     """The patches of every GROUND item with triangles (an empty list when there are none);
-    every_ground=False (live frames): none unless some plane is a wall (STEEP). The same
+    every_ground=False (as a live frame sees them): none unless some plane is a wall. The same
     GROUND geometry as the last call's (a live frame's) returns its patches."""
     ground = [it for it in items if it.role == "GROUND" and len(it.triangles)]
     if not ground:
