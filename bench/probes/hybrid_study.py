@@ -19,10 +19,13 @@ Per scene and c, it prints:
   the rays, against the target 1.1 × the MAE of 64 plain rays;
 - the hybrid at 16 and 64 near rays, MAE and time / time of 64 rays.
 
-The hybrid is the add-on's call (core/lighting.py _hybrid_ao): native ao_near_far with each
-receiver's own vertex named, so its near rays start at Cycles' bake point and are cast at every
-face corner as the plain rays are, over the grid the add-on builds (leaves and branches at
-resolution 48, lighting.build_grid); near = c × its voxel (the add-on's c is 2).
+The hybrid is the add-on's native call (core/lighting.py hybrid_ao): native ao_near_far with
+each receiver's own vertex named, so its near rays start at Cycles' bake point and are cast at
+every face corner as the plain rays are, over the grid the add-on builds (leaves and branches at
+resolution 48, lighting.build_grid); near = c × its voxel (the add-on's c is 2). Its far field
+is the grid alone: the GROUND patches a bake multiplies in beyond `near` (lighting.hybrid_ao,
+core/walls.py) are left out, so the floor here is the grid's, and a bake's hybrid reads lower
+(bench/real_assets.py's hybrid rows).
 
 Times include the BVH (and the grid, for the hybrid); one run, ratios only.
 """
