@@ -273,10 +273,7 @@ def main(argv):
         import chart_foliage
         chart_foliage.draw([r for scene, x in res.items() for r in
                              ({"scene": scene, **e} for e in errors(x))], a.png)
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    with open(a.out, "w", encoding="utf-8") as f:
-        f.write(text)
-    print(text)
+    harness.write_text(a.out, text)
     return 0
 
 

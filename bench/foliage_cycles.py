@@ -229,11 +229,7 @@ def main(argv):
              "",
              harness.markdown(["samples", "trunk all / unburied", "ground", "card texels",
                                "above 1"], targets), ""]
-    text = "\n".join(lines)
-    os.makedirs(os.path.dirname(os.path.abspath(a.out)), exist_ok=True)
-    with open(a.out, "w", encoding="utf-8") as f:
-        f.write(text)
-    print(text)
+    harness.write_text(a.out, "\n".join(lines))
     return 0
 
 

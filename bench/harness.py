@@ -199,6 +199,14 @@ def load_note():
 
 # === Tables ==================================================================================
 
+def write_text(path, text):
+    """Write ``text`` to ``path`` (its folder made) and print it."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)
+    print(text)
+
+
 def markdown(header, rows, align=None):
     """A markdown table: ``header`` a list of column titles, ``rows`` lists of cells (str()
     of each); ``align`` a string of 'l' / 'r' per column (default: left)."""

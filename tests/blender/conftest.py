@@ -101,6 +101,20 @@ def add_mesh(name, positions, triangles, collection=None):
     return ob
 
 
+def add_grid_ground(size, cuts, name="Ground"):
+    """A flat square ground of side ``size`` at z = 0, (cuts + 1)² vertices, role GROUND."""
+    g = np.linspace(-size / 2, size / 2, cuts + 1)
+    xy = np.array([(x, y) for y in g for x in g], np.float32)
+    k = cuts + 1
+    tris = [[k * r + c, k * r + c + 1, k * r + c + k + 1] for r in range(cuts) for c in range(cuts)]
+    tris += [[k * r + c, k * r + c + k + 1, k * r + c + k] for r in range(cuts)
+             for c in range(cuts)]
+    ground = add_mesh(name, np.column_stack([xy, np.zeros(len(xy), np.float32)]),
+                      np.int32(tris))
+    ground["canopy_ao_role"] = "GROUND"
+    return ground
+
+
 @pytest.fixture
 def tree_scene_objects():
     """Trunk (cylinder), Leaves (1500 quads in a ball of radius 1.2 at z = 2.6), Ground

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from conftest import REPO, _clear_scene, add_mesh
+from conftest import REPO, _clear_scene, add_grid_ground, add_mesh
 from canopy_ao.blender import cycles_check, mesh_io, properties
 from canopy_ao.blender.job import run_bake
 
@@ -25,13 +25,7 @@ def _scene(centre, length):
     """A 4 × 4 ground (9 × 9 vertices) and the card in the xz plane, x in [-0.5, 0.5], z in
     [0, 1], UVs (x + 0.5, z), its leaf a lens (foliage_scenes.leaf_card_image)."""
     _clear_scene()
-    g = np.linspace(-2, 2, 9)
-    xy = np.array([(x, y) for y in g for x in g], np.float32)
-    tris = [[9 * r + c, 9 * r + c + 1, 9 * r + c + 10] for r in range(8) for c in range(8)]
-    tris += [[9 * r + c, 9 * r + c + 10, 9 * r + c + 9] for r in range(8) for c in range(8)]
-    ground = add_mesh("Ground", np.column_stack([xy, np.zeros(len(xy), np.float32)]),
-                      np.int32(tris))
-    ground["canopy_ao_role"] = "GROUND"
+    add_grid_ground(4.0, 8)
     p = np.array([[-0.5, 0, 0], [0.5, 0, 0], [0.5, 0, 1], [-0.5, 0, 1]], np.float32)
     card = add_mesh("Card", p, np.int32([[0, 1, 2], [0, 2, 3]]))
     card["canopy_ao_role"] = "CANOPY"

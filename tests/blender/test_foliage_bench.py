@@ -8,7 +8,7 @@ import sys
 import bpy
 import numpy as np
 
-from conftest import REPO, _clear_scene, add_mesh
+from conftest import REPO, _clear_scene, add_grid_ground, add_mesh
 
 sys.path.insert(0, os.path.join(REPO, "bench"))
 import foliage  # noqa: E402
@@ -24,13 +24,7 @@ def _box(name, centre, half):
 
 def test_buried_masks_mark_a_leaf_base_inside_its_twig():
     _clear_scene()
-    g = np.linspace(-3, 3, 4)
-    xy = np.array([(x, y) for y in g for x in g], np.float32)
-    tris = [[4 * r + c, 4 * r + c + 1, 4 * r + c + 5] for r in range(3) for c in range(3)]
-    tris += [[4 * r + c, 4 * r + c + 5, 4 * r + c + 4] for r in range(3) for c in range(3)]
-    ground = add_mesh("Ground", np.column_stack([xy, np.zeros(len(xy), np.float32)]),
-                      np.int32(tris))
-    ground["canopy_ao_role"] = "GROUND"
+    add_grid_ground(6.0, 3)
     twig = _box("Twig", (0, 0, 1), 0.005)
     twig["canopy_ao_role"] = "TRUNK"
     # A strip along x from the twig's centre to 2 m out, 0.1 m wide: 2 m across, so 1 % of
