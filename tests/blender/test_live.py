@@ -55,14 +55,9 @@ def _ao(name, attribute="CanopyAO"):
 
 def held_ground(scene):
     """{name: float32 (V,)}: the live session's ground occlusion held from its first bake, as
-    the scene stores it (live_session.HELD, in the record's object order)."""
-    import json
-    held, raw = scene.get(live_session.HELD), scene.get(live_session.RECORD)
-    if not held or not raw:
-        return {}
-    names = json.loads(raw)["objects"]
-    return {n: np.asarray(held[str(i)], np.float32) for i, n in enumerate(names)
-            if str(i) in held}
+    the scene stores it (live_session.HELD)."""
+    held = scene.get(live_session.HELD) or {}
+    return {n: np.asarray(held[n], np.float32) for n in held.keys()}
 
 
 def _full(method, tau, attribute="Full", live_ground=False):

@@ -72,8 +72,8 @@ def _rebuild(scene, depsgraph):
         # whichever frame the session was rebuilt at (a farm task's chunk, a reload).
         held = scene.get(HELD)
         if held is not None:
-            session.held = {n: np.asarray(held[str(i)], dtype=np.float32)
-                            for i, n in enumerate(session.targets) if str(i) in held}
+            session.held = {n: np.asarray(held[n], dtype=np.float32)
+                            for n in session.targets if n in held}
         return live_session.keep(scene.name, session)
     if is_render(depsgraph):
         raise CanopyAOError("live AO is on but was never baked in this file: bake once with "

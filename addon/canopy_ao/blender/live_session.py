@@ -20,7 +20,7 @@ from ..core.native import CanopyAOError
 
 RECORD = "canopy_ao_live"  # the scene's custom property: JSON of what a rebuild needs
 SHELLS = "canopy_ao_live_shells"  # ... and the shell partition per tree: {"0": int32 array}
-HELD = "canopy_ao_live_held"  # a ground alone's occlusion at the first bake, per target
+HELD = "canopy_ao_live_held"  # a ground alone's occlusion at the first bake: {target: float}
 _SESSIONS = {}  # scene name -> Session
 _SUSPENDED = []  # non-empty while a frame-range bake steps the frames itself
 
@@ -130,8 +130,8 @@ def begin(job):
     # as tree names may be longer than an ID property key.
     job.scene[SHELLS] = {str(i): np.ascontiguousarray(job.plan.shell_labels[t], np.int32)
                          for i, t in enumerate(session.shell_trees)}
-    job.scene[HELD] = {str(i): np.ascontiguousarray(session.held[n], np.float32)
-                       for i, n in enumerate(session.targets) if n in session.held}
+    # by object name (at most 63 characters, as an ID property key)
+    job.scene[HELD] = {n: np.ascontiguousarray(a, np.float32) for n, a in session.held.items()}
     job.scene.canopy_ao.live = True
     return session
 
