@@ -67,7 +67,7 @@ def _full(method, tau, attribute="Full", live_ground=False):
     from canopy_ao.core import walls
     build = walls.build
     if live_ground:
-        walls.build = lambda items, every_ground=True: build(items, False)
+        walls.build = lambda items: (lambda pt: pt if walls.has_wall(pt) else [])(build(items))
     try:
         _j, rep = run_bake(bpy.context, list(NAMES), opts(method=method, tau=tau,
                                                           attribute=attribute))

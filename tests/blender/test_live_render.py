@@ -34,7 +34,7 @@ def bake_as_a_live_frame(opts, held):
     is (core/walls.py), the ground alone's occlusion ``held`` from the first frame."""
     from canopy_ao.core import walls
     build = walls.build
-    walls.build = lambda items, every_ground=True: build(items, False)
+    walls.build = lambda items: (lambda pt: pt if walls.has_wall(pt) else [])(build(items))
     try:
         run_bake(bpy.context, [], opts)
     finally:

@@ -77,7 +77,7 @@ def test_without_the_patches_the_wall_is_too_bright(scene, method, monkeypatch):
     """The control: with the GROUND surfaces left out of the proxies (as before them), the
     same check fails on the wall, so the test above measures the patches."""
     items, want = scene
-    monkeypatch.setattr(walls, "build", lambda items, every_ground=True: [])
+    monkeypatch.setattr(walls, "build", lambda items: [])
     mae, const = _errors(items, want, method)["Wall"]
     assert mae > const
 
@@ -89,8 +89,8 @@ def _level_patches(ground):
 
 def test_a_ground_alone_is_a_patch_but_not_live():
     """Flat or sloped, a ground alone is a patch in a bake (it occludes what stands above it);
-    live frames (every_ground=False) keep the model without patches there, at no cost per
-    frame, and make them all once a wall stands on the ground."""
+    live frames (live.refit: patches only where walls.has_wall) keep the model without patches
+    there, at no cost per frame, and make them all once a wall stands on the ground."""
     for tilt in (0.0, 0.5):
         p, t = plane(size=10.0, cuts=4)
         p = p.copy()
@@ -98,11 +98,10 @@ def test_a_ground_alone_is_a_patch_but_not_live():
         g = core.SceneItem("G", "GROUND", "", p, vertex_normals(p, t), t)
         (patch,) = walls.build([g])
         assert patch.normal @ [-tilt, 0, 1] == pytest.approx(np.hypot(tilt, 1))
-        assert walls.build([g], every_ground=False) == []
-        assert len(walls.build([g])) == 1  # the last build's patches are not the live one's
+        assert not walls.has_wall([patch])
     items = _items()
     assert len(walls.build(items[:1])) == 1 and len(walls.build(items[:2])) == 2
-    assert walls.build(items[:1], False) == [] and len(walls.build(items[:2], False)) == 2
+    assert not walls.has_wall(walls.build(items[:1])) and walls.has_wall(walls.build(items[:2]))
 
 
 def test_a_flat_ground_sees_itself_edge_on():

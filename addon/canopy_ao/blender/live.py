@@ -67,14 +67,12 @@ def _rebuild(scene, depsgraph):
         job.plan.shell_labels = {t: np.asarray(stored[str(i)], dtype=np.int32)
                                  for i, t in enumerate(rec.get("shell_trees", []))
                                  if str(i) in stored}
-        session = Session(job)
         # ... and its ground's occlusion, not this frame's: every frame shades the same
         # whichever frame the session was rebuilt at (a farm task's chunk, a reload).
         held = scene.get(HELD)
         if held is not None:
-            session.held = {n: np.asarray(held[n], dtype=np.float32)
-                            for n in session.targets if n in held}
-        return live_session.keep(scene.name, session)
+            held = {n: np.asarray(held[n], dtype=np.float32) for n in held.keys()}
+        return live_session.keep(scene.name, Session(job, held))
     if is_render(depsgraph):
         raise CanopyAOError("live AO is on but was never baked in this file: bake once with "
                             "Live on (or the CLI's --live) before rendering")

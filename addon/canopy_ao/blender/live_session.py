@@ -48,15 +48,17 @@ def check_job(job):
 class Session:
     """What one scene's live AO keeps between frames; built from a prepared BakeJob."""
 
-    def __init__(self, job):
+    def __init__(self, job, held=None):
         core_live.check_method(job.plan.method, core.rung(job.settings.method).chooses)
         self.scene_name = job.scene.name
         self.plan = job.plan
         self.plan.fit_warm = {}  # the frames' ellipsoid fits start from the previous frame's
         self.template = core_live.template_items(job.items, job.plan.method)
         self.targets = [t.item.name for t in job.targets]
-        # a ground alone's occlusion at the first bake, multiplied into every frame
-        self.held = core_live.held_ground(job.plan, job.items, set(self.targets))
+        # a ground alone's occlusion at the first bake, multiplied into every frame (held: the
+        # scene's stored one, when a session is rebuilt at a later frame)
+        self.held = held if held is not None else core_live.held_ground(
+            job.plan, job.items, set(self.targets))
         self.attribute = job.opts["attribute"]
         self.frames = 0
         self.timings = {}  # the last frame's seconds per stage

@@ -117,11 +117,10 @@ def _new_mix(nt, location, role="mix", label="Canopy AO multiply", blend="MULTIP
         node.data_type = "RGBA"
         node.blend_type = blend
         node.clamp_result = False
-        next(s for s in node.inputs if s.identifier == "Factor_Float").default_value = 1.0
     else:  # Blender < 3.4
         node = _new(nt, "ShaderNodeMixRGB", role, label, location)
         node.blend_type = blend
-        node.inputs["Fac"].default_value = 1.0
+    _factor_socket(node).default_value = 1.0
     return node
 
 

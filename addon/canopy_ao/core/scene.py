@@ -120,7 +120,9 @@ class Plan:
     grass: dict = field(default_factory=dict)  # item name -> (ground_height, blade_height)
     grass_layers: list = field(default_factory=list)  # grass_layer.GrassLayer per grass field
     walls: list = field(default_factory=list)  # walls.Patch: the GROUND surfaces as occluders
-    every_ground: bool = True  # walls.build's: every GROUND a patch (False: live, walls only)
+    # False: a live bake's, whose frames rebuild the patches only where a wall is and hold a
+    # ground alone's occlusion from this bake (live.refit, live.held_ground)
+    every_ground: bool = True
     tracer: object = None
     tracer_items: list = field(default_factory=list)  # the items the tracer's mesh holds
     # item name -> (its first vertex, its first triangle) in the tracer's mesh, or None when two

@@ -21,8 +21,7 @@ A bake makes every GROUND plane a patch, a flat ground alone too: it occludes wh
 it (leaves facing down, a trunk's foot) as it does for rays. Live frames rebuild patches only
 when a GROUND surface holds a wall (a solid plane steeper than 45°, STEEP; has_wall), then of
 every plane; a ground alone's occlusion they hold from the first bake (core/live.held_ground:
-its patch costs a frame tens of times a rung's own evaluation, DESIGN). build(every_ground=
-False) gives the patches as such a frame sees them (the tests' reference).
+its patch costs a frame tens of times a rung's own evaluation, DESIGN).
 """
 
 from __future__ import annotations
@@ -67,15 +66,13 @@ def has_wall(patches) -> bool:
     return any(abs(pt.normal[2]) < STEEP for pt in patches)
 
 
-def build(items, every_ground=True) -> list:
-    """The patches of every GROUND item with triangles (an empty list when there are none);
-    every_ground=False (as a live frame sees them): none unless some plane is a wall. The same
-    GROUND geometry as the last call's (a live frame's) returns its patches."""
+def build(items) -> list:
+    """The patches of every GROUND item with triangles (an empty list when there are none).
+    The same GROUND geometry as the last call's (a live frame's) returns its patches."""
     ground = [it for it in items if it.role == "GROUND" and len(it.triangles)]
     if not ground:
         return []
     h = hashlib.blake2b(digest_size=16)
-    h.update(b"every" if every_ground else b"walls")
     for it in ground:
         for a in (it.positions, it.triangles):
             a = np.ascontiguousarray(a)
@@ -83,11 +80,11 @@ def build(items, every_ground=True) -> list:
             h.update(memoryview(a).cast("B"))
     key = h.digest()
     if _LAST[0] != key:
-        _LAST[:] = [key, _build(ground, every_ground)]
+        _LAST[:] = [key, _build(ground)]
     return list(_LAST[1])
 
 
-def _build(ground, every_ground) -> list:
+def _build(ground) -> list:
     first = np.cumsum([0] + [len(it.positions) for it in ground])
     pos = np.concatenate([it.positions for it in ground]).astype(np.float64)
     tri = np.concatenate([it.triangles + f for it, f in zip(ground, first)])
@@ -99,8 +96,6 @@ def _build(ground, every_ground) -> list:
     if not len(t):
         return []
     m = cross / dbl[:, None]
-    if not every_ground and not np.any(np.abs(m[:, 2]) < STEEP):  # no wall: none live
-        return []
     lo, hi = t.reshape(-1, 3).min(0), t.reshape(-1, 3).max(0)
     diag = max(float(np.linalg.norm(hi - lo)), 1e-30)
     d = np.einsum("ij,ij->i", m, t.mean(1))
@@ -143,8 +138,6 @@ def _build(ground, every_ground) -> list:
         # piece of it: their hull would be a sheet where there is none
         if covered >= COVERAGE * hull_area:
             patches.append(Patch(hull, normal, covered))
-    if not every_ground and not any(abs(pt.normal[2]) < STEEP for pt in patches):
-        return []
     return patches
 
 
