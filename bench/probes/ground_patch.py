@@ -6,7 +6,7 @@ What the ground's own patch does to each rung of a static bake on the real-gener
     /usr/bin/python3 bench/probes/ground_patch.py --trunk-scale [--scenes ...] [--rungs ...]
 
 Per scene and rung, baked twice, the GROUND planes as patches only where a wall is (live AO's
-rule, walls.build(every_ground=False)) and every GROUND plane a patch (a bake's): MAE over all
+rule: the patches kept where walls.has_wall) and every GROUND plane a patch (a bake's): MAE over all
 vertices / with buried ones left out (bench/real_scenes.buried) against the highest-sample
 Cycles bake cached beside the scene (else Embree at 1024 rays), per role too, and the whole
 bake's seconds (one run each: compare within a row). auto and regression calibrate against rays
@@ -38,7 +38,8 @@ def bake(items, method, distance, every_ground, trunk_scale=True):
     """(AO over all vertices, seconds, τ) of one static bake, GROUND patches as asked, the
     trunk's τ factor its own or the leaves'."""
     build, scaled = walls.build, ladder.SCALED_ROLES
-    walls.build = lambda its, _every=True: build(its, every_ground)
+    if not every_ground:  # a live frame's rule: patches only where a wall is
+        walls.build = lambda its: (lambda pt: pt if walls.has_wall(pt) else [])(build(its))
     if not trunk_scale:
         ladder.SCALED_ROLES = tuple(r for r in scaled if "TRUNK" not in r)
     try:
