@@ -76,6 +76,37 @@ def octants(mesh):
     return [(v, np.ascontiguousarray(t[key == q])) for q in np.unique(key)]
 
 
+def placements(trees, side):
+    """The trees' (prototype index int32 (T,), matrices float32 (T, 4, 4)): random place,
+    heading and scale 0.8-1.2 (seed 0), the two prototypes alternating."""
+    rng = np.random.default_rng(0)
+    mats = []
+    for _ in range(trees):
+        a, s = rng.uniform(0, 2 * math.pi), rng.uniform(0.8, 1.2)
+        x, y = rng.uniform(-side / 2, side / 2, 2)
+        mats.append([[s * math.cos(a), -s * math.sin(a), 0, x],
+                     [s * math.sin(a), s * math.cos(a), 0, y], [0, 0, s, 0], [0, 0, 0, 1]])
+    return (np.arange(trees) % 2).astype(np.int32), np.array(mats, np.float32)
+
+
+def grid_ground(k, side):
+    """A k × k vertex grid on side × side at z = 0: (vertices float32, triangles int32)."""
+    x = np.linspace(-side / 2, side / 2, k, dtype=np.float32)
+    gx, gy = np.meshgrid(x, x)
+    gv = np.ascontiguousarray(np.c_[gx.ravel(), gy.ravel(), np.zeros(k * k)], np.float32)
+    i = np.arange((k - 1) * (k - 1))
+    a = (i // (k - 1)) * k + i % (k - 1)
+    gt = np.ascontiguousarray(np.concatenate([np.stack([a, a + 1, a + k + 1], 1),
+                                              np.stack([a, a + k + 1, a + k], 1)]), np.int32)
+    return gv, gt
+
+
+def prototypes():
+    """The two prototypes' parts: the round tree and the conifer, 8000 leaves each."""
+    return [cs.round_tree(seed=1, leaves=8000, ground=False),
+            cs.conifer(seed=2, leaves=8000, ground=False)]
+
+
 def main():
     ap = argparse.ArgumentParser(prog="forest_rays.py")
     ap.add_argument("--trees", type=int, default=200)
@@ -83,25 +114,9 @@ def main():
     ap.add_argument("--ground", type=int, default=100)
     ap.add_argument("--samples", type=int, default=376)
     args = ap.parse_args()
-    kinds = [cs.round_tree(seed=1, leaves=8000, ground=False),
-             cs.conifer(seed=2, leaves=8000, ground=False)]
-    rng = np.random.default_rng(0)
-    mats = []
-    for _ in range(args.trees):
-        a, s = rng.uniform(0, 2 * math.pi), rng.uniform(0.8, 1.2)
-        x, y = rng.uniform(-args.side / 2, args.side / 2, 2)
-        mats.append([[s * math.cos(a), -s * math.sin(a), 0, x],
-                     [s * math.sin(a), s * math.cos(a), 0, y], [0, 0, s, 0], [0, 0, 0, 1]])
-    mats = np.array(mats, np.float32)
-    which = (np.arange(args.trees) % 2).astype(np.int32)
-    k = args.ground
-    x = np.linspace(-args.side / 2, args.side / 2, k, dtype=np.float32)
-    gx, gy = np.meshgrid(x, x)
-    gv = np.ascontiguousarray(np.c_[gx.ravel(), gy.ravel(), np.zeros(k * k)], np.float32)
-    i = np.arange((k - 1) * (k - 1))
-    a = (i // (k - 1)) * k + i % (k - 1)
-    gt = np.ascontiguousarray(np.concatenate([np.stack([a, a + 1, a + k + 1], 1),
-                                              np.stack([a, a + k + 1, a + k], 1)]), np.int32)
+    kinds = prototypes()
+    which, mats = placements(args.trees, args.side)
+    gv, gt = grid_ground(args.ground, args.side)
     p = gv + np.float32([0, 0, 1e-3])
     n = np.tile(np.float32([0, 0, 1]), (len(gv), 1))
     print(f"forest_rays: {args.trees} trees on {args.side:g} m, {len(gv)} receivers x "

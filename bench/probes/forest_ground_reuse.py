@@ -44,7 +44,6 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # bench/
 import harness  # noqa: E402,F401  (addon/, examples/ and bench/ on sys.path)
 
-import canopy_scenes as cs  # noqa: E402
 import forest_rays as fr  # noqa: E402
 from canopy_ao import _core  # noqa: E402
 
@@ -53,25 +52,10 @@ TREES, SIDE = 200, 50.0
 
 def forest_tracer(k):
     """The forest over a k × k grid ground; (tracer, points, normals, ring pairs i, j)."""
-    kinds = [cs.round_tree(seed=1, leaves=8000, ground=False),
-             cs.conifer(seed=2, leaves=8000, ground=False)]
-    rng = np.random.default_rng(0)
-    mats = []
-    for _ in range(TREES):
-        a, s = rng.uniform(0, 2 * math.pi), rng.uniform(0.8, 1.2)
-        x, y = rng.uniform(-SIDE / 2, SIDE / 2, 2)
-        mats.append([[s * math.cos(a), -s * math.sin(a), 0, x],
-                     [s * math.sin(a), s * math.cos(a), 0, y], [0, 0, s, 0], [0, 0, 0, 1]])
-    x = np.linspace(-SIDE / 2, SIDE / 2, k, dtype=np.float32)
-    gx, gy = np.meshgrid(x, x)
-    gv = np.ascontiguousarray(np.c_[gx.ravel(), gy.ravel(), np.zeros(k * k)], np.float32)
-    i = np.arange((k - 1) * (k - 1))
-    a = (i // (k - 1)) * k + i % (k - 1)
-    gt = np.ascontiguousarray(np.concatenate([np.stack([a, a + 1, a + k + 1], 1),
-                                              np.stack([a, a + k + 1, a + k], 1)]), np.int32)
-    rt = _core.RayTracer(gv, gt, prototypes=[fr.merge(t) for t in kinds],
-                         instance_prototypes=(np.arange(TREES) % 2).astype(np.int32),
-                         instance_matrices=np.array(mats, np.float32))
+    which, mats = fr.placements(TREES, SIDE)
+    gv, gt = fr.grid_ground(k, SIDE)
+    rt = _core.RayTracer(gv, gt, prototypes=[fr.merge(t) for t in fr.prototypes()],
+                         instance_prototypes=which, instance_matrices=mats)
     idx = np.arange(k * k).reshape(k, k)
     pairs = [(idx[:k - di, :k - dj].ravel(), idx[di:, dj:].ravel())
              for di, dj in ((0, 1), (1, 0), (1, 1))]
