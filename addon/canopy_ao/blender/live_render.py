@@ -103,8 +103,9 @@ def write_viewport(depsgraph, objs, attribute, aos, last):
         ao = aos[obj.name]
         attr = _drawn_attribute(obj, depsgraph, attribute) if obj.name in fresh else None
         if attr is not None:
-            mesh_io.write_evaluated_ao(attr, ao)
-            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True, tag=False)
+            rgba = mesh_io.gray_rgba(ao)
+            mesh_io.write_evaluated_ao(attr, ao, rgba)
+            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True, tag=False, rgba=rgba)
         elif obj.name not in last or not np.array_equal(last[obj.name], ao):
             mesh_io.write_ao_attribute(obj, attribute, ao, checked=True)
         last[obj.name] = ao
