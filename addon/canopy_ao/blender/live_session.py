@@ -117,7 +117,7 @@ class Session:
         aos = {t.item.name: t.ao for t in targets}
         for name, held in self.held.items():
             if name in aos and len(aos[name]) == len(held):
-                aos[name] = aos[name] * held
+                np.multiply(aos[name], held, out=aos[name])  # the target's own array
         tm["evaluate"] = time.perf_counter() - t2
         tm["total"] = time.perf_counter() - t0
         return aos, tm
