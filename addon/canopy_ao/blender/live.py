@@ -111,6 +111,23 @@ def _on_frame_change(scene, depsgraph=None):
 
 
 @persistent
+def _on_save(*_args):
+    """A save keeps each target's last frame drawn (live_session.Session.flush)."""
+    live_session.flush_all()
+
+
+@persistent
+def _on_depsgraph_update(scene, depsgraph=None):
+    """An edit that evaluated a target again from its original (a modifier's setting, paused)
+    drew the original's older AO: the last frame's written there and redrawn. A frame change
+    calls frame_change_post, not this."""
+    if depsgraph is None or is_render(depsgraph) or not live_session.any_lagging():
+        return
+    from .live_render import geometry_updated
+    live_session.flush_all(geometry_updated(depsgraph))
+
+
+@persistent
 def _forget(*_args):
     """Undo, redo and file loads replace every datablock: drop what the sessions cached."""
     live_session.forget_all()
@@ -130,7 +147,8 @@ class CANOPY_AO_OT_live_stop(bpy.types.Operator):
         return {'FINISHED'}
 
 
-_HANDLERS = (("frame_change_post", _on_frame_change), ("load_post", _forget),
+_HANDLERS = (("frame_change_post", _on_frame_change), ("save_pre", _on_save),
+             ("depsgraph_update_post", _on_depsgraph_update), ("load_post", _forget),
              ("undo_post", _forget), ("redo_post", _forget))
 
 
