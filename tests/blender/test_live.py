@@ -183,6 +183,19 @@ def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated, tmp_p
     assert mesh_io.ownership(leaves.data, "CanopyAO") == 'ours'
 
 
+def test_unticking_live_leaves_the_last_frame_drawn(animated):
+    """Live unticked by hand (no stop): the next frame change writes the last frame drawn into
+    the originals left behind, and draws it again."""
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    animated.frame_set(5)
+    at5 = _drawn("Leaves")
+    assert np.abs(_ao("Leaves") - at5).max() > 0.02  # left behind
+    animated.canopy_ao.live = False
+    animated.frame_set(7)
+    np.testing.assert_array_equal(_ao("Leaves"), at5)
+    np.testing.assert_array_equal(_drawn("Leaves"), at5)
+
+
 def test_a_save_during_live_keeps_an_edit_or_a_bake_made_since(animated, tmp_path, capsys):
     """The original of a swaying target is written at a save only if it still holds what live
     AO last wrote there: an attribute painted since, or a static bake since, stays."""

@@ -8,7 +8,8 @@ frame_change_post handler then reads the frame's evaluated meshes from the depsg
 given (the render's own during a render), refits the proxies (core/live.py), evaluates the
 targets and writes their attribute under mesh_io's ownership rules, where the frame draws it
 (live_render.py: into the meshes this frame evaluated, untagged, so Blender evaluates the frame
-once; a still target's original, tagged).
+once, their originals at a save, a stop, a render or an edit; a still target's original,
+tagged).
 
 What survives what:
 - undo, redo and loading a file drop the sessions (they hold object names and arrays, never
@@ -93,8 +94,12 @@ def update_scene(scene, depsgraph):
 
 @persistent
 def _on_frame_change(scene, depsgraph=None):
-    if live_session.suspended() or not getattr(scene, "canopy_ao", None) \
-            or not scene.canopy_ao.live:
+    if live_session.suspended() or not getattr(scene, "canopy_ao", None):
+        return
+    if not scene.canopy_ao.live:  # unticked: originals left behind get the last frame, once
+        session = session_of(scene)
+        if session is not None and session.lagging:
+            session.flush(scene, tag=True)
         return
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()

@@ -175,6 +175,7 @@ def suspend(on):
     """While on (nested), frame changes do not update live AO (a frame-range bake steps the
     frames and evaluates them itself)."""
     if on:
+        flush_all()  # the frames it steps evaluate the targets from their originals
         _SUSPENDED.append(True)
     elif _SUSPENDED:
         _SUSPENDED.pop()
