@@ -215,23 +215,22 @@ def _point_attribute(obj, name, values, data_type, overwrite, checked=False):
 
 def gray_rgba(ao):
     """The colours (ao, ao, ao, 1) of AO float (V,), flat float32 (4V,), as the writes store
-    them (one frame's two writes in the viewport build them once)."""
+    them."""
     return native.require().gray_rgba(np.ascontiguousarray(ao, dtype=np.float32)).reshape(-1)
 
 
-def write_ao_attribute(obj, name, ao, overwrite=False, checked=False, tag=True, rgba=None):
+def write_ao_attribute(obj, name, ao, overwrite=False, checked=False, tag=True):
     """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
 
     Replaces an attribute exactly as Canopy AO wrote it (or any, with overwrite); refuses
     otherwise. checked: the caller ran check_attribute on it just before (Live AO checks every
     target before it writes any), so its content is not read and fingerprinted twice.
-    tag=False: no depsgraph tag, so nothing is evaluated again (live AO wrote this frame's
-    evaluated copy too, live_render.write_viewport; the original keeps it for a save).
-    rgba: gray_rgba(ao), when the caller has built it already.
+    tag=False: no depsgraph tag, so nothing is evaluated again (live AO's Session.flush: the
+    evaluated copy drawn already holds this AO).
     """
     attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite, checked)
     mesh = obj.data
-    rgba = gray_rgba(ao) if rgba is None else rgba
+    rgba = gray_rgba(ao)
     attr.data.foreach_set("color", rgba)
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
@@ -261,11 +260,11 @@ def evaluated_ao_attribute(obj, depsgraph, name):
     return attr
 
 
-def write_evaluated_ao(attr, ao, rgba=None):
+def write_evaluated_ao(attr, ao):
     """Fill an attribute of an evaluated mesh (evaluated_ao_attribute) with AO: no tag, no
     ownership record (the depsgraph's copy is dropped at its next evaluation; the original
-    mesh is not touched). rgba: gray_rgba(ao), when the caller has built it already."""
-    attr.data.foreach_set("color", gray_rgba(ao) if rgba is None else rgba)
+    mesh is not touched)."""
+    attr.data.foreach_set("color", gray_rgba(ao))
 
 
 def write_float_attribute(obj, name, values, overwrite=False):
