@@ -161,11 +161,11 @@ def run(n_vertices, method, frames, tree="crown", accuracy=False):
         for k, v in session.timings.items():
             stages.setdefault(k, []).append(v)
     assert session.frames == frames, "the handler did not run on every frame"
+    live.stop(scene)  # the originals then hold the last frame's AO (Session.flush)
     if accuracy:
         from canopy_ao.blender import mesh_io
         live_ao = {n: mesh_io.read_ao_attribute(scene.objects[n], opts["attribute"])
                    for n in names}
-    live.stop(scene)
     blender_only = []
     for f in range(2 + frames, 2 + 2 * frames):
         t0 = time.perf_counter()

@@ -632,6 +632,46 @@ def test_fast_read_matches_evaluated_copy(tree_scene_objects):
     assert not mio.evaluated_is_original(ob)
 
 
+def test_vertex_normals_copied_whole(tree_scene_objects):
+    """The cached vertex normals are read in one copy, bit for bit what foreach_get gives, on a
+    deformed evaluated mesh and on an original; normals that do not lie in one array of
+    float[3] (a stride other than 12 bytes, a null address, values that differ) or a mesh of
+    fewer than two vertices leave it to foreach_get."""
+    from canopy_ao.blender import mesh_io as mio
+    ob = bpy.data.objects["Leaves"]
+    bend = ob.modifiers.new("Bend", 'SIMPLE_DEFORM')
+    bend.deform_method, bend.angle = 'BEND', 0.4
+    bpy.context.view_layer.update()
+    dg = bpy.context.evaluated_depsgraph_get()
+    meshes = (ob.evaluated_get(dg).data, ob.data)
+    assert meshes[0] != meshes[1]
+    for mesh in meshes:
+        n = len(mesh.vertices)
+        ref = np.empty((n, 3), np.float32)
+        mesh.vertex_normals.foreach_get("vector", ref.reshape(-1))
+        out = np.zeros((n, 3), np.float32)
+        assert mio._copy_normals(mesh.vertex_normals, out)
+        np.testing.assert_array_equal(out, ref)
+        np.testing.assert_array_equal(mio._vertex_normals(mesh, n), ref)
+    assert not np.array_equal(*(mio._vertex_normals(m, len(m.vertices)) for m in meshes))
+
+    class Normal:
+        def __init__(self, address, vector):
+            self.address, self.vector = address, vector
+
+        def as_pointer(self):
+            return self.address
+
+    real = meshes[0].vertex_normals
+    base, v0, v1 = real[0].as_pointer(), real[0].vector, real[1].vector
+    out = np.zeros((len(real), 3), np.float32)
+    for fake in ([Normal(base, v0), Normal(base + 16, v1)], [Normal(0, v0), Normal(12, v1)],
+                 [Normal(base, (9.0, 9.0, 9.0)), Normal(base + 12, v1)]):
+        assert not mio._copy_normals(fake, out[:2])
+    assert not mio._copy_normals(real, out[:1])
+    assert not out.any()
+
+
 def test_explicit_roles_fetch_no_triangles(tree_scene_objects, monkeypatch):
     """Set roles and a given τ with an analytic model: no object's triangles are fetched, and
     the bake equals the one that fetched them (grass keeps its blades, the ground its

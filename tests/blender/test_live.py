@@ -53,6 +53,13 @@ def _ao(name, attribute="CanopyAO"):
     return mesh_io.read_ao_attribute(bpy.context.scene.objects[name], attribute)
 
 
+def _drawn(name):
+    """What the viewport draws of a live target at this frame: its evaluated mesh's AO (the
+    original of a target this frame evaluated is written at a save, a stop, a render or an
+    edit: live_render.write_viewport)."""
+    return _evaluated_ao(bpy.context.scene.objects[name])
+
+
 def held_ground(scene):
     """{name: float32 (V,)}: the live session's ground occlusion held from its first bake, as
     the scene stores it (live_session.HELD)."""
@@ -111,7 +118,7 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
         assert held_ground(animated) and held_ground(animated)["Leaves"].min() < 0.99
         _assert_equal(first, _full(method, rep["tau"]))
     animated.frame_set(7)  # the handler re-evaluates
-    now = {n: _ao(n) for n in NAMES}
+    now = {n: _drawn(n) for n in NAMES}
     assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
     assert np.abs(now["Ground"] - first["Ground"]).max() > 0.005  # and the shadow moved
     if method == "sphere":
@@ -119,34 +126,96 @@ def test_live_ao_at_a_frame_equals_a_full_bake_of_that_frame(animated, method):
     elif method == "ellipsoid":  # live fits solve to 1e-6, a bake's to 1e-3
         _assert_within_the_fit(now, _full(method, rep["tau"], live_ground=True))
         animated.frame_set(4)  # its fit starts from frame 7's
-        _assert_within_the_fit({n: _ao(n) for n in NAMES},
+        _assert_within_the_fit({n: _drawn(n) for n in NAMES},
                                _full(method, rep["tau"], live_ground=True))
     else:
         # The shells keep the first bake's partition of the leaves (core/live.py): a full bake
         # clusters afresh, so the check is the first frame, reached again (the bake's fits
         # at 1e-3, the frame's at 1e-6), then frame 7 again, its fits started elsewhere.
         animated.frame_set(1)
-        _assert_within_the_fit({n: _ao(n) for n in NAMES}, first)
+        _assert_within_the_fit({n: _drawn(n) for n in NAMES}, first)
         animated.frame_set(7)
-        _assert_same_fit({n: _ao(n) for n in NAMES}, now)
+        _assert_same_fit({n: _drawn(n) for n in NAMES}, now)
 
 
-def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated):
+def test_live_ao_reaches_the_evaluated_meshes_the_viewport_draws(animated, tmp_path):
     """The swaying leaves are written into the mesh this frame evaluated (no second
-    evaluation), the still ground into its original, tagged; both must be what is drawn, and
-    the original keeps the frame's AO (a save, a stop)."""
+    evaluation), their original left as it was; the still ground into its original, tagged.
+    What is drawn is the frame's AO, and a save, an edit that evaluates the leaves again from
+    their original and a stop each write the last frame drawn into it, owned."""
     run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
     first = {n: _ao(n) for n in NAMES}
+    leaves = animated.objects["Leaves"]
     for frame in (7, 4):
         animated.frame_set(frame)
-        for n in NAMES:
-            np.testing.assert_array_equal(_evaluated_ao(animated.objects[n]), _ao(n),
-                                          err_msg=n)
-        assert np.abs(_ao("Leaves") - first["Leaves"]).max() > 0.02
-        assert np.abs(_ao("Ground") - first["Ground"]).max() > 0.005
+        drawn = {n: _drawn(n) for n in NAMES}
+        assert np.abs(drawn["Leaves"] - first["Leaves"]).max() > 0.02
+        assert np.abs(drawn["Ground"] - first["Ground"]).max() > 0.005
+    # (the first frame evaluates every target the bake tagged; the second, the leaves alone)
+    np.testing.assert_array_equal(_ao("Ground"), drawn["Ground"])  # still: the original
+    np.testing.assert_array_equal(_ao("Leaves"), first["Leaves"])  # not written per frame
+    # A save keeps the frame drawn: in the file, and ours to overwrite at the next frame.
+    path = str(tmp_path / "saved.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path, copy=True)
+    np.testing.assert_array_equal(_ao("Leaves"), drawn["Leaves"])
+    assert mesh_io.ownership(leaves.data, "CanopyAO") == 'ours'
+    # An edit evaluating the leaves again reads their original: the last frame is written
+    # there first and drawn again, not an older one.
+    animated.frame_set(7)
+    at7 = _drawn("Leaves")
+    np.testing.assert_array_equal(_ao("Leaves"), drawn["Leaves"])  # frame 4's, from the save
+    leaves.data.update_tag()
+    bpy.context.view_layer.update()
+    np.testing.assert_array_equal(_drawn("Leaves"), at7)
+    np.testing.assert_array_equal(_ao("Leaves"), at7)
+    # A stop leaves the last frame drawn in the original, and frames after it show that.
+    animated.frame_set(4)
+    at4 = _drawn("Leaves")
     live.stop(animated)
-    animated.frame_set(7)  # stopped: the attribute keeps frame 4's AO
-    np.testing.assert_array_equal(_evaluated_ao(animated.objects["Leaves"]), _ao("Leaves"))
+    np.testing.assert_array_equal(_ao("Leaves"), at4)
+    assert mesh_io.ownership(leaves.data, "CanopyAO") == 'ours'
+    animated.frame_set(7)
+    np.testing.assert_array_equal(_drawn("Leaves"), at4)
+    bpy.ops.wm.open_mainfile(filepath=path)  # the saved file holds frame 4's AO, owned
+    leaves = bpy.context.scene.objects["Leaves"]
+    np.testing.assert_array_equal(mesh_io.read_ao_attribute(leaves, "CanopyAO"),
+                                  drawn["Leaves"])
+    assert mesh_io.ownership(leaves.data, "CanopyAO") == 'ours'
+
+
+def test_unticking_live_leaves_the_last_frame_drawn(animated):
+    """Live unticked by hand (no stop): the next frame change writes the last frame drawn into
+    the originals left behind, and draws it again."""
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    animated.frame_set(5)
+    at5 = _drawn("Leaves")
+    assert np.abs(_ao("Leaves") - at5).max() > 0.02  # left behind
+    animated.canopy_ao.live = False
+    animated.frame_set(7)
+    np.testing.assert_array_equal(_ao("Leaves"), at5)
+    np.testing.assert_array_equal(_drawn("Leaves"), at5)
+
+
+def test_a_save_during_live_keeps_an_edit_or_a_bake_made_since(animated, tmp_path, capsys):
+    """The original of a swaying target is written at a save only if it still holds what live
+    AO last wrote there: an attribute painted since, or a static bake since, stays."""
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True))
+    leaves = animated.objects["Leaves"]
+    animated.frame_set(5)
+    attr = leaves.data.attributes["CanopyAO"]
+    attr.data.foreach_set("color", np.full(len(attr.data) * 4, 0.5, np.float32))  # painted
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "painted.blend"), copy=True)
+    assert np.all(_ao("Leaves") == 0.5)
+    assert mesh_io.ownership(leaves.data, "CanopyAO") == 'changed'
+    assert "not kept in Leaves" in capsys.readouterr().err
+    run_bake(bpy.context, list(NAMES), opts(method="ellipsoid", live=True, overwrite=True))
+    animated.frame_set(6)
+    run_bake(bpy.context, list(NAMES), opts(method="sphere", tau=1.0))  # live still on
+    static = _ao("Leaves")
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "static.blend"), copy=True)
+    np.testing.assert_array_equal(_ao("Leaves"), static)
+    assert mesh_io.ownership(leaves.data, "CanopyAO") == 'ours'
+    assert "written by another bake" in capsys.readouterr().err
 
 
 def test_a_target_whose_modifier_drops_the_attribute_keeps_its_original_written(animated):
@@ -181,7 +250,7 @@ def test_the_ray_free_rung_runs_live_as_close_to_rays_as_its_static_bake(animate
     first = {n: _ao(n) for n in NAMES}
     animated.frame_set(7)
     assert live.session_of(animated).frames == 1
-    now = {n: _ao(n) for n in NAMES}
+    now = {n: _drawn(n) for n in NAMES}
     assert np.abs(now["Leaves"] - first["Leaves"]).max() > 0.02  # the AO followed the wind
     rays = _full("raytrace", rep["tau"], attribute="Rays")
     static = _full("regression", rep["tau"], attribute="Static")
@@ -207,7 +276,7 @@ def test_live_keeps_the_first_bakes_calibrated_tau(animated):
             want[name][mask] = 0.0
         # ... and the ground, grass and trunk, lit with τ × their factor (a given τ has none)
         scaled = {n for n in NAMES if ROLES[n] in rep["tau_role_scale"]}
-        _assert_within_the_fit({n: _ao(n) for n in NAMES}, want,
+        _assert_within_the_fit({n: _drawn(n) for n in NAMES}, want,
                                [n for n in NAMES if n not in scaled])
 
 
@@ -225,7 +294,7 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
         animated, tmp_path):
     run_bake(bpy.context, list(NAMES), opts(live=True))
     animated.frame_set(4)
-    at4 = _ao("Leaves")
+    at4 = _drawn("Leaves")
     assert bpy.ops.canopy_ao.live_stop() == {'FINISHED'}
     animated.frame_set(8)
     np.testing.assert_array_equal(_ao("Leaves"), at4)  # stopped: the last frame's AO stays
@@ -233,7 +302,8 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
     animated.canopy_ao.live = True
     live._forget()
     animated.frame_set(9)
-    _assert_within_the_fit({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
+    _assert_within_the_fit({n: _drawn(n) for n in NAMES},
+                           _full("ellipsoid", 1.7, live_ground=True))
     # Saved and loaded: re-armed from the file's record by the persistent handler.
     path = str(tmp_path / "live.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
@@ -241,7 +311,8 @@ def test_live_stops_resumes_after_undo_and_reload_and_respects_the_users_attribu
     scene = bpy.context.scene
     assert scene.canopy_ao.live and live.session_of(scene) is None
     scene.frame_set(3)
-    _assert_within_the_fit({n: _ao(n) for n in NAMES}, _full("ellipsoid", 1.7, live_ground=True))
+    _assert_within_the_fit({n: _drawn(n) for n in NAMES},
+                           _full("ellipsoid", 1.7, live_ground=True))
     # The user's own attribute of that name is never overwritten: live AO stops instead.
     leaves = scene.objects["Leaves"]
     mesh_io.remove_owned_attribute(leaves, "CanopyAO")
@@ -318,8 +389,8 @@ def test_a_frame_range_bake_of_the_ray_free_rung_caches_what_live_shows(animated
     run_bake(bpy.context, list(NAMES), opts(method="regression", live=True))
     at1 = _ao("Leaves")
     animated.frame_set(5)
-    assert np.abs(_ao("Leaves") - at1).max() > 0.02
-    _assert_equal({n: _ao(n) for n in NAMES}, cached)
+    assert np.abs(_drawn("Leaves") - at1).max() > 0.02
+    _assert_equal({n: _drawn(n) for n in NAMES}, cached)
 
 
 def test_a_cancelled_frame_range_bake_leaves_nothing_behind(animated):
@@ -450,11 +521,11 @@ def test_a_reloaded_file_keeps_the_shell_partition_of_the_session_that_saved_it(
                                                                                  tmp_path):
     run_bake(bpy.context, list(NAMES), opts(method="shells", live=True))
     animated.frame_set(5)
-    at5 = {n: _ao(n) for n in NAMES}
+    at5 = {n: _drawn(n) for n in NAMES}
     path = str(tmp_path / "shells.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)  # re-armed at frame 5, a frame the bake was not at
     scene = bpy.context.scene
     scene.frame_set(6)
     scene.frame_set(5)
-    _assert_same_fit({n: _ao(n) for n in NAMES}, at5)
+    _assert_same_fit({n: _drawn(n) for n in NAMES}, at5)

@@ -24,6 +24,15 @@ def leaves_ao():
     return mesh_io.read_ao_attribute(bpy.data.objects["Leaves"], "CanopyAO")
 
 
+def leaves_drawn():
+    """The leaves' AO as the viewport draws it (their evaluated mesh's)."""
+    ob = bpy.data.objects["Leaves"]
+    mesh = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    buf = np.empty(len(mesh.vertices) * 4, np.float32)
+    mesh.attributes["CanopyAO"].data.foreach_get("color", buf)
+    return buf.reshape(-1, 4)[:, 0].copy()
+
+
 def steps():
     import addon_utils
     addon_utils.enable("canopy_ao", default_set=False, handle_error=None)
@@ -50,7 +59,32 @@ def steps():
     at1 = leaves_ao()
     scene.frame_set(6)
     check(live.session_of(scene) is not None, "the frame change did not rebuild the session")
-    check(np.abs(leaves_ao() - at1).max() > 0.02, "live AO did not follow the frame after undo")
+    check(np.abs(leaves_drawn() - at1).max() > 0.02, "live AO did not follow the frame after undo")
+    # Playback: each frame writes the swaying leaves' evaluated mesh alone. Their original is
+    # written once at most as it starts (Blender then evaluates the keyed leaves again outside
+    # a frame change: depsgraph_update_post), then not until something asks (here a stop).
+    from canopy_ao.blender import live_session
+    flushes, real_flush = [], live_session.Session.flush
+    live_session.Session.flush = lambda self, *a, **kw: (flushes.append(1),
+                                                        real_flush(self, *a, **kw))[1]
+    try:
+        frames_before = live.session_of(scene).frames
+        with bpy.context.temp_override(**ctx):
+            bpy.ops.screen.animation_play()
+        yield 2.0
+        with bpy.context.temp_override(**ctx):
+            bpy.ops.screen.animation_cancel(restore_frame=False)
+        yield 0.2
+        played = live.session_of(scene).frames - frames_before
+        check(played >= 4, f"playback ran {played} live frames in 2 s")
+        check(len(flushes) <= 1, f"playback wrote the originals {len(flushes)} times in "
+              f"{played} frames")
+        drawn = leaves_drawn()
+        live.stop(scene)
+        check(np.array_equal(leaves_ao(), drawn), "the stop did not keep the last frame drawn")
+    finally:
+        live_session.Session.flush = real_flush
+    scene.canopy_ao.live = True
     # The live bake itself undone: no attribute, no record, live off, frame changes inert.
     with bpy.context.temp_override(**ctx):
         bpy.ops.ed.undo()

@@ -8,7 +8,8 @@ frame_change_post handler then reads the frame's evaluated meshes from the depsg
 given (the render's own during a render), refits the proxies (core/live.py), evaluates the
 targets and writes their attribute under mesh_io's ownership rules, where the frame draws it
 (live_render.py: into the meshes this frame evaluated, untagged, so Blender evaluates the frame
-once; a still target's original, tagged).
+once, their originals at a save, a stop, a render or an edit; a still target's original,
+tagged).
 
 What survives what:
 - undo, redo and loading a file drop the sessions (they hold object names and arrays, never
@@ -93,8 +94,12 @@ def update_scene(scene, depsgraph):
 
 @persistent
 def _on_frame_change(scene, depsgraph=None):
-    if live_session.suspended() or not getattr(scene, "canopy_ao", None) \
-            or not scene.canopy_ao.live:
+    if live_session.suspended() or not getattr(scene, "canopy_ao", None):
+        return
+    if not scene.canopy_ao.live:  # unticked: originals left behind get the last frame, once
+        session = session_of(scene)
+        if session is not None and session.lagging:
+            session.flush(scene, tag=True)
         return
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -108,6 +113,23 @@ def _on_frame_change(scene, depsgraph=None):
         print(f"canopy_ao: error: {msg}", file=sys.stderr, flush=True)
         stop(scene)
         scene.canopy_ao.last_report = msg
+
+
+@persistent
+def _on_save(*_args):
+    """A save keeps each target's last frame drawn (live_session.Session.flush)."""
+    live_session.flush_all()
+
+
+@persistent
+def _on_depsgraph_update(scene, depsgraph=None):
+    """An edit that evaluated a target again from its original (a modifier's setting, paused)
+    drew the original's older AO: the last frame's written there and redrawn. A frame change
+    calls frame_change_post, not this."""
+    if depsgraph is None or is_render(depsgraph) or not live_session.any_lagging():
+        return
+    from .live_render import geometry_updated
+    live_session.flush_all(geometry_updated(depsgraph))
 
 
 @persistent
@@ -130,7 +152,8 @@ class CANOPY_AO_OT_live_stop(bpy.types.Operator):
         return {'FINISHED'}
 
 
-_HANDLERS = (("frame_change_post", _on_frame_change), ("load_post", _forget),
+_HANDLERS = (("frame_change_post", _on_frame_change), ("save_pre", _on_save),
+             ("depsgraph_update_post", _on_depsgraph_update), ("load_post", _forget),
              ("undo_post", _forget), ("redo_post", _forget))
 
 

@@ -87,24 +87,29 @@ def _drawn_attribute(obj, depsgraph, attribute):
         return None
 
 
-def write_viewport(depsgraph, objs, attribute, aos, last):
+def write_viewport(depsgraph, objs, attribute, aos, last, lagging):
     """Write each target's AO {name: float32 (V,)} where the viewport draws it, evaluating
     nothing again where that can be avoided (docs/DESIGN.md, 'Live and per-frame AO'). The
     caller has checked every target's ownership. last: {name: the AO last written}, updated.
+    lagging: {name: (AO, the ownership record its original holds)}, updated: the targets
+    whose original is behind what is drawn (Session.flush writes them).
 
     A target whose geometry this frame evaluated (a deform, a shape key, an armature) has a
     new evaluated mesh that nothing has drawn yet: its attribute is written there, untagged,
-    and in the original untagged too (what a save keeps and a stop leaves). Tagging it instead
-    makes Blender evaluate it a second time in this frame (its modifiers again: as long as
-    Blender's own frame). A target not evaluated this frame (a still ground) keeps its drawn
-    copy, so its original is written and tagged, and only when its AO changed."""
+    and its original left until a save, a stop or a render needs it (lagging). Tagging it
+    instead makes Blender evaluate it a second time in this frame (its modifiers again: as
+    long as Blender's own frame). A target not evaluated this frame (a still ground) keeps its
+    drawn copy, so its original is written and tagged, and only when its AO changed."""
+    from .ownership import recorded
     fresh = geometry_updated(depsgraph)
     for obj in objs:
         ao = aos[obj.name]
         attr = _drawn_attribute(obj, depsgraph, attribute) if obj.name in fresh else None
         if attr is not None:
             mesh_io.write_evaluated_ao(attr, ao)
-            mesh_io.write_ao_attribute(obj, attribute, ao, checked=True, tag=False)
+            held = lagging.get(obj.name)
+            lagging[obj.name] = (ao, held[1] if held else recorded(obj.data, attribute))
         elif obj.name not in last or not np.array_equal(last[obj.name], ao):
             mesh_io.write_ao_attribute(obj, attribute, ao, checked=True)
+            lagging.pop(obj.name, None)
         last[obj.name] = ao

@@ -5,6 +5,7 @@ The frame-change handlers and the rebuild after a load or an undo are live.py's;
 frame-range bake (frames.py) runs a Session per frame without writing."""
 
 import json
+import sys
 import time
 
 import numpy as np
@@ -63,6 +64,9 @@ class Session:
         self.frames = 0
         self.timings = {}  # the last frame's seconds per stage
         self.written = {}  # {target name: the AO last written in the viewport}
+        # {target name: (its AO drawn, the ownership record of its original then)}: the
+        # targets whose original is behind the frame drawn (live_render.write_viewport)
+        self.lagging = {}
         self.shell_trees = sorted(job.plan.shell_labels)
         self.record = json.dumps({
             "objects": self.targets, "tau_by_tree": dict(job.plan.tau_by_tree),
@@ -81,14 +85,37 @@ class Session:
             if why:
                 raise CanopyAOError(why)
         if is_render(depsgraph):
+            self.flush(scene)  # a render copies the originals: the viewport's last frame first
             live_render.write_frame(scene, depsgraph, objs, self.attribute, aos)
         else:
-            live_render.write_viewport(depsgraph, objs, self.attribute, aos, self.written)
+            live_render.write_viewport(depsgraph, objs, self.attribute, aos, self.written,
+                                       self.lagging)
         tm["write"] = time.perf_counter() - t0
         tm["total"] += tm["write"]
         self.timings = tm
         self.frames += 1
         return tm
+
+    def flush(self, scene, tag=False):
+        """Write into the originals the AO drawn of the targets whose original is behind (a
+        save, a stop, a render, an edit that evaluates them again from the original: tag).
+        A target whose attribute was changed or written by another since (its record is not
+        the one it had, or its content not its record's: painted, a bake) keeps that, and the
+        console says so; nothing is lost either way (what it skips is only drawn)."""
+        from .ownership import recorded
+        lagging, self.lagging = self.lagging, {}
+        for name, (ao, record) in lagging.items():
+            obj = scene.objects.get(name)
+            if obj is None or obj.type != 'MESH':
+                continue
+            why = mesh_io.check_attribute(obj, self.attribute, False)
+            if not why and recorded(obj.data, self.attribute) != record:
+                why = f"{name}: '{self.attribute}' was written by another bake since"
+            if why:
+                print(f"canopy_ao: warning: live AO's last frame not kept in {name}: {why}",
+                      file=sys.stderr, flush=True)
+                continue
+            mesh_io.write_ao_attribute(obj, self.attribute, ao, checked=True, tag=tag)
 
     def evaluate(self, scene, depsgraph):
         """The targets' AO at the depsgraph's frame, written nowhere: ({name: float32 (V,)},
@@ -117,7 +144,7 @@ class Session:
         aos = {t.item.name: t.ao for t in targets}
         for name, held in self.held.items():
             if name in aos and len(aos[name]) == len(held):
-                aos[name] = aos[name] * held
+                np.multiply(aos[name], held, out=aos[name])  # the target's own array
         tm["evaluate"] = time.perf_counter() - t2
         tm["total"] = time.perf_counter() - t0
         return aos, tm
@@ -148,6 +175,7 @@ def suspend(on):
     """While on (nested), frame changes do not update live AO (a frame-range bake steps the
     frames and evaluates them itself)."""
     if on:
+        flush_all()  # the frames it steps evaluate the targets from their originals
         _SUSPENDED.append(True)
     elif _SUSPENDED:
         _SUSPENDED.pop()
@@ -163,10 +191,32 @@ def session_of(scene):
 
 def stop(scene):
     """Stop a scene's live AO: the toggle off, the session gone (the record stays, so ticking
-    the toggle on again resumes with the same rung and τ)."""
-    _SESSIONS.pop(scene.name, None)
+    the toggle on again resumes with the same rung and τ); the originals keep the last frame's
+    AO."""
+    session = _SESSIONS.pop(scene.name, None)
+    if session is not None:
+        session.flush(scene)
     if scene.canopy_ao.live:
         scene.canopy_ao.live = False
+
+
+def any_lagging():
+    return any(s.lagging for s in _SESSIONS.values())
+
+
+def flush_all(tag_names=None):
+    """Every session's lagging originals written (a save: tag_names None), or only sessions
+    with a lagging target among tag_names (objects evaluated again from their original), then
+    tagged so the viewport redraws them."""
+    import bpy
+    for scene_name, session in list(_SESSIONS.items()):
+        scene = bpy.data.scenes.get(scene_name)
+        if scene is None or not session.lagging:
+            continue
+        if tag_names is None:
+            session.flush(scene)
+        elif tag_names & session.lagging.keys():
+            session.flush(scene, tag=True)
 
 
 def forget_all():

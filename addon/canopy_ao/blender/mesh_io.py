@@ -5,6 +5,7 @@ float32 and FLOAT_COLOR because they are the fast paths (docs/DESIGN.md, 'Facts 
 Blender': float64 is ~40× slower to move, BYTE_COLOR ~25×).
 """
 
+import ctypes
 import time
 
 import bpy
@@ -21,11 +22,32 @@ class MeshIOError(CanopyAOError):
 
 def _vertex_normals(mesh, n):
     out = np.empty((n, 3), dtype=np.float32)
-    if hasattr(mesh, "vertex_normals"):  # cached; vertices.normal is removed in 4.1
-        mesh.vertex_normals.foreach_get("vector", out.reshape(-1))
-    else:
+    if not hasattr(mesh, "vertex_normals"):  # cached; vertices.normal is removed in 4.1
         mesh.vertices.foreach_get("normal", out.reshape(-1))
+    elif not _copy_normals(mesh.vertex_normals, out):
+        mesh.vertex_normals.foreach_get("vector", out.reshape(-1))
     return out
+
+
+def _copy_normals(normals, out):
+    """Copy the mesh's cached vertex normals (float[3] each, one array: what vertex_normals
+    iterates) into out float32 (V, 3) in one memcpy; False where they do not lie so (then
+    foreach_get). foreach_get on vertex_normals has no raw path and goes element by element:
+    2 ms per 100k vertices against 0.1 ms (bench/probes/live_stages.py; docs/DESIGN.md,
+    'Facts measured in Blender'). The cache lives as long as the mesh, which the caller holds."""
+    n = len(out)
+    if n < 2:
+        return False
+    first, second = normals[0], normals[1]
+    base = first.as_pointer()
+    if base == 0 or second.as_pointer() - base != 12:
+        return False
+    view = np.ctypeslib.as_array((ctypes.c_float * (3 * n)).from_address(base))
+    if not (np.array_equal(view[:3], np.array(first.vector, np.float32))
+            and np.array_equal(view[3:6], np.array(second.vector, np.float32))):
+        return False
+    out.reshape(-1)[:] = view
+    return True
 
 
 def evaluated_is_original(obj):
@@ -191,18 +213,24 @@ def _point_attribute(obj, name, values, data_type, overwrite, checked=False):
     return attr, values
 
 
+def gray_rgba(ao):
+    """The colours (ao, ao, ao, 1) of AO float (V,), flat float32 (4V,), as the writes store
+    them."""
+    return native.require().gray_rgba(np.ascontiguousarray(ao, dtype=np.float32)).reshape(-1)
+
+
 def write_ao_attribute(obj, name, ao, overwrite=False, checked=False, tag=True):
     """Write AO (float (V,)) as a POINT-domain FLOAT_COLOR attribute (ao, ao, ao, 1).
 
     Replaces an attribute exactly as Canopy AO wrote it (or any, with overwrite); refuses
     otherwise. checked: the caller ran check_attribute on it just before (Live AO checks every
     target before it writes any), so its content is not read and fingerprinted twice.
-    tag=False: no depsgraph tag, so nothing is evaluated again (live AO wrote this frame's
-    evaluated copy too, live_render.write_viewport; the original keeps it for a save).
+    tag=False: no depsgraph tag, so nothing is evaluated again (live AO's Session.flush: the
+    evaluated copy drawn already holds this AO).
     """
     attr, ao = _point_attribute(obj, name, ao, 'FLOAT_COLOR', overwrite, checked)
     mesh = obj.data
-    rgba = native.require().gray_rgba(ao).reshape(-1)
+    rgba = gray_rgba(ao)
     attr.data.foreach_set("color", rgba)
     # Only the depsgraph tag: mesh.update() also marks the normals dirty, and the next bake
     # would pay their recomputation (~50 ms per million vertices).
@@ -236,8 +264,7 @@ def write_evaluated_ao(attr, ao):
     """Fill an attribute of an evaluated mesh (evaluated_ao_attribute) with AO: no tag, no
     ownership record (the depsgraph's copy is dropped at its next evaluation; the original
     mesh is not touched)."""
-    attr.data.foreach_set("color", native.require().gray_rgba(
-        np.ascontiguousarray(ao, dtype=np.float32)).reshape(-1))
+    attr.data.foreach_set("color", gray_rgba(ao))
 
 
 def write_float_attribute(obj, name, values, overwrite=False):

@@ -91,6 +91,12 @@ def ownership(mesh, name):
     return 'ours' if ok else 'changed'
 
 
+def recorded(mesh, name):
+    """The fingerprint mesh's record holds for attribute ``name`` (None: no record): what
+    tells whether anything wrote the attribute since this value was read."""
+    return _json(mesh, OWNED_PROP, dict).get(name)
+
+
 def owned_attributes(obj):
     """Names of the attributes on obj's mesh that are exactly as Canopy AO wrote them. The
     record is the mesh's, so objects sharing one mesh agree and a swapped mesh brings its own."""
