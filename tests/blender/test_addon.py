@@ -452,15 +452,20 @@ def test_cli_numbers_out_of_range_exit_2_with_a_message(tree_scene_objects, caps
     (".select_vert", "names one of Blender's own layers"),
     ("a" * 80, "longer than Blender's limit of 63 bytes"),
     ("UV", "names one of Blender's own layers"),
+    ("Weights", "names one of its vertex groups"),
 ])
 def test_attribute_names_blender_owns_or_shortens_are_refused(tree_scene_objects, capsys, name,
                                                                message):
-    """Even with --overwrite: a built-in attribute, a UV map's name or a name past Blender's
-    length limit is refused before anything is written (exit 1, a message, no traceback)."""
+    """Even with --overwrite: a built-in attribute, a UV map's or a vertex group's name (Blender
+    makes no attribute beside a vertex group of its name) or a name past Blender's length limit
+    is refused before anything is written (exit 1, a message, no traceback)."""
     from canopy_ao import cli
-    mesh = bpy.data.objects["Ground"].data
+    ground = bpy.data.objects["Ground"]
+    mesh = ground.data
     if name == "UV" and name not in mesh.uv_layers:
         mesh.uv_layers.new(name="UV")
+    if name == "Weights":
+        ground.vertex_groups.new(name="Weights")
     layers = sorted(a.name for a in mesh.attributes)
     with pytest.raises(SystemExit) as exc:
         cli.main(["--objects", "Ground", "--method", "sphere", "--attribute", name,

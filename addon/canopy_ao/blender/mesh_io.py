@@ -153,6 +153,9 @@ def check_attribute(obj, name, overwrite):
     if name.startswith(".") or name in BUILTIN_ATTRIBUTES or name in obj.data.uv_layers:
         return (f"{obj.name}: '{name}' names one of Blender's own layers (a built-in "
                 "attribute or a UV map); choose another attribute name")
+    if name in obj.vertex_groups:  # Blender makes no attribute beside it (new() gives None)
+        return (f"{obj.name}: '{name}' names one of its vertex groups; choose another "
+                "attribute name or rename the vertex group")
     if overwrite or obj.data.attributes.get(name) is None:
         return None
     state = ownership(obj.data, name)
