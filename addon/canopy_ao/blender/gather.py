@@ -99,6 +99,11 @@ def is_candidate(obj):
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
 
 
+# Objects Cycles renders as the mesh Blender makes of them (Object > Convert > Mesh): they
+# occlude as that mesh, a role guessed for it as for any mesh; never targets.
+SOLID_TYPES = frozenset(('CURVE', 'SURFACE', 'FONT', 'META'))
+
+
 def object_names(text):
     """The names an operator's ``objects`` argument gives: the whole text when it is an
     object's exact name (one with a comma, or spaces at its ends), else the comma-separated
@@ -236,7 +241,8 @@ def _viewport_notes(context, depsgraph, vis, members):
 
 def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     """Every mesh Cycles renders (visibility.py: trees shade a selected ground, also when hidden
-    in the viewport) and every target as SceneItems.
+    in the viewport), every curve, text, surface and metaball it renders (SOLID_TYPES, as the
+    mesh Blender makes of it) and every target as SceneItems.
 
     Returns (items, objects {name: object}, how {name: why this role}); IGNORE objects are left
     out. Triangles are fetched only where the bake or a role guess needs them. notes: a list to
@@ -244,7 +250,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     so the depsgraph did not evaluate it)."""
     vis = RenderVisibility(context.view_layer)
     members = {o.name: o for o in context.scene.objects
-               if is_candidate(o) and vis.mesh_renders(o)}
+               if (is_candidate(o) or o.type in SOLID_TYPES) and vis.mesh_renders(o)}
     if notes is not None:
         notes.extend(_viewport_notes(context, depsgraph, vis, members))
     for o in targets:

@@ -34,7 +34,7 @@ def evaluated_is_original(obj):
     mode (whose data lives in a BMesh until it is left), and no armature / lattice / curve
     parent deforming it (a "virtual" modifier, not in obj.modifiers)."""
     me = obj.data
-    return (not obj.modifiers and me.shape_keys is None and not me.is_editmode
+    return (isinstance(me, bpy.types.Mesh) and not obj.modifiers and me.shape_keys is None and not me.is_editmode
             and (obj.parent is None or obj.parent_type in ('OBJECT', 'VERTEX', 'VERTEX_3',
                                                              'BONE')))
 
