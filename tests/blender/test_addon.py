@@ -508,6 +508,37 @@ def test_objects_sharing_one_mesh_are_refused_by_name(tree_scene_objects, capsys
         bpy.data.objects.remove(twin)
 
 
+def test_an_object_named_twice_is_baked_once(tree_scene_objects, capsys):
+    """A name listed twice is one target (it was refused as two objects sharing one mesh)."""
+    from canopy_ao import cli
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "Ground", "--method", "sphere", "--tau", "2"])
+    out, err = capsys.readouterr()
+    assert exc.value.code == 0, err
+    assert [l for l in out.splitlines() if l.startswith("Ground:")] != []
+    assert len([l for l in out.splitlines() if l.startswith("Ground:")]) == 1, out
+    assert ATTR in bpy.data.objects["Ground"].data.attributes
+
+
+@pytest.mark.parametrize("where", ["missing folder", "a folder"])
+def test_a_report_that_cannot_be_written_is_refused_before_the_bake(tree_scene_objects, capsys,
+                                                                   tmp_path, where):
+    """--report naming a file in a folder that does not exist, or a folder: refused before the
+    bake (exit 1, a message naming the path), so no image file is left for a run that failed
+    (the bake wrote its images, then failed on the report)."""
+    from canopy_ao import cli
+    report = tmp_path / "no" / "r.json" if where == "missing folder" else tmp_path
+    images = tmp_path / "images"
+    mesh = bpy.data.objects["Ground"].data
+    xy = np.array([mesh.vertices[l.vertex_index].co[:2] for l in mesh.loops])
+    mesh.uv_layers.new(name="UVMap").data.foreach_set(
+        "uv", ((xy - xy.min(0)) / np.ptp(xy, 0)).astype(np.float32).ravel())
+    _refused(cli, capsys, ["--objects", "Ground", "--method", "sphere", "--tau", "2",
+                           "--mode", "texel", "--resolution", "16", "--image-dir", str(images),
+                           "--report", str(report)], "--report")
+    assert not images.exists() or list(images.iterdir()) == []
+
+
 def test_linked_library_meshes_are_refused(tree_scene_objects, capsys, tmp_path):
     from canopy_ao import cli
     lib = str(tmp_path / "lib.blend")

@@ -125,6 +125,7 @@ def bake_targets(context, object_names, opts=None, on_mesh=True):
     scene = context.scene
     vis = RenderVisibility(context.view_layer)
     if object_names:
+        object_names = list(dict.fromkeys(object_names))  # a name given twice is one target
         missing = [n for n in object_names if n not in scene.objects]
         if missing:
             raise CanopyAOError(f"no object named {', '.join(missing)} in scene "
