@@ -139,3 +139,20 @@ def test_curves_text_surfaces_and_metaballs_occlude_as_cycles_renders_them(scene
     ours, cycles = _bake_and_cycles(ground)
     assert cycles.mean() < TOL  # it occludes in Cycles
     np.testing.assert_allclose(ours, cycles, atol=TOL)
+
+
+def test_a_loose_vertex_is_left_out_of_the_cycles_check(scene):
+    """Cycles bakes face corners, so a loose vertex keeps 0 in its bake, whatever lights it:
+    the check compares the vertices faces use (a stray vertex read as an error of up to 1)."""
+    from canopy_ao.blender.job import run_bake
+    from canopy_ao.blender import properties
+    ground = _quad("Ground", 1.0)
+    ground.canopy_ao.role = 'GROUND'
+    ground.data.vertices.add(1)
+    ground.data.vertices[4].co = (3.0, 3.0, 3.0)  # open sky: ours 1.0, Cycles' bake 0.0
+    ground.data.update()
+    opts = dict(properties.scene_options(scene), method="raytrace", samples=SAMPLES,
+                distance=DISTANCE, show_proxies=False, check_cycles=True)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    check = rep["objects"]["Ground"]["cycles"]
+    assert check["n"] == 4 and check["mae"] < TOL, check

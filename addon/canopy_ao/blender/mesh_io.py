@@ -123,6 +123,16 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     return pos, nor, tris
 
 
+def cornered_vertices(mesh):
+    """bool (V,): the vertices a face uses. Cycles bakes face corners, so a loose vertex keeps
+    0 in its vertex bake, whatever lights it: a Cycles check compares only these."""
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    corners = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", corners)
+    used[corners] = True
+    return used
+
+
 def _to_world(co, nor, matrix_world):
     """Positions and unit normals (float32 (V, 3), modified in place) in world space: one
     native pass (mesh_arrays.h), which skips the transform for an identity matrix and keeps
