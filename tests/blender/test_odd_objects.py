@@ -125,8 +125,23 @@ def _metaball():
     return ob
 
 
-@pytest.mark.parametrize("make", [_text, _curve, _surface, _metaball],
-                         ids=["text", "curve", "surface", "metaball"])
+def _instanced_curve():
+    """The curve sheet in a collection instanced by an empty, its own collection excluded
+    from the view layer."""
+    coll = bpy.data.collections.new("Sheets")
+    bpy.context.scene.collection.children.link(coll)
+    sheet = _curve()
+    bpy.context.scene.collection.objects.unlink(sheet)
+    coll.objects.link(sheet)
+    bpy.context.view_layer.layer_collection.children["Sheets"].exclude = True
+    empty = bpy.data.objects.new("SheetInstance", None)
+    empty.instance_type, empty.instance_collection = 'COLLECTION', coll
+    bpy.context.scene.collection.objects.link(empty)
+    return empty
+
+
+@pytest.mark.parametrize("make", [_text, _curve, _surface, _metaball, _instanced_curve],
+                         ids=["text", "curve", "surface", "metaball", "instanced curve"])
 def test_curves_text_surfaces_and_metaballs_occlude_as_cycles_renders_them(scene, make):
     """Cycles renders them as the mesh Blender makes of them, and its AO rays stop on them
     (0.00: a sheet over the ground, or a closed one around it); so do ours (before: they were
