@@ -508,6 +508,26 @@ def test_objects_sharing_one_mesh_are_refused_by_name(tree_scene_objects, capsys
         bpy.data.objects.remove(twin)
 
 
+def test_a_mesh_another_object_shares_is_named_when_one_is_baked(tree_scene_objects):
+    """Baked alone, one of two linked duplicates writes the mesh both show: the other shows AO
+    baked where the first stands, so the report names it (it said nothing)."""
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import run_bake
+    ground = bpy.data.objects["Ground"]
+    twin = ground.copy()  # a linked duplicate (Alt+D): the same mesh datablock
+    twin.name = "GroundTwin"
+    bpy.context.scene.collection.objects.link(twin)
+    try:
+        opts = dict(properties.scene_options(bpy.context.scene), method="sphere", tau=2.0)
+        _job, rep = run_bake(bpy.context, ["Ground"], opts)
+        assert any(n.startswith("Ground: its mesh is also GroundTwin's") for n in rep["notes"]), \
+            rep["notes"]
+        _job, rep = run_bake(bpy.context, ["Leaves"], opts)
+        assert not any("also" in n and "mesh" in n for n in rep["notes"]), rep["notes"]
+    finally:
+        bpy.data.objects.remove(twin)
+
+
 def test_an_object_named_twice_is_baked_once(tree_scene_objects, capsys):
     """A name listed twice is one target (it was refused as two objects sharing one mesh)."""
     from canopy_ao import cli

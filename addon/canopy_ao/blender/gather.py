@@ -113,7 +113,7 @@ def object_names(text):
     return [s.strip() for s in text.split(",") if s.strip()]
 
 
-def bake_targets(context, object_names, opts=None, on_mesh=True):
+def bake_targets(context, object_names, opts=None, on_mesh=True, notes=None):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
     mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
     modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
@@ -121,7 +121,8 @@ def bake_targets(context, object_names, opts=None, on_mesh=True):
     scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
     wrong, a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
     bake here cannot do) or does not render (it would occlude the other targets, which Cycles
-    does not)."""
+    does not). notes: a list to which a line is added per target whose mesh (on_mesh: the
+    result is written onto it) other objects show too."""
     scene = context.scene
     vis = RenderVisibility(context.view_layer)
     if object_names:
@@ -145,6 +146,13 @@ def bake_targets(context, object_names, opts=None, on_mesh=True):
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets, on_mesh)
+    for o in targets if on_mesh and notes is not None else ():
+        others = sorted(x.name for x in scene.objects if x.data == o.data and x not in targets
+                        ) if o.data.users > 1 else ()
+        if others:  # linked duplicates: each shows the one result, baked where o stands
+            notes.append(f"{o.name}: its mesh is also {', '.join(others)}'s, so they show this "
+                         f"AO too, baked where {o.name} stands; give each its own mesh "
+                         "(Object > Relations > Make Single User) to bake each")
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
