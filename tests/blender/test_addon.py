@@ -494,6 +494,24 @@ def test_a_mesh_in_edit_mode_is_refused_and_left_alone(tree_scene_objects, capsy
     assert ATTR not in ground.data.attributes
 
 
+def test_a_mesh_sculpted_with_dynamic_topology_is_refused_and_left_alone(tree_scene_objects,
+                                                                         capsys):
+    """Dynamic Topology keeps the mesh in a BMesh until Sculpt Mode is left, which then
+    replaces the mesh: a bake reported success and its attribute was gone on leaving."""
+    from canopy_ao import cli
+    ground = bpy.data.objects["Ground"]
+    bpy.context.view_layer.objects.active = ground
+    bpy.ops.object.mode_set(mode='SCULPT')
+    try:
+        bpy.ops.sculpt.dynamic_topology_toggle()
+        assert ground.use_dynamic_topology_sculpting
+        _refused(cli, capsys, ["--objects", "Ground", "--method", "sphere"],
+                 "Dynamic Topology")
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+    assert ATTR not in ground.data.attributes
+
+
 def test_objects_sharing_one_mesh_are_refused_by_name(tree_scene_objects, capsys):
     from canopy_ao import cli
     ground = bpy.data.objects["Ground"]

@@ -189,6 +189,12 @@ def check_writable(targets, on_mesh=True):
     if editing:
         raise CanopyAOError(f"{', '.join(editing)}: in Edit Mode; leave it (Tab) and bake "
                             "again (nothing was changed)")
+    dyntopo = [o.name for o in targets
+               if o.mode == 'SCULPT' and getattr(o, "use_dynamic_topology_sculpting", False)]
+    if dyntopo:  # its mesh lives in a BMesh, which replaces the mesh when the mode is left
+        raise CanopyAOError(f"{', '.join(dyntopo)}: sculpted with Dynamic Topology, whose "
+                            "mesh replaces the object's when Sculpt Mode is left; leave it or "
+                            "turn Dyntopo off and bake again (nothing was changed)")
     linked = [o.name for o in targets if o.library is not None or o.data.library is not None]
     if linked:
         raise CanopyAOError(f"{', '.join(linked)}: linked from another .blend file, so a bake "
