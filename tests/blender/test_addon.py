@@ -639,6 +639,23 @@ def test_operator_number_without_its_switch_is_used(tree_scene_objects):
 
 
 
+@pytest.mark.parametrize("kw, message", [
+    (dict(samples=0), "samples must be an integer in \\[1, 65536\\], got 0"),
+    (dict(samples=100_000), "got 100000"),
+    (dict(distance=-1.0, use_world_distance=False), "got -1.0"),
+    (dict(time_budget=-1.0), "time_budget"),
+    (dict(mode='TEXEL', resolution=0), "resolution must be"),
+])
+def test_the_operator_refuses_numbers_out_of_range_as_the_cli_does(tree_scene_objects, kw,
+                                                                   message):
+    """Out of range, bpy.ops.canopy_ao.bake(...) refuses as the command line does (exit 2
+    there): Blender clamped it silently before, so samples=0 baked 1 ray and distance=-1
+    baked unlimited rays, both reported as done."""
+    with pytest.raises(RuntimeError, match=message):
+        bpy.ops.canopy_ao.bake(objects="Ground", method="raytrace", **kw)
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+
+
 def _break_evaluation(monkeypatch):
     from canopy_ao.core import lighting
 
