@@ -155,10 +155,10 @@ def bake_targets(context, object_names, opts=None, on_mesh=True, notes=None):
                          "(Object > Relations > Make Single User) to bake each")
     custom = [o.name for o in targets if getattr(o.data, "has_custom_normals", False)
               and getattr(o.data, "use_auto_smooth", True)]  # before 4.1: used with it only
-    if custom and on_mesh and notes is not None:  # texels take their corners' normals
-        notes.append(f"{', '.join(custom)}: custom split normals, around which Cycles' bake "
-                     "turns each corner's hemisphere; a bake per vertex takes the vertex "
-                     "normals, so the two differ where those normals part")
+    if custom and notes is not None:
+        notes.append(f"{', '.join(custom)}: custom split normals, which Cycles' bake follows "
+                     "and this one only in part (per vertex it takes the vertex normals): the "
+                     "two differ where they part from the faces' own normals")
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
