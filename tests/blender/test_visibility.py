@@ -298,6 +298,26 @@ def test_hair_strands_are_named_in_the_notes(ground):
     assert any(n.startswith("Roof: hair drawn as strands") for n in rep["notes"]), rep["notes"]
 
 
+def test_hair_curves_are_named_in_the_notes(ground):
+    """A hair curves object (here one curve a geometry-nodes Curve Line makes) renders in
+    Cycles as strands and is not traced here: the report names it, as particle hair."""
+    hair = bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair"))
+    bpy.context.scene.collection.objects.link(hair)
+    tree = bpy.data.node_groups.new("Line", 'GeometryNodeTree')
+    if hasattr(tree, "interface"):  # 4.0+
+        tree.interface.new_socket("Geometry", in_out='OUTPUT', socket_type='NodeSocketGeometry')
+    else:
+        tree.outputs.new('NodeSocketGeometry', "Geometry")
+    line, out = tree.nodes.new("GeometryNodeCurvePrimitiveLine"), tree.nodes.new(
+        "NodeGroupOutput")
+    tree.links.new(line.outputs[0], out.inputs[0])
+    hair.modifiers.new("Line", 'NODES').node_group = tree
+    opts = dict(properties.scene_options(bpy.context.scene), method="raytrace",
+                samples=SAMPLES, distance=DISTANCE, show_proxies=False)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert any(n.startswith("Hair: hair drawn as strands") for n in rep["notes"]), rep["notes"]
+
+
 @pytest.mark.parametrize("setting", ["render_only", "levels"])
 def test_modifiers_set_otherwise_for_renders_are_named_in_the_notes(ground, setting):
     """Cycles' bake evaluates modifiers as a render does (a Displace shown in renders only

@@ -251,12 +251,14 @@ def _viewport_notes(context, depsgraph, vis, members):
         notes.append(f"{', '.join(differ)}: modifiers set differently for viewport and render "
                      "(shown in one only, or other subdivision levels): the bake reads the "
                      "viewport's shape, Cycles renders the other")
-    strands = sorted(o.name for o in context.scene.objects if vis.object_renders(o) and any(
-        p.settings.render_type == 'PATH' and p.settings.count for p in o.particle_systems))
+    strands = sorted(o.name for o in context.scene.objects if vis.object_renders(o) and (any(
+        p.settings.render_type == 'PATH' and p.settings.count for p in o.particle_systems)
+        or o.type == 'CURVES' and len(o.evaluated_get(depsgraph).data.curves)))
     if strands:
-        notes.append(f"{', '.join(strands)}: hair drawn as strands (Render As: Path), which "
-                     "Cycles renders and which occludes there, is not traced here; render it "
-                     "as an object or collection (a blade) for it to occlude")
+        notes.append(f"{', '.join(strands)}: hair drawn as strands (hair curves, or particles "
+                     "rendered as Path), which Cycles renders and which occludes there, is not "
+                     "traced here; render it as an object or collection (a blade) for it to "
+                     "occlude")
     hidden = sorted(o.name for o in context.scene.objects
                     if _instances_anything(o) and vis.object_renders(o)
                     and not o.visible_get(view_layer=context.view_layer))
