@@ -202,6 +202,8 @@ def run(args, profile=None):
     require().set_max_threads(args.threads)  # 0 also lifts a cap an earlier bake here set
     if args.save and not bpy.data.filepath:
         raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
+    if args.report:  # before the bake: a run that fails on its report leaves no images
+        _check_report_path(bpy.path.abspath(args.report))
     try:
         world = None if args.distance is not None else gather.world_ao_distance(
             bpy.context.scene, bake=True)
@@ -286,6 +288,22 @@ def _with_progress(bake):
             bar.close()
         stop.check()  # a Ctrl-C while the writes were kept: nothing saved or reported
     return out
+
+
+def _check_report_path(path):
+    """Raise BakeFailed when the report could not be written at path (nothing changed yet)."""
+    import os
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        why = "is a folder; give a file name"
+    elif not os.path.isdir(folder):
+        why = f"is in a folder that does not exist ({folder})"
+    elif not os.access(folder, os.W_OK) or (os.path.exists(path)
+                                            and not os.access(path, os.W_OK)):
+        why = "cannot be written (permissions)"
+    else:
+        return
+    raise BakeFailed(f"--report {path} {why} (nothing was baked)")
 
 
 def _finish(args, rep):

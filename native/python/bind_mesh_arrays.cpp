@@ -75,10 +75,11 @@ void bind_mesh_arrays(py::module_& m) {
       "to_world(positions, normals, matrix=None) -> None\n\n"
       "Receivers into world space, in place: positions and normals float32 (N, 3), "
       "C-contiguous, writeable. matrix (4x4, row-major, e.g. an object's matrix_world): "
-      "positions become M p + t and normals the inverse transpose of M times n (a singular M "
-      "keeps their direction); None or the identity leaves positions untouched. Then every "
-      "normal is unit length: kept if its squared length is within 1e-6 of 1, (0, 0, 1) if it "
-      "is zero or not finite, else normalised. One parallel pass.");
+      "positions become M p + t and normals the inverse transpose of M times n (a singular M: "
+      "its cofactors, the normal of the face each becomes); None or the identity leaves "
+      "positions untouched. Then every normal is unit length: kept if its squared length is "
+      "within 1e-6 of 1, (0, 0, 1) if it is zero or not finite, else normalised. One parallel "
+      "pass.");
 
   m.def(
       "gray_rgba",

@@ -52,9 +52,12 @@ void to_world_in_place(float* positions, float* normals, std::size_t n, const do
         cof[i][k] = a[i1][k1] * a[i2][k2] - a[i1][k2] * a[i2][k1];
       }
     const double det = a[0][0] * cof[0][0] + a[0][1] * cof[0][1] + a[0][2] * cof[0][2];
-    if (det != 0 && std::isfinite(det))
-      for (int i = 0; i < 3; ++i)
-        for (int k = 0; k < 3; ++k) nm[i][k] = cof[i][k] / det;
+    // A singular A (a scale of 0 on an axis) has no inverse; its cofactors still map a
+    // face's normal to the normal of the face it becomes (cof(A)(a × b) = Aa × Ab), the
+    // geometric normal Cycles shades a flattened mesh's faces with.
+    const double scale = det != 0 && std::isfinite(det) ? 1.0 / det : 1.0;
+    for (int i = 0; i < 3; ++i)
+      for (int k = 0; k < 3; ++k) nm[i][k] = cof[i][k] * scale;
   }
   const bool move = matrix != nullptr;
   parallel_for_blocks(n, kGrain, [&](std::size_t b, std::size_t e) {

@@ -452,15 +452,20 @@ def test_cli_numbers_out_of_range_exit_2_with_a_message(tree_scene_objects, caps
     (".select_vert", "names one of Blender's own layers"),
     ("a" * 80, "longer than Blender's limit of 63 bytes"),
     ("UV", "names one of Blender's own layers"),
+    ("Weights", "names one of its vertex groups"),
 ])
 def test_attribute_names_blender_owns_or_shortens_are_refused(tree_scene_objects, capsys, name,
                                                                message):
-    """Even with --overwrite: a built-in attribute, a UV map's name or a name past Blender's
-    length limit is refused before anything is written (exit 1, a message, no traceback)."""
+    """Even with --overwrite: a built-in attribute, a UV map's or a vertex group's name (Blender
+    makes no attribute beside a vertex group of its name) or a name past Blender's length limit
+    is refused before anything is written (exit 1, a message, no traceback)."""
     from canopy_ao import cli
-    mesh = bpy.data.objects["Ground"].data
+    ground = bpy.data.objects["Ground"]
+    mesh = ground.data
     if name == "UV" and name not in mesh.uv_layers:
         mesh.uv_layers.new(name="UV")
+    if name == "Weights":
+        ground.vertex_groups.new(name="Weights")
     layers = sorted(a.name for a in mesh.attributes)
     with pytest.raises(SystemExit) as exc:
         cli.main(["--objects", "Ground", "--method", "sphere", "--attribute", name,
@@ -489,6 +494,24 @@ def test_a_mesh_in_edit_mode_is_refused_and_left_alone(tree_scene_objects, capsy
     assert ATTR not in ground.data.attributes
 
 
+def test_a_mesh_sculpted_with_dynamic_topology_is_refused_and_left_alone(tree_scene_objects,
+                                                                         capsys):
+    """Dynamic Topology keeps the mesh in a BMesh until Sculpt Mode is left, which then
+    replaces the mesh: a bake reported success and its attribute was gone on leaving."""
+    from canopy_ao import cli
+    ground = bpy.data.objects["Ground"]
+    bpy.context.view_layer.objects.active = ground
+    bpy.ops.object.mode_set(mode='SCULPT')
+    try:
+        bpy.ops.sculpt.dynamic_topology_toggle()
+        assert ground.use_dynamic_topology_sculpting
+        _refused(cli, capsys, ["--objects", "Ground", "--method", "sphere"],
+                 "Dynamic Topology")
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+    assert ATTR not in ground.data.attributes
+
+
 def test_objects_sharing_one_mesh_are_refused_by_name(tree_scene_objects, capsys):
     from canopy_ao import cli
     ground = bpy.data.objects["Ground"]
@@ -501,6 +524,57 @@ def test_objects_sharing_one_mesh_are_refused_by_name(tree_scene_objects, capsys
         assert ATTR not in ground.data.attributes
     finally:
         bpy.data.objects.remove(twin)
+
+
+def test_a_mesh_another_object_shares_is_named_when_one_is_baked(tree_scene_objects):
+    """Baked alone, one of two linked duplicates writes the mesh both show: the other shows AO
+    baked where the first stands, so the report names it (it said nothing)."""
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import run_bake
+    ground = bpy.data.objects["Ground"]
+    twin = ground.copy()  # a linked duplicate (Alt+D): the same mesh datablock
+    twin.name = "GroundTwin"
+    bpy.context.scene.collection.objects.link(twin)
+    try:
+        opts = dict(properties.scene_options(bpy.context.scene), method="sphere", tau=2.0)
+        _job, rep = run_bake(bpy.context, ["Ground"], opts)
+        assert any(n.startswith("Ground: its mesh is also GroundTwin's") for n in rep["notes"]), \
+            rep["notes"]
+        _job, rep = run_bake(bpy.context, ["Leaves"], opts)
+        assert not any("also" in n and "mesh" in n for n in rep["notes"]), rep["notes"]
+    finally:
+        bpy.data.objects.remove(twin)
+
+
+def test_an_object_named_twice_is_baked_once(tree_scene_objects, capsys):
+    """A name listed twice is one target (it was refused as two objects sharing one mesh)."""
+    from canopy_ao import cli
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--objects", "Ground", "Ground", "--method", "sphere", "--tau", "2"])
+    out, err = capsys.readouterr()
+    assert exc.value.code == 0, err
+    assert [l for l in out.splitlines() if l.startswith("Ground:")] != []
+    assert len([l for l in out.splitlines() if l.startswith("Ground:")]) == 1, out
+    assert ATTR in bpy.data.objects["Ground"].data.attributes
+
+
+@pytest.mark.parametrize("where", ["missing folder", "a folder"])
+def test_a_report_that_cannot_be_written_is_refused_before_the_bake(tree_scene_objects, capsys,
+                                                                   tmp_path, where):
+    """--report naming a file in a folder that does not exist, or a folder: refused before the
+    bake (exit 1, a message naming the path), so no image file is left for a run that failed
+    (the bake wrote its images, then failed on the report)."""
+    from canopy_ao import cli
+    report = tmp_path / "no" / "r.json" if where == "missing folder" else tmp_path
+    images = tmp_path / "images"
+    mesh = bpy.data.objects["Ground"].data
+    xy = np.array([mesh.vertices[l.vertex_index].co[:2] for l in mesh.loops])
+    mesh.uv_layers.new(name="UVMap").data.foreach_set(
+        "uv", ((xy - xy.min(0)) / np.ptp(xy, 0)).astype(np.float32).ravel())
+    _refused(cli, capsys, ["--objects", "Ground", "--method", "sphere", "--tau", "2",
+                           "--mode", "texel", "--resolution", "16", "--image-dir", str(images),
+                           "--report", str(report)], "--report")
+    assert not images.exists() or list(images.iterdir()) == []
 
 
 def test_linked_library_meshes_are_refused(tree_scene_objects, capsys, tmp_path):
@@ -563,6 +637,23 @@ def test_operator_number_without_its_switch_is_used(tree_scene_objects):
     with pytest.raises(RuntimeError, match="calibrate_tau"):
         bpy.ops.canopy_ao.bake(objects="Ground,Leaves", method="sphere", tau=0.0)
 
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(samples=0), "samples must be an integer in \\[1, 65536\\], got 0"),
+    (dict(samples=100_000), "got 100000"),
+    (dict(distance=-1.0, use_world_distance=False), "got -1.0"),
+    (dict(time_budget=-1.0), "time_budget"),
+    (dict(mode='TEXEL', resolution=0), "resolution must be"),
+])
+def test_the_operator_refuses_numbers_out_of_range_as_the_cli_does(tree_scene_objects, kw,
+                                                                   message):
+    """Out of range, bpy.ops.canopy_ao.bake(...) refuses as the command line does (exit 2
+    there): Blender clamped it silently before, so samples=0 baked 1 ray and distance=-1
+    baked unlimited rays, both reported as done."""
+    with pytest.raises(RuntimeError, match=message):
+        bpy.ops.canopy_ao.bake(objects="Ground", method="raytrace", **kw)
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
 
 
 def _break_evaluation(monkeypatch):

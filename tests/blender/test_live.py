@@ -411,6 +411,25 @@ def test_a_cancelled_frame_range_bake_leaves_nothing_behind(animated):
         frames.FrameBake(bpy.context, [], opts(), 5, 3)
 
 
+def test_frames_blender_cannot_show_or_a_cache_that_would_not_fit_are_refused(animated,
+                                                                             monkeypatch):
+    """Frames past Blender's ±1048574 (frame_set stops there: each would cache that frame's AO
+    under another frame's name), and a cache whose frames would not fit in memory (it was
+    evaluated frame by frame until the machine ran out): refused, nothing written."""
+    before = {n: sorted(a.name for a in animated.objects[n].data.attributes) for n in NAMES}
+    with pytest.raises(CanopyAOError, match="1048574"):
+        frames.FrameBake(bpy.context, list(NAMES), opts(), 1048570, 1048580)
+    with pytest.raises(CanopyAOError, match="1048574"):
+        frames.FrameBake(bpy.context, list(NAMES), opts(), -1048580, -1048570)
+    from canopy_ao.core import texel_budget
+    monkeypatch.setattr(texel_budget, "available_bytes", lambda: 10_000)
+    with pytest.raises(CanopyAOError, match="frame cache .* needs about"):
+        frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 9).run()
+    assert {n: sorted(a.name for a in animated.objects[n].data.attributes)
+            for n in NAMES} == before
+    assert all(not o.modifiers for o in animated.objects)
+
+
 def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_path,
                                                                  user_scripts):
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))

@@ -95,6 +95,9 @@ def test_user_image_never_overwritten(scene, tmp_path):
     image, _ = texel.bake_texel(bpy.context, obj, _ramp, resolution=16, image_dir=str(tmp_path))
     assert image != user and image.get("canopy_ao") and not user.get("canopy_ao")
     assert user.size[0] == 4 and np.allclose(_pixels(user), 0.9)
+    # Nor renamed: Blender 3.4 gives a name set on one image to it and renames the image that
+    # had it (the user's became Plane_CanopyAO.001, and whatever found it by name lost it).
+    assert user.name == "Plane_CanopyAO" and image.name != user.name
 
 
 def test_overlapping_uvs_warn_with_object_name(scene, tmp_path):

@@ -108,6 +108,18 @@ def test_an_operator_bakes_an_object_whatever_its_name(scene, tmp_path, name):
     assert bpy.ops.canopy_ao.remove_wiring(objects=name) == {'FINISHED'}
 
 
+def test_an_image_folder_blender_could_not_load_from_is_refused_before_writing(scene,
+                                                                               tmp_path):
+    """A backslash is a folder name's letter on Linux but a separator to Blender, which then
+    could not load the image written there: the bake failed with an internal error after
+    writing the file. Refused by name before anything is written."""
+    H.add_plane(name="Ground")
+    folder = tmp_path / "a\\b"
+    with pytest.raises(RuntimeError, match="backslash"):
+        _bake(folder, "Ground")
+    assert not folder.exists() and not [i for i in bpy.data.images if i.get("canopy_ao")]
+
+
 @pytest.mark.parametrize("udim", [False, True])
 def test_uvs_reaching_past_the_baked_square_are_named(scene, tmp_path, udim):
     """A UV map reaching past 0–1 (or past a UDIM tile) baked only what lies inside, without a

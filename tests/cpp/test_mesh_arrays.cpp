@@ -86,13 +86,22 @@ TEST(MeshArrays, AffineTransformAndInverseTransposeNormals) {
   to_world_in_place(q.data(), up.data(), 1, mirror);
   EXPECT_FLOAT_EQ(q[0], -1);
   EXPECT_FLOAT_EQ(up[0], -1);
-  // A singular matrix (scale 0 on z) keeps the normals' direction.
+  // A singular matrix (scale 0 on z): the cofactors, which turn a face's normal into that of
+  // the face it becomes (along z); one in the plane has no direction left, as a zero normal.
   const double flat[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1};
-  std::vector<float> r = {1, 2, 3}, nz = {0, 0.6f, 0.8f};
-  to_world_in_place(r.data(), nz.data(), 1, flat);
+  std::vector<float> r = {1, 2, 3, 0, 0, 0}, nz = {0, 0.6f, 0.8f, 0.6f, 0.8f, 0};
+  to_world_in_place(r.data(), nz.data(), 2, flat);
   EXPECT_FLOAT_EQ(r[2], 0);
-  EXPECT_FLOAT_EQ(nz[1], 0.6f);
-  EXPECT_FLOAT_EQ(nz[2], 0.8f);
+  EXPECT_FLOAT_EQ(nz[1], 0);
+  EXPECT_FLOAT_EQ(nz[2], 1);
+  EXPECT_FLOAT_EQ(nz[5], 1);
+  // Flattened on z, then stood up about x: the quad's normal is its world geometric normal,
+  // (1, 0, 0) × (0, 0, 1) = -y, not the object's +z unrotated.
+  const double stood[16] = {1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 1};
+  std::vector<float> w = {1, 2, 3}, face = {0, 0, 1};
+  to_world_in_place(w.data(), face.data(), 1, stood);
+  EXPECT_FLOAT_EQ(face[1], -1);
+  EXPECT_NEAR(face[2], 0, 1e-6);
 }
 
 TEST(MeshArrays, ThreadCountDoesNotChangeResults) {

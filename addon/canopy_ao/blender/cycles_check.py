@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from ..core import metrics
-from . import materials
+from . import materials, mesh_io
 
 __all__ = ["bake_cycles_vertex_ao", "bake_cycles_texel_ao", "write_error_attribute",
            "check_objects", "check_texel", "render_settings_snapshot"]
@@ -314,14 +314,15 @@ def check_objects(context, objects, ours, distance, samples, write_errors=False,
     for o in objects:
         a = np.asarray(ours[o.name], dtype=np.float32)
         r = ref[o.name]
-        m = metrics.compare(a, r)
-        unburied = metrics.compare(a, r, mask=r > buried_threshold)
+        used = mesh_io.cornered_vertices(o.data)
+        m = metrics.compare(a, r, mask=used)
+        unburied = metrics.compare(a, r, mask=used & (r > buried_threshold))
         m["time_cycles"] = t_bake
         m["n_buried"] = m["n"] - unburied["n"]
         for k in ("mae", "rmse", "corr"):
             m[k + "_unburied"] = unburied[k]
         if write_errors:
-            write_error_attribute(o, a - r)
+            write_error_attribute(o, np.where(used, a - r, 0.0))
         report[o.name] = m
     return report
 

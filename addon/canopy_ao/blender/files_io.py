@@ -98,6 +98,10 @@ def image_path(obj, image_dir, notes, suffix="CanopyAO", make=True, fmt="EXR"):
         d = unsaved_folder()
         notes.append(f"the .blend is not saved yet; the image went to {d} (bake again once "
                      "the .blend is saved)")
+    if os.sep == "/" and "\\" in d:  # a letter here, a separator when Blender loads the image
+        raise CanopyAOError(f"the image folder '{d}' holds a backslash, which Blender reads as "
+                            "a folder separator, so it could not load the image written there; "
+                            "choose a folder without one (nothing was changed)")
     try:
         if make:
             os.makedirs(d, exist_ok=True)

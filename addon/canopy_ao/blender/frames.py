@@ -16,7 +16,11 @@ from .commit import Transaction
 from .frame_cache import GROUP_TAG, MODIFIER, attach, cache_name, clear, node_group
 from .job import BakeJob
 from .modal import start_modal
+from ..core import texel_budget
 from ..core.native import CanopyAOError
+
+# Blender's last frame either way (MAXFRAME): frame_set stops there.
+MAX_FRAME = 1048574
 
 
 class FrameBake:
@@ -26,6 +30,11 @@ class FrameBake:
         start, end = int(start), int(end)
         if end < start:
             raise CanopyAOError(f"the frame range {start}-{end} is empty (end before start)")
+        if max(abs(start), abs(end)) > MAX_FRAME:
+            raise CanopyAOError(f"the frame range {start}-{end} reaches past Blender's frames "
+                                f"(-{MAX_FRAME} to {MAX_FRAME}), where every frame shows the "
+                                "last one's scene; choose a range within them (nothing was "
+                                "changed)")
         live_session.check_request(opts)
         if opts.get("gltf") or opts.get("packing", "NONE") != "NONE":
             raise CanopyAOError("a frame-range bake caches grey AO per frame, read back by a "
@@ -71,6 +80,13 @@ class FrameBake:
 
     def _check_names(self):
         o = self.opts
+        # Every frame's AO is held until the commit writes it: twice the cache at the end.
+        verts = sum(len(self.scene.objects[n].data.vertices) for n in self.session.targets)
+        need, have = 8 * verts * len(self.frames), texel_budget.available_bytes()
+        if have is not None and need > have:
+            raise CanopyAOError(f"a frame cache of {len(self.frames):,} frames × {verts:,} "
+                                f"vertices needs about {need:,} bytes but only {have:,} are "
+                                "available; bake a shorter range (nothing was changed)")
         for name in self.session.targets:
             obj = self.scene.objects[name]
             for n in [o["attribute"]] + [cache_name(o["attribute"], f) for f in self.frames]:

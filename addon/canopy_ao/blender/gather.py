@@ -99,6 +99,11 @@ def is_candidate(obj):
     return obj.type == 'MESH' and not obj.get(mesh_io.PROXY_PROP)
 
 
+# Objects Cycles renders as the mesh Blender makes of them (Object > Convert > Mesh): they
+# occlude as that mesh, a role guessed for it as for any mesh; never targets.
+SOLID_TYPES = frozenset(('CURVE', 'SURFACE', 'FONT', 'META'))
+
+
 def object_names(text):
     """The names an operator's ``objects`` argument gives: the whole text when it is an
     object's exact name (one with a comma, or spaces at its ends), else the comma-separated
@@ -108,7 +113,7 @@ def object_names(text):
     return [s.strip() for s in text.split(",") if s.strip()]
 
 
-def bake_targets(context, object_names, opts=None, on_mesh=True):
+def bake_targets(context, object_names, opts=None, on_mesh=True, notes=None):
     """The objects a bake writes: the named ones, else the selected meshes, else every visible
     mesh that renders and occludes (visibility.py) and holds a result: not an instancer whose
     modifiers leave it no vertices of its own (geometry nodes scattering leaves), nor, per
@@ -116,10 +121,12 @@ def bake_targets(context, object_names, opts=None, on_mesh=True):
     scattered leaves): those only occlude. Raises CanopyAOError when there are none, a name is
     wrong, a target casts no shadow (Cycles' AO of it leaves it out of its own rays, which a
     bake here cannot do) or does not render (it would occlude the other targets, which Cycles
-    does not)."""
+    does not). notes: a list to which a line is added per target whose mesh (on_mesh: the
+    result is written onto it) other objects show too."""
     scene = context.scene
     vis = RenderVisibility(context.view_layer)
     if object_names:
+        object_names = list(dict.fromkeys(object_names))  # a name given twice is one target
         missing = [n for n in object_names if n not in scene.objects]
         if missing:
             raise CanopyAOError(f"no object named {', '.join(missing)} in scene "
@@ -139,6 +146,19 @@ def bake_targets(context, object_names, opts=None, on_mesh=True):
     if not targets:
         raise CanopyAOError("nothing to bake: no mesh objects selected or visible")
     check_writable(targets, on_mesh)
+    for o in targets if on_mesh and notes is not None else ():
+        others = sorted(x.name for x in scene.objects if x.data == o.data and x not in targets
+                        ) if o.data.users > 1 else ()
+        if others:  # linked duplicates: each shows the one result, baked where o stands
+            notes.append(f"{o.name}: its mesh is also {', '.join(others)}'s, so they show this "
+                         f"AO too, baked where {o.name} stands; give each its own mesh "
+                         "(Object > Relations > Make Single User) to bake each")
+    custom = [o.name for o in targets if getattr(o.data, "has_custom_normals", False)
+              and getattr(o.data, "use_auto_smooth", True)]  # before 4.1: used with it only
+    if custom and notes is not None:
+        notes.append(f"{', '.join(custom)}: custom split normals, which Cycles' bake follows "
+                     "and this one only in part (per vertex it takes the vertex normals): the "
+                     "two differ where they part from the faces' own normals")
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
@@ -175,6 +195,12 @@ def check_writable(targets, on_mesh=True):
     if editing:
         raise CanopyAOError(f"{', '.join(editing)}: in Edit Mode; leave it (Tab) and bake "
                             "again (nothing was changed)")
+    dyntopo = [o.name for o in targets
+               if o.mode == 'SCULPT' and getattr(o, "use_dynamic_topology_sculpting", False)]
+    if dyntopo:  # its mesh lives in a BMesh, which replaces the mesh when the mode is left
+        raise CanopyAOError(f"{', '.join(dyntopo)}: sculpted with Dynamic Topology, whose "
+                            "mesh replaces the object's when Sculpt Mode is left; leave it or "
+                            "turn Dyntopo off and bake again (nothing was changed)")
     linked = [o.name for o in targets if o.library is not None or o.data.library is not None]
     if linked:
         raise CanopyAOError(f"{', '.join(linked)}: linked from another .blend file, so a bake "
@@ -225,6 +251,14 @@ def _viewport_notes(context, depsgraph, vis, members):
         notes.append(f"{', '.join(differ)}: modifiers set differently for viewport and render "
                      "(shown in one only, or other subdivision levels): the bake reads the "
                      "viewport's shape, Cycles renders the other")
+    strands = sorted(o.name for o in context.scene.objects if vis.object_renders(o) and (any(
+        p.settings.render_type == 'PATH' and p.settings.count for p in o.particle_systems)
+        or o.type == 'CURVES' and len(o.evaluated_get(depsgraph).data.curves)))
+    if strands:
+        notes.append(f"{', '.join(strands)}: hair drawn as strands (hair curves, or particles "
+                     "rendered as Path), which Cycles renders and which occludes there, is not "
+                     "traced here; render it as an object or collection (a blade) for it to "
+                     "occlude")
     hidden = sorted(o.name for o in context.scene.objects
                     if _instances_anything(o) and vis.object_renders(o)
                     and not o.visible_get(view_layer=context.view_layer))
@@ -236,7 +270,8 @@ def _viewport_notes(context, depsgraph, vis, members):
 
 def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     """Every mesh Cycles renders (visibility.py: trees shade a selected ground, also when hidden
-    in the viewport) and every target as SceneItems.
+    in the viewport), every curve, text, surface and metaball it renders (SOLID_TYPES, as the
+    mesh Blender makes of it) and every target as SceneItems.
 
     Returns (items, objects {name: object}, how {name: why this role}); IGNORE objects are left
     out. Triangles are fetched only where the bake or a role guess needs them. notes: a list to
@@ -244,7 +279,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
     so the depsgraph did not evaluate it)."""
     vis = RenderVisibility(context.view_layer)
     members = {o.name: o for o in context.scene.objects
-               if is_candidate(o) and vis.mesh_renders(o)}
+               if (is_candidate(o) or o.type in SOLID_TYPES) and vis.mesh_renders(o)}
     if notes is not None:
         notes.extend(_viewport_notes(context, depsgraph, vis, members))
     for o in targets:

@@ -68,7 +68,7 @@ def instance_matrices(depsgraph):
         if not inst.is_instance:
             continue
         ob = inst.instance_object
-        if ob is None or ob.type != 'MESH':
+        if ob is None or (ob.type != 'MESH' and ob.type not in gather.SOLID_TYPES):
             continue
         orig = ob.original
         parent = inst.parent.original if inst.parent is not None else None
@@ -121,9 +121,10 @@ class Prototypes:
         for name, (obj, mats, parents) in instance_matrices(depsgraph).items():
             self.instancers[name] = parents
             asked = targets is None or name in targets or bool(parents & set(targets))
-            try:
-                pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=True)
-                if vertex_mode and asked:
+            try:  # a curve, text, surface or metaball occludes as its mesh, never written
+                pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph,
+                                                          same_count=obj.type == 'MESH')
+                if vertex_mode and asked and obj.type == 'MESH':
                     self.writable.add(name)
             except mesh_io.MeshIOError:
                 pos, nor, tris = mesh_io.evaluated_arrays(obj, depsgraph, same_count=False)

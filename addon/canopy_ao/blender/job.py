@@ -50,10 +50,11 @@ class BakeJob:
         self.lines = []
         checks.check_request(opts)  # what needs no geometry: refused before any work
         self.kind = KINDS[opts["mode"]]
-        targets = gather.bake_targets(context, object_names, opts, on_mesh=self.kind.on_mesh)
+        self.gather_notes = []
+        targets = gather.bake_targets(context, object_names, opts, on_mesh=self.kind.on_mesh,
+                                      notes=self.gather_notes)
         target_names = {o.name for o in targets}
         depsgraph = context.evaluated_depsgraph_get()
-        self.gather_notes = []
         self.items, self.objects, self.how = gather.scene_items(
             context, depsgraph, targets, opts, self.timings, notes=self.gather_notes)
         # Every target's receivers, read now: vertices, or texels rasterised from its UVs.

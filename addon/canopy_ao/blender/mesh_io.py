@@ -57,7 +57,7 @@ def evaluated_is_original(obj):
     mode (whose data lives in a BMesh until it is left), and no armature / lattice / curve
     parent deforming it (a "virtual" modifier, not in obj.modifiers)."""
     me = obj.data
-    return (not obj.modifiers and me.shape_keys is None and not me.is_editmode
+    return (isinstance(me, bpy.types.Mesh) and not obj.modifiers and me.shape_keys is None and not me.is_editmode
             and (obj.parent is None or obj.parent_type in ('OBJECT', 'VERTEX', 'VERTEX_3',
                                                              'BONE')))
 
@@ -146,6 +146,16 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     return pos, nor, tris
 
 
+def cornered_vertices(mesh):
+    """bool (V,): the vertices a face uses. Cycles bakes face corners, so a loose vertex keeps
+    0 in its vertex bake, whatever lights it: a Cycles check compares only these."""
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    corners = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", corners)
+    used[corners] = True
+    return used
+
+
 def _to_world(co, nor, matrix_world):
     """Positions and unit normals (float32 (V, 3), modified in place) in world space: one
     native pass (mesh_arrays.h), which skips the transform for an identity matrix and keeps
@@ -176,6 +186,9 @@ def check_attribute(obj, name, overwrite):
     if name.startswith(".") or name in BUILTIN_ATTRIBUTES or name in obj.data.uv_layers:
         return (f"{obj.name}: '{name}' names one of Blender's own layers (a built-in "
                 "attribute or a UV map); choose another attribute name")
+    if name in obj.vertex_groups:  # Blender makes no attribute beside it (new() gives None)
+        return (f"{obj.name}: '{name}' names one of its vertex groups; choose another "
+                "attribute name or rename the vertex group")
     if overwrite or obj.data.attributes.get(name) is None:
         return None
     state = ownership(obj.data, name)

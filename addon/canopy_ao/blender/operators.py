@@ -251,7 +251,7 @@ class CANOPY_AO_OT_remove_wiring(bpy.types.Operator):
         return self.execute(context)
 
 
-CANOPY_AO_OT_bake.__annotations__.update(option_properties())
+CANOPY_AO_OT_bake.__annotations__.update(option_properties(hard=False))
 
 classes = (CANOPY_AO_OT_bake, CANOPY_AO_OT_guess_roles, CANOPY_AO_OT_remove_wiring)
 

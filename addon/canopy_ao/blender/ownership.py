@@ -145,3 +145,14 @@ def mark_owned(obj, name, values=None):
     values, the flat LAYOUT array just written (read back when not given)."""
     attr = obj.data.attributes[name]
     set_record(obj.data, name, attribute_fingerprint(attr, values))
+
+
+def free_name(collection, name, own=None):
+    """name, or name.001, name.002 … when a datablock of collection (bpy.data.images, say)
+    other than own holds it: setting a taken name takes it from its holder (Blender 3.4
+    renames the user's datablock), so a bake only ever sets a free one."""
+    free, i = name, 0
+    while collection.get(free) not in (None, own):
+        i += 1
+        free = f"{name}.{i:03d}"
+    return free

@@ -10,25 +10,27 @@ from ..core.settings import OPTIONS
 from .gather import world_ao_distance
 
 
-def _number_kw(o):
+def _number_kw(o, hard):
+    """The range of o's field: hard, Blender clamps a value typed or given to it; soft, only
+    the slider stops there (the bake's own check refuses a value outside, naming it)."""
     kw = {}
     if o.min is not None:
-        kw["min"] = o.min
+        kw["min" if hard else "soft_min"] = o.min
     if o.max is not None:
-        kw["max"] = o.max
+        kw["max" if hard else "soft_max"] = o.max
     if o.soft_max is not None:
         kw["soft_max"] = o.soft_max
     return kw
 
 
-def _property(o):
+def _property(o, hard=True):
     """The bpy property of one option (its number, for an optional one)."""
     kw = dict(name=o.label, description=o.help)
     if o.kind == "float":
         default = o.number_default if o.none_prop else o.default
-        return FloatProperty(default=default, unit=o.unit, **_number_kw(o), **kw)
+        return FloatProperty(default=default, unit=o.unit, **_number_kw(o, hard), **kw)
     if o.kind == "int":
-        return IntProperty(default=o.default, **_number_kw(o), **kw)
+        return IntProperty(default=o.default, **_number_kw(o, hard), **kw)
     if o.kind == "bool":
         return BoolProperty(default=o.default, **kw)
     if o.kind == "str":
@@ -40,15 +42,17 @@ def _property(o):
     return EnumProperty(items=items, default=o.default, **kw)
 
 
-def option_properties():
+def option_properties(hard=True):
     """{name: bpy property} for every option, and the None switch of optional numbers
-    (calibrate_tau), in OPTIONS order."""
+    (calibrate_tau), in OPTIONS order. hard=False (the operator's arguments): numbers are not
+    clamped, so one out of range reaches the bake's check and is refused, as on the command
+    line, instead of baking another number (samples=0 as 1 ray)."""
     out = {}
     for o in OPTIONS:
         if o.none_prop:
             out[o.none_prop] = BoolProperty(name=o.none_label, description=o.none_help,
                                             default=o.default is None)
-        out[o.name] = _property(o)
+        out[o.name] = _property(o, hard)
     return out
 
 

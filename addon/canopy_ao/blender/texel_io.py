@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import materials, mesh_io, texel_points
+from . import materials, mesh_io, ownership, texel_points
 from .files_io import Output, check_outputs, image_path, write_own_file
 from ..core import texel_budget
 # Kept under their old names for code that writes image files of its own through texel_io.
@@ -274,10 +274,10 @@ def load_image(obj, path, suffix="CanopyAO", key=OBJ_KEY, name=None, numbers=Non
         def undo():
             _retile(img, *old)
     else:
-        # Never touches a user image of the same name: load() makes a new datablock and Blender
-        # gives it a free name.
+        # Never touches a user image of the same name: load() makes a new datablock, and it
+        # takes a free name (a taken one would be taken from the user's image).
         img = bpy.data.images.load(path, check_existing=False)
-        img.name = name or f"{value}_{suffix}"
+        img.name = ownership.free_name(bpy.data.images, name or f"{value}_{suffix}", img)
         img[TAG] = True
         img[key] = value
         img[MAP_KEY] = suffix

@@ -112,5 +112,6 @@ class VertexTarget(Target):
                 rep["notes"].append(f"{name}: Cycles check skipped (its modifiers change "
                                     "the vertex count)")
             elif name in ref:
+                used = mesh_io.cornered_vertices(t.obj.data)
                 rep["objects"][name]["cycles"] = {
-                    k: float(v) for k, v in metrics.compare(t.ao, ref[name]).items()}
+                    k: float(v) for k, v in metrics.compare(t.ao, ref[name], mask=used).items()}

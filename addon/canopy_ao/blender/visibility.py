@@ -67,9 +67,10 @@ class RenderVisibility:
                 and casts_shadow(obj))
 
     def mesh_renders(self, obj):
-        """object_renders, and for an instancer (particles, vertices, faces) its own mesh shown
-        in renders (Show Instancer)."""
-        return self.object_renders(obj) and (not obj.is_instancer
+        """object_renders, and for an instancer (vertices, faces) or a particle emitter (hair
+        too: Blender's BKE_object_visibility) its own mesh shown in renders (Show Instancer,
+        Show Emitter)."""
+        return self.object_renders(obj) and (not (obj.is_instancer or len(obj.particle_systems))
                                              or obj.show_instancer_for_render)
 
     def instance_renders(self, obj, instancer):

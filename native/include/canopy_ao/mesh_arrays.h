@@ -16,7 +16,8 @@ constexpr double kUnitNormalSlack = 1e-6;
 
 /// Receivers in world space, in place: positions (n rows of 3 floats) become M·p + t, normals
 /// the inverse transpose of M times n (non-uniform scale; M = the upper-left 3×3 of `matrix`,
-/// row-major 4×4; a singular M leaves the normals' direction as it is), computed in double.
+/// row-major 4×4; a singular M, a scale of 0 on an axis, has its cofactors instead: the normal
+/// of the face each becomes, cof(M)(a × b) = Ma × Mb), computed in double.
 /// matrix == nullptr (or the identity) leaves positions untouched. Then every normal is made
 /// unit length: within kUnitNormalSlack of unit it is kept, a zero or non-finite one becomes
 /// (0, 0, 1), any other is normalised. Rows are independent (parallel_for_blocks).
