@@ -104,8 +104,9 @@ def bole(plan: Plan, item: SceneItem) -> list:
 
 def fit_scene(plan: Plan, items) -> None:
     """Fill plan.fits (per tree, from its CANOPY points), plan.trunks (solid ellipsoids per
-    trunk, one fitted to each piece of its bole), plan.grass (ground level and blade height per grass item) and
-    plan.grass_layers (each grass field as an occluder of the ground under it)."""
+    trunk, one fitted to each piece of its bole), plan.grass (ground level and blade height per
+    grass item) and plan.grass_layers (each grass field as an occluder of the ground under
+    it)."""
     trees = {}
     for it in items:
         # a card's points where it is opaque (card_area.counted_points): none when all clear
