@@ -1,7 +1,8 @@
-"""A trunk's solid occluders are fitted per piece of its bole (core/proxies.py, bole): a stem
-and two low branches reaching out of the crown, each its own tube as Sapling makes them. One
-ellipsoid over all three was a slab metres wide, opaque over the ground the thin branches
-hardly shade; each proxy rung's ground under them is held near the traced one."""
+"""A trunk's solid occluders (core/proxies.py, bole and bole_solids): a stem and three low
+branches reaching out of the crown, each its own tube as Sapling makes them. One ellipsoid
+over all four is a ball metres wide, opaque over the ground the thin branches hardly shade, so
+each piece is its own solid and each proxy rung's ground under them is held near the traced
+one; stems bundled in a tight fork stay one solid."""
 
 import numpy as np
 import pytest
@@ -113,3 +114,36 @@ def test_a_trunk_without_faces_is_one_piece():
     plan = core.prepare([items[0], bare, items[2]], core.BakeSettings(method="sphere", tau=1.5,
                                                                       distance=20.0))
     assert len(proxies.bole(plan, bare)) == 1
+
+
+def test_a_tight_fork_at_the_foot_is_one_solid():
+    """Two stems bundled at the foot (one leaning 0.05 off the other, inside each other's
+    hull): one ellipsoid over both is no larger than theirs together, so it is kept (as on the
+    Sapling japanese maple, whose three forked pieces under the crown are one solid)."""
+    its = _items()
+    a = _tube((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), STEM, 0.15, rings=24)
+    b = _tube((0.0, 0.0, 0.3), (0.05, 0.0, 1.0), STEM - 0.3, 0.12, rings=24)
+    p = np.concatenate([a[0], b[0]])
+    t = np.concatenate([a[1], b[1] + len(a[0])]).astype(np.int32)
+    its[1] = core.SceneItem("Trunk", "TRUNK", "T", p, vertex_normals(p, t), t)
+    plan, _ = _ground(its, "sphere")
+    (solid,) = plan.trunks["T"]
+    assert len(proxies.bole(plan, its[1])) == 2
+    assert max(solid.radii) > 3.0 and sorted(solid.radii)[1] < 0.3
+
+
+def test_a_piece_with_few_points_outside_the_crown_is_left_to_it():
+    """A branch's base poking out of the crown's proxy (here: a 6-point stub, fewer than
+    MIN_BOLE) joins no solid: fitted with the stem into one ellipsoid it widened it to a slab
+    (the Sapling aspen's ground under the sphere 0.04 too dark)."""
+    stem = _tube((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), STEM, 0.15, rings=24)
+    stub = _tube((0.4, 0.0, 2.0), (1.0, 0.0, 0.2), 0.6, 0.04, rings=2, sides=3)
+    assert len(stub[0]) < proxies.MIN_BOLE
+    p = np.concatenate([stem[0], stub[0]])
+    t = np.concatenate([stem[1], stub[1] + len(stem[0])]).astype(np.int32)
+    ground = _items()[0]
+    trunk = core.SceneItem("Trunk", "TRUNK", "T", p, vertex_normals(p, t), t)
+    plan = core.prepare([ground, trunk], core.BakeSettings(method="sphere", tau=1.5,
+                                                           distance=20.0))
+    (solid,) = plan.trunks["T"]
+    assert sorted(solid.radii)[1] < 0.25, tuple(solid.radii)  # the stem's alone

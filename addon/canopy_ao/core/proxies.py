@@ -78,12 +78,12 @@ def bole(plan: Plan, item: SceneItem) -> list:
     float32 (K, 3) array per connected piece of the mesh (a stem, a branch tube: Sapling
     bevels each on its own) with at least MIN_BOLE points there. Branches inside the crown are
     already in the canopy's medium; an ellipsoid fitted to them too would be a solid as big as
-    the crown (it darkened the ground by 0.1 on the grove). Per piece, because a low branch
-    reaching out of the crown with the stem made one ellipsoid a slab metres wide over the
-    stem and the branch together, opaque where the truth is two thin tubes: the ground of the
-    Sapling aspen 0.04 too dark under the sphere, the white birch's 0.017 under the ellipsoid
-    (docs/DESIGN.md, 'How each role is lit'). A mesh of one piece (a welded tree) is one
-    solid, as before; a mesh without faces is one piece."""
+    the crown (it darkened the ground by 0.1 on the grove). A piece with fewer points outside
+    is a branch's base poking out of the crown's proxy, the crown's: fitted with the stem into
+    one ellipsoid, such bases made it a slab metres wide, opaque over the ground (the Sapling
+    aspen's 0.04 too dark under the sphere, whose narrow bottom the lowest branches leave; the
+    white birch's 0.017 under the ellipsoid; docs/DESIGN.md, 'How each role is lit'). A mesh
+    without faces is one piece."""
     p = item.positions
     inside = np.zeros(len(p), bool)
     if item.tree in plan.fits:
@@ -102,9 +102,24 @@ def bole(plan: Plan, item: SceneItem) -> list:
             if len(g) >= MIN_BOLE]
 
 
+def bole_solids(plan: Plan, item: SceneItem) -> list:
+    """The solid ellipsoids standing for a trunk's bole (bole): one over all its pieces where
+    it is no larger than their own ellipsoids together (pieces bundled where a stem forks,
+    each inside the others' hull), else one per piece (branches reaching out of the crown
+    apart: one ellipsoid over them would be mostly air). Volumes are compared, so the choice
+    is scale-free."""
+    pieces = bole(plan, item)
+    solids = [_core.fit_ellipsoid(b) for b in pieces]
+    if len(solids) < 2:
+        return solids
+    whole = _core.fit_ellipsoid(np.ascontiguousarray(np.concatenate(pieces)))
+    volume = lambda e: float(np.prod(np.asarray(e.radii, np.float64)))  # noqa: E731 (× 4π/3)
+    return [whole] if volume(whole) <= sum(map(volume, solids)) else solids
+
+
 def fit_scene(plan: Plan, items) -> None:
     """Fill plan.fits (per tree, from its CANOPY points), plan.trunks (solid ellipsoids per
-    trunk, one fitted to each piece of its bole), plan.grass (ground level and blade height per
+    trunk, fitted to its bole: bole_solids), plan.grass (ground level and blade height per
     grass item) and plan.grass_layers (each grass field as an occluder of the ground under
     it)."""
     trees = {}
@@ -122,8 +137,9 @@ def fit_scene(plan: Plan, items) -> None:
             plan.shell_labels[tree] = labels
     for it in items:
         if it.role == "TRUNK":
-            for b in bole(plan, it):
-                plan.trunks.setdefault(it.tree, []).append(_core.fit_ellipsoid(b))
+            solids = bole_solids(plan, it)
+            if solids:
+                plan.trunks.setdefault(it.tree, []).extend(solids)
         if it.role == "GRASS":
             plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
             layer = grass_layer(it.name, it.positions, it.triangles, *plan.grass[it.name],
