@@ -248,3 +248,20 @@ def test_a_warm_state_of_other_points_is_ignored():
     cold = _core.fit_ellipsoid(moved)
     vol = float(np.prod(np.asarray(warm.radii, np.float64) / np.asarray(cold.radii)))
     assert abs(vol - 1.0) < 5e-3 and not same(warm, cold)
+
+
+def test_the_ray_free_rung_holds_the_ground_as_the_proxy_rungs_do():
+    """The ray-free rung multiplies the GROUND patches in (Rung.ground_patches): a live bake's
+    frames hold a ground alone's occlusion from the first bake as the proxy rungs' do, so the
+    first frame shows the bake; without it the leaves facing down read too bright."""
+    items = scene_items(0.0)
+    settings = core.BakeSettings(method="regression", tau=1.7)
+    baked = core.prepare(items, settings)
+    first = core.prepare(items, settings, live=True)
+    held = live.held_ground(first, items, {"Leaves", "Trunk"})
+    assert set(held) == {"Leaves", "Trunk"} and held["Leaves"].min() < 0.9
+    still, same = _regression_frame(first, 0.0)
+    assert same.walls == []
+    want, bare = leaves_ao(baked, items), leaves_ao(same, still)
+    assert np.abs(bare * held["Leaves"] - want).mean() < 0.005
+    assert np.abs(bare - want).mean() > 0.01

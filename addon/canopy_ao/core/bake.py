@@ -107,7 +107,7 @@ def prepare(items, settings: BakeSettings, prototypes=None, targets=None,
                 plan.regression = regression.RegressionRung(
                     items, settings.distance, points=regression.POINTS,
                     samples=settings.calibration_samples, seed=settings.seed, meshes=whole,
-                    cards=plan.carry_cards, **shared)
+                    cards=plan.carry_cards, patches=plan.walls, **shared)
         except CanopyAOError as exc:
             if rung.needs_regression:
                 raise

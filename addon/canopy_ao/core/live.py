@@ -94,10 +94,10 @@ def held_ground(base: Plan, items, names) -> dict:
     first bake (its patches' visibility, walls.visibility), which live frames multiply in
     rather than evaluate the patches per frame (tens of times a proxy rung's own cost: DESIGN,
     'Live and per-frame AO'). Empty where frames make their own patches (a wall: refit), where
-    the first bake made none, and for rungs that do not use them (Rung.scene_plan: the
-    ray-free rung has no patch); a grass blade's law holds its ground (lighting.walls_ao)."""
+    the first bake made none, and for rungs that do not use them (Rung.ground_patches); a grass
+    blade's law holds its ground (lighting.walls_ao)."""
     if (base.every_ground or not base.walls or walls.has_wall(base.walls)
-            or not rungs.get(base.method).scene_plan):
+            or not rungs.get(base.method).ground_patches):
         return {}
     distance = ray_length(base.settings.distance)
     return {it.name: walls.visibility(base.walls, it.positions, it.normals, distance)

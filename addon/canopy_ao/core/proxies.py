@@ -19,6 +19,7 @@ from .scene import Plan, SceneItem
 # render farm's chunks and a reloaded file give the same AO; warm-started it still costs half
 # a fresh fit at 1e-3 (5 against 10 ms of one core per 100k points, loaded machine).
 LIVE_TOLERANCE = 1e-6
+MIN_BOLE = 8  # points a piece of a bole needs outside the crown to be fitted as a solid
 
 
 def fit_tree(points: np.ndarray, settings, labels=None, warm=None):
@@ -72,24 +73,55 @@ def own_shells(plan: Plan, tree: str, method) -> list:
     return rungs.get(method).own_shells(plan, tree)
 
 
-def bole(plan: Plan, item: SceneItem) -> np.ndarray:
-    """The trunk points a solid occluder should stand for: those outside the tree's crown.
-    Branches inside the crown are already in the canopy's medium; an ellipsoid fitted to them
-    too would be a solid as big as the crown (it darkened the ground by 0.1 on the grove)."""
+def bole(plan: Plan, item: SceneItem) -> list:
+    """The trunk points solid occluders should stand for: those outside the tree's crown, one
+    float32 (K, 3) array per connected piece of the mesh (a stem, a branch tube: Sapling
+    bevels each on its own) with at least MIN_BOLE points there. Branches inside the crown are
+    already in the canopy's medium; an ellipsoid fitted to them too would be a solid as big as
+    the crown (it darkened the ground by 0.1 on the grove). A piece with fewer points outside
+    is a branch's base poking out of the crown's proxy, the crown's: fitted with the stem into
+    one ellipsoid, such bases made it a slab metres wide, opaque over the ground (the Sapling
+    aspen's 0.04 too dark under the sphere, whose narrow bottom the lowest branches leave; the
+    white birch's 0.017 under the ellipsoid; docs/DESIGN.md, 'How each role is lit'). A mesh
+    without faces is one piece."""
     p = item.positions
-    if item.tree not in plan.fits:
-        return p
-    _sphere, ell, shells = plan.fits[item.tree]
-    inside = np.asarray(ell.contains(p), bool)
-    for e in shells:
-        inside |= np.asarray(e.contains(p), bool)
-    return np.ascontiguousarray(p[~inside])
+    inside = np.zeros(len(p), bool)
+    if item.tree in plan.fits:
+        _sphere, ell, shells = plan.fits[item.tree]
+        inside = np.asarray(ell.contains(p), bool)
+        for e in shells:
+            inside |= np.asarray(e.contains(p), bool)
+    out = np.flatnonzero(~inside)
+    if len(item.triangles) == 0:
+        labels = np.zeros(len(out), np.int64)
+    else:
+        labels = _roles.connected_components(len(p), item.triangles)[out]
+    order = np.argsort(labels, kind="stable")
+    cuts = np.flatnonzero(np.diff(labels[order])) + 1
+    return [np.ascontiguousarray(p[out[g]]) for g in np.split(order, cuts)
+            if len(g) >= MIN_BOLE]
+
+
+def bole_solids(plan: Plan, item: SceneItem) -> list:
+    """The solid ellipsoids standing for a trunk's bole (bole): one over all its pieces where
+    it is no larger than their own ellipsoids together (pieces bundled where a stem forks,
+    each inside the others' hull), else one per piece (branches reaching out of the crown
+    apart: one ellipsoid over them would be mostly air). Volumes are compared, so the choice
+    is scale-free."""
+    pieces = bole(plan, item)
+    solids = [_core.fit_ellipsoid(b) for b in pieces]
+    if len(solids) < 2:
+        return solids
+    whole = _core.fit_ellipsoid(np.ascontiguousarray(np.concatenate(pieces)))
+    volume = lambda e: float(np.prod(np.asarray(e.radii, np.float64)))  # noqa: E731 (× 4π/3)
+    return [whole] if volume(whole) <= sum(map(volume, solids)) else solids
 
 
 def fit_scene(plan: Plan, items) -> None:
-    """Fill plan.fits (per tree, from its CANOPY points), plan.trunks (a solid ellipsoid per
-    trunk, fitted to its bole), plan.grass (ground level and blade height per grass item) and
-    plan.grass_layers (each grass field as an occluder of the ground under it)."""
+    """Fill plan.fits (per tree, from its CANOPY points), plan.trunks (solid ellipsoids per
+    trunk, fitted to its bole: bole_solids), plan.grass (ground level and blade height per
+    grass item) and plan.grass_layers (each grass field as an occluder of the ground under
+    it)."""
     trees = {}
     for it in items:
         # a card's points where it is opaque (card_area.counted_points): none when all clear
@@ -105,9 +137,9 @@ def fit_scene(plan: Plan, items) -> None:
             plan.shell_labels[tree] = labels
     for it in items:
         if it.role == "TRUNK":
-            b = bole(plan, it)
-            if len(b) >= 8:
-                plan.trunks.setdefault(it.tree, []).append(_core.fit_ellipsoid(b))
+            solids = bole_solids(plan, it)
+            if solids:
+                plan.trunks.setdefault(it.tree, []).extend(solids)
         if it.role == "GRASS":
             plan.grass[it.name] = _roles.blade_heights(it.positions, it.triangles)
             layer = grass_layer(it.name, it.positions, it.triangles, *plan.grass[it.name],

@@ -18,7 +18,10 @@ chosen by 5-fold cross-validation on the sample (ties to the larger λ); the pie
 (LeafTable) only where they cut that CV error by more than PIECES_GAIN (_fit). Buried sample points
 (every ray stops within ``buried.BURIED_SCALE`` of the object's size: a leaf base inside its branch)
 are kept out of the fit — their AO of 0 says nothing about the rest of the leaf; the model
-predicts them like any vertex."""
+predicts them like any vertex. The GROUND patches (core/walls.py) are multiplied in as the
+proxy rungs do: the model is fitted to the sample as g(features) × V_ground (its rows weighted
+by each point's patch visibility) and its caller multiplies that visibility back
+(rungs/regression.py, lighting.walls_ao)."""
 from __future__ import annotations
 
 import copy
@@ -27,11 +30,13 @@ import time
 import numpy as np
 
 from . import buried as _buried
-from . import card_ao, card_area, native
+from . import card_ao, card_area, native, walls
 from .leaf_features import LeafTable, tree_frame  # noqa: F401 (tree_frame: tests)
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
 from .regression_fit import NATIVE, PIECES_GAIN, fit_group as _fit  # noqa: F401 (tests)
+from .regression_fit import (MIN_POINTS, MIN_SAMPLES, POINTS, RAYS_PER_RECEIVER,  # noqa: F401
+                             _sample, calibration_size)
 from .scene import RECEIVER_ROLES, ray_length
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
@@ -41,50 +46,6 @@ LEAF_TABLE_ROLES = ("CANOPY", "TRUNK")
 # unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046.
 BURIED_RAYS = 2 * _buried.BURIED_RAYS
 MIN_GROUP = 96           # sample points a group needs for its own fit
-POINTS = 1024            # calibration points of the rung (the ray-free contract: <= 1024)
-# Sizing on small scenes (calibration_size): counted work, scale-free.
-RAYS_PER_RECEIVER = 8    # calibration samples per receiver at most: 1/8 of a 64-sample bake
-MIN_SAMPLES = 32         # rays per calibration point at least
-MIN_POINTS = 256         # calibration points at least (when the scene has them)
-
-
-def _sample(groups, count, seed):
-    """{group: sorted row indices} of at most `count` points in all (or one per group), every
-    group some, larger groups more (∝ sqrt of their size: small groups such as a trunk are not
-    starved)."""
-    rng = np.random.default_rng(seed)
-    sizes = {g: n for g, n in groups.items() if n > 0}
-    if not sizes:
-        return {}
-    w = {g: np.sqrt(n) for g, n in sizes.items()}
-    tot = sum(w.values())
-    ks = {g: min(n, max(1, int(round(count * w[g] / tot)))) for g, n in sizes.items()}
-    while sum(ks.values()) > max(count, len(ks)):  # rounding up must not break the cap
-        g = max(ks, key=lambda g_: (ks[g_], str(g_)))
-        ks[g] -= 1
-    return {g: np.sort(rng.choice(sizes[g], size=ks[g], replace=False)) for g in sizes}
-
-
-def calibration_size(receivers, points=POINTS, samples=128):
-    """(points, rays per point) of the calibration sample for ``receivers`` receiver points,
-    sized so the sample stays a fraction of a ray-traced bake of the same scene whatever its
-    size (docs/DESIGN.md, 'The ray-free rung'): at most RAYS_PER_RECEIVER samples per receiver
-    (an eighth of a 64-sample bake; a vertex casts both at each face corner), fewer per point
-    first (down to MIN_SAMPLES: the fit averages their noise out), then fewer points (down to
-    MIN_POINTS; the floor is MIN_POINTS × MIN_SAMPLES, or every receiver at MIN_SAMPLES on a
-    smaller scene).
-    Counted, never timed: the same scene always gets the same sample. The grid is not sized
-    down: 48 or 32 voxels instead of 64 cut the rung's time on a 14k-vertex tree by 40-50 %
-    but cost MAE 0.003-0.006 (callistemon)."""
-    receivers = max(int(receivers), 1)
-    budget = RAYS_PER_RECEIVER * receivers
-    pts = min(int(points), receivers)
-    spp = int(min(samples, max(MIN_SAMPLES, budget // max(pts, 1))))
-    if pts * spp > budget:
-        pts = min(pts, max(MIN_POINTS, budget // spp))
-    return pts, spp
-
-
 def _own_ids_from(bases):
     """ids(item, idx, key) for the rung's own tracer: the rows' (key "vertex_ids") or the
     triangles' ("triangle_ids") place in its merged mesh (bases: {id(item): its first vertex
@@ -108,12 +69,16 @@ class RegressionRung:
     tracer, ids: the plan's ray tracer over the same triangles and ids(item, idx, key) -> its
     ids of those rows (key "vertex_ids") or triangles ("triangle_ids"; ladder.sample_ids): one
     BVH a bake; None = the rung's own. meshes: the unsplit items when ``items`` are split per
-    tree (scene.parts), for the leaf tables (LeafTable) by item name; None = the items."""
+    tree (scene.parts), for the leaf tables (LeafTable) by item name; None = the items.
+    patches: the GROUND patches (walls.build of the unsplit items, Plan.walls) whose visibility
+    the fit divides out and :meth:`ao`'s caller multiplies back; None = built here from meshes
+    (or items)."""
 
     _bounded = False  # a live frame's copy holds its features to the sample's range
 
     def __init__(self, items, distance=0.0, points=1024, samples=128, resolution=64,
-                 directions=24, seed=0, tracer=None, ids=None, meshes=None, cards=False):
+                 directions=24, seed=0, tracer=None, ids=None, meshes=None, cards=False,
+                 patches=None):
         _core = native.require()
         t0 = time.perf_counter()
         items = [it for it in items if it.role != "IGNORE"]
@@ -123,6 +88,8 @@ class RegressionRung:
         receivers = [it for it in items if it.role in RECEIVER_ROLES and len(it.positions)]
         n_recv = sum(len(it.positions) for it in receivers)
         points, samples = calibration_size(n_recv, points, samples)
+        self.patches = list(patches) if patches is not None else walls.build(
+            meshes if meshes is not None else items)
         self._features, self._leaves, self._scene_frame, self._frames = _geometry(
             items, occ, meshes, resolution, directions)
         t_grid = time.perf_counter()
@@ -161,6 +128,7 @@ class RegressionRung:
             tri, own_tri = card_ao.move_to_cards(its if cards else (), owner, idx - offs[owner],
                                                  P, N, own, ids)
             diag = np.array([_buried.size(it.positions) for it in its])[owner]
+            ground = self.ground(g[1], P, N, d)
             ao = _trace(tracer, P, N, samples, d, seed + 1, own, own_tri)
             buried = _buried_mask(tracer, P, N, diag, own, own_tri)
             F = np.zeros((len(idx), NATIVE + LeafTable.COUNT), np.float32)
@@ -171,7 +139,8 @@ class RegressionRung:
                     whole = it.vertex_map[rows] if it.vertex_map is not None else rows
                     F[m] = self._compute(it.tree, P[m], N[m], it.name, {
                         "vertex_ids": np.where(tri[m] < 0, whole, -1), "triangle_ids": tri[m]})
-            sample[g] = dict(features=F[~buried], ao=ao[~buried], buried=int(buried.sum()))
+            sample[g] = dict(features=F[~buried], ao=ao[~buried], ground=ground[~buried],
+                             buried=int(buried.sum()))
         t_cal = time.perf_counter()
         # Fit per group, falling back to the role's pooled sample, then to everything.
         by_role = {}
@@ -179,24 +148,24 @@ class RegressionRung:
             by_role.setdefault(g[1], []).append(s_)
 
         def pool(ss):
-            return (np.concatenate([s_["features"] for s_ in ss]),
-                    np.concatenate([s_["ao"] for s_ in ss]))
+            return tuple(np.concatenate([s_[k] for s_ in ss]) for k in ("features", "ao",
+                                                                          "ground"))
 
         self._models, self.fits, cache = {}, {}, {}
         for g in groups:
             s_ = sample.get(g)
             if s_ is not None and len(s_["ao"]) >= MIN_GROUP:
-                src, (F, y) = "own", (s_["features"], s_["ao"])
+                src, (F, y, v) = "own", (s_["features"], s_["ao"], s_["ground"])
             elif sum(len(t["ao"]) for t in by_role.get(g[1], [])) >= MIN_GROUP:
-                src, (F, y) = f"role {g[1]}", pool(by_role[g[1]])
+                src, (F, y, v) = f"role {g[1]}", pool(by_role[g[1]])
             else:
-                src, (F, y) = "scene", pool(list(sample.values()))
+                src, (F, y, v) = "scene", pool(list(sample.values()))
             if len(y) < 8:
                 raise CanopyAOError("method 'regression': fewer than 8 unburied calibration "
                                     "points (is every receiver buried inside geometry?)")
             ck = g if src == "own" else src
             if ck not in cache:
-                cache[ck] = _fit(F, y)
+                cache[ck] = _fit(F, y, v)
             m = self._models[g] = cache[ck]
             self.fits[f"{g[0] or '-'}/{g[1]}"] = dict(
                 source=src, points=int(m.n), lam=float(m.lam), cv_mae=round(float(m.cv_mae), 4),
@@ -239,8 +208,17 @@ class RegressionRung:
                  else np.zeros((len(p), LeafTable.COUNT), np.float32))
         return np.concatenate([f, extra], axis=1)
 
+    def ground(self, role, p, n, distance):
+        """float32 (N,): the GROUND patches' visibility of points p, n of this role, as
+        lighting.walls_ao gives it (1 for a grass blade, whose traced AO holds its ground)."""
+        if not self.patches or role == "GRASS":
+            return np.ones(len(p), np.float32)
+        return np.asarray(walls.visibility(self.patches, p, n, distance), np.float32)
+
     def ao(self, role, tree, p, n, name=None, own=None):
-        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree.
+        """AO of receiver points p, n (float32 (N, 3)) of an item with this role and tree,
+        without the GROUND patches, which the caller multiplies in (rungs/regression.py:
+        lighting.walls_ao, as for the proxy rungs; a live frame the ground held).
         name, own: the item's name and {"vertex_ids" | "triangle_ids"} of each point in it
         (-1 = none), so a leaf's points know their leaf (LeafTable); without them a point
         reads as its leaf's centre."""
@@ -306,8 +284,10 @@ def bake(items, distance=0.0, **options):
     RegressionRung; IGNORE items get 1)."""
     t0 = time.perf_counter()
     rung = RegressionRung(items, distance, **options)
+    d = ray_length(distance)
     out = {it.name: (rung.ao(it.role, it.tree, it.positions, it.normals, it.name,
                              {"vertex_ids": np.arange(len(it.positions))})
+                     * rung.ground(it.role, it.positions, it.normals, d)
                      if it.role in RECEIVER_ROLES else np.ones(len(it.positions), np.float32))
            for it in items}
     rung.report["timings"]["total"] = time.perf_counter() - t0

@@ -5,4 +5,4 @@ from .base import Proxy, Rung, always
 RUNG = Rung("ellipsoid", "Ellipsoid", "One fitted ellipsoid per tree",
             evaluate=lighting.scene_plan_ao, work=cost.analytic_work, takes_tau=True,
             scene_plan=True, native="ellipsoid", proxy=Proxy.ELLIPSOID, live=True,
-            climbs=always, number=2)
+            ground_patches=True, climbs=always, number=2)

@@ -10,4 +10,4 @@ RUNG = Rung("medium", "Leaf medium", "The shells filled with randomly oriented l
             evaluate=lighting.scene_plan_ao,
             work=functools.partial(cost.analytic_work, unit="medium"), takes_tau=True,
             scene_plan=True, native="medium", proxy=Proxy.SHELLS, live=True, climbs=always,
-            number=4)
+            ground_patches=True, number=4)

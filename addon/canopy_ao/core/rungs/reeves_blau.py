@@ -4,4 +4,5 @@ from .base import Proxy, Rung
 
 RUNG = Rung("reeves_blau", "Reeves-Blau", "Baseline exp(-tau depth) inside one ellipsoid",
             evaluate=lighting.scene_plan_ao, work=cost.analytic_work, takes_tau=True,
-            scene_plan=True, native="reeves_blau", proxy=Proxy.ELLIPSOID, live=True, number=5)
+            scene_plan=True, native="reeves_blau", proxy=Proxy.ELLIPSOID, live=True,
+            ground_patches=True, number=5)

@@ -1,11 +1,14 @@
 """regression: ray-free, a ridge fit of ray-traced points on cheap per-vertex features of the
 density grid and the tree's shape (core/regression.py)."""
-from .. import cost
+from .. import cost, lighting
 from .base import Rung
 
 
 def _evaluate(rung, plan, role, tree, grass_key, p, n, tau, own, group):
-    return plan.regression.ao(role, tree, p, n, grass_key, own)
+    # The GROUND patches multiplied in as the proxy rungs do (lighting.walls_ao): the fit
+    # divided them out of its sample (core/regression.py).
+    ao = plan.regression.ao(role, tree, p, n, grass_key, own)
+    return ao * lighting.walls_ao(plan, p, n, role) if plan.walls else ao
 
 
 def _work(rung, plan, receivers, names=None, samples=None):
@@ -16,5 +19,6 @@ RUNG = Rung("regression", "Regression", "Ray-free: up to 1024 ray-traced points 
             "cheap per-vertex features of the density grid and the tree's shape; no rays "
             "beyond them, cost independent of the leaf count",
             evaluate=_evaluate, work=_work, needs_triangles=True, needs_regression=True,
-            live=True, frame_triangle_roles=("GRASS", "GROUND", "CANOPY", "TRUNK"),
+            live=True, ground_patches=True,
+            frame_triangle_roles=("GRASS", "GROUND", "CANOPY", "TRUNK"),
             climbs=lambda plan: plan.regression is not None, number=7)

@@ -5,4 +5,4 @@ from .base import Proxy, Rung, always
 RUNG = Rung("shells", "Shells", "Several ellipsoid shells per tree (k-means clusters)",
             evaluate=lighting.scene_plan_ao, work=cost.analytic_work, takes_tau=True,
             scene_plan=True, native="shells", proxy=Proxy.SHELLS, live=True, climbs=always,
-            number=3)
+            ground_patches=True, number=3)
