@@ -13,6 +13,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "canopy_ao/fast_math.h"
 #include "canopy_ao/parallel.h"
@@ -151,15 +152,27 @@ OcclusionFeatures::Field OcclusionFeatures::sweep(const DensityGrid& g, int leve
           for (int ia = 0; ia < ia_lo; ++ia) checked(ia);
           const std::ptrdiff_t u0 = static_cast<std::ptrdiff_t>(ubase + (ib + ob) * sb) +
                                     static_cast<std::ptrdiff_t>(oa) * static_cast<std::ptrdiff_t>(sa);
-          for (int ia = ia_lo; ia <= ia_hi; ++ia) {
-            const std::size_t c = base + ia * sa + ib * sb;
-            const std::size_t u = static_cast<std::size_t>(u0 + ia * static_cast<std::ptrdiff_t>(sa));
-            const float tu = wq[0] * tp[u] + wq[1] * tp[u + sa] + wq[2] * tp[u + sb] +
-                             wq[3] * tp[u + sa + sb];
-            const float su = wq[0] * sg[u] + wq[1] * sg[u + sa] + wq[2] * sg[u + sb] +
-                             wq[3] * sg[u + sa + sb];
-            tp[c] = tu + 0.5f * step * (sg[c] + su);
-          }
+          // Slices im and up never overlap: no dependence between iterations. Where the
+          // lateral axis is x (stride 1, known at compile time) GCC vectorises the loop; the
+          // arithmetic is the same element by element.
+          auto interior = [&](auto sa_c) {
+            const std::size_t sa1 = sa_c;
+#pragma GCC ivdep
+            for (int ia = ia_lo; ia <= ia_hi; ++ia) {
+              const std::size_t c = base + ia * sa1 + ib * sb;
+              const std::size_t u =
+                  static_cast<std::size_t>(u0 + ia * static_cast<std::ptrdiff_t>(sa1));
+              const float tu = wq[0] * tp[u] + wq[1] * tp[u + sa1] + wq[2] * tp[u + sb] +
+                               wq[3] * tp[u + sa1 + sb];
+              const float su = wq[0] * sg[u] + wq[1] * sg[u + sa1] + wq[2] * sg[u + sb] +
+                               wq[3] * sg[u + sa1 + sb];
+              tp[c] = tu + 0.5f * step * (sg[c] + su);
+            }
+          };
+          if (sa == 1)
+            interior(std::integral_constant<std::size_t, 1>{});
+          else
+            interior(sa);
           for (int ia = ia_hi + 1; ia < n[a1]; ++ia) checked(ia);
         }
       }
@@ -621,6 +634,70 @@ int model_size(int features, int native_features) {
   return expanded_size(native_features) + 3 * (features - native_features);
 }
 
+namespace {
+// predict_model's rows kRows at a time: the same terms in the same order as one row's
+// expand_row and extra columns (each float product, then its double product with the weight,
+// added to the row's double sum), laid out [term][row] so GCC vectorises across the rows.
+constexpr int kRows = 8;
+struct PredictArgs {
+  const float* features;
+  int f, f_native, g;
+  const float *mean, *scale, *weights, *lo, *hi;
+  float* out;
+};
+
+__attribute__((always_inline)) inline void predict_rows(const PredictArgs& a, std::size_t i0,
+                                                         float* z) {
+  const int f = a.f, fn = a.f_native, g = a.g;
+  for (int j = 0; j < f; ++j)
+    for (int r = 0; r < kRows; ++r) {
+      const float v = a.features[(i0 + r) * f + j];
+      const float x = a.lo != nullptr ? std::min(std::max(v, a.lo[j]), a.hi[j]) : v;
+      z[j * kRows + r] = (x - a.mean[j]) / a.scale[j];
+    }
+  double acc[kRows];
+  for (int r = 0; r < kRows; ++r) acc[r] = 0.0;
+  int p = 0;
+  auto term = [&](const float* zj) {  // φ_p = zj[r]
+    const double w = a.weights[p++];
+    for (int r = 0; r < kRows; ++r) acc[r] += w * static_cast<double>(zj[r]);
+  };
+  auto product = [&](const float* za, const float* zb) {  // φ_p = za[r]·zb[r]
+    const double w = a.weights[p++];
+    for (int r = 0; r < kRows; ++r) acc[r] += w * static_cast<double>(za[r] * zb[r]);
+  };
+  const float one[kRows] = {1, 1, 1, 1, 1, 1, 1, 1};
+  term(one);
+  for (int j = 0; j < fn; ++j) term(z + j * kRows);
+  for (int j = 0; j < fn; ++j) product(z + j * kRows, z + j * kRows);
+  for (int j = 0; j < fn; ++j)
+    if (j != g) product(z + g * kRows, z + j * kRows);
+  if (fn == OcclusionFeatures::kCount)
+    for (int u = kShapeBegin; u < kShapeEnd; ++u)
+      for (int v = u + 1; v < kShapeEnd; ++v) product(z + u * kRows, z + v * kRows);
+  for (int j = fn; j < f; ++j) term(z + j * kRows);
+  for (int j = fn; j < f; ++j) product(z + j * kRows, z + j * kRows);
+  for (int j = fn; j < f; ++j) product(z + j * kRows, z + g * kRows);
+  for (int r = 0; r < kRows; ++r)
+    a.out[i0 + r] =
+        std::isfinite(acc[r]) ? static_cast<float>(std::clamp(acc[r], 0.0, 1.0)) : 1.0f;
+}
+
+void predict_rows_portable(const PredictArgs& a, std::size_t i0, float* z) {
+  predict_rows(a, i0, z);
+}
+}  // namespace
+
+#ifdef CANOPY_AO_X86
+namespace avx2 {
+// AVX2 without FMA: the baseline's operations, four rows a register (the same bits).
+__attribute__((target("avx2"))) void predict_rows(const PredictArgs& a, std::size_t i0,
+                                                  float* z) {
+  canopy_ao::predict_rows(a, i0, z);
+}
+}  // namespace avx2
+#endif
+
 void predict_model(const float* features, std::size_t n, int f, int f_native, const float* mean,
                    const float* scale, const float* weights, const float* lo, const float* hi,
                    float* out) {
@@ -630,14 +707,27 @@ void predict_model(const float* features, std::size_t n, int f, int f_native, co
   check_model(f, scale);
   const int P = model_size(f, f_native);
   const int g = std::min(kGridAO, f_native - 1);
+  const PredictArgs args{features, f, f_native, g, mean, scale, weights, lo, hi, out};
+  const bool avx2 = occlusion_features_kernel_avx2();
   parallel_for_blocks(n, 1024, [&](std::size_t b, std::size_t e) {
-    std::vector<float> x(f), z(f), phi(P);
-    for (std::size_t i = b; i < e; ++i) {
+    std::vector<float> x(f), z(f), phi(P), zr(static_cast<std::size_t>(f) * kRows);
+    std::size_t i = b;
+    for (; i + kRows <= e; i += kRows) {  // blocks are multiples of kRows but the last
+#ifdef CANOPY_AO_X86
+      if (avx2) {
+        avx2::predict_rows(args, i, zr.data());
+        continue;
+      }
+#endif
+      predict_rows_portable(args, i, zr.data());
+    }
+    (void)avx2;
+    for (; i < e; ++i) {  // the last rows one by one: the same terms in the same order
       const float* row = features + i * f;
       for (int j = 0; j < f; ++j)
         x[j] = lo != nullptr ? std::min(std::max(row[j], lo[j]), hi[j]) : row[j];
       expand_row(x.data(), f_native, mean, scale, z.data(), phi.data());
-      // The extra columns: [z_e, z_e², z_grid·z_e], each group over the extra features.
+      // The extra columns: [z_e, z_e², z_e·z_grid], each group over the extra features.
       const int E = f - f_native, base = expanded_size(f_native);
       for (int j = 0; j < E; ++j) {
         const float ze = (x[f_native + j] - mean[f_native + j]) / scale[f_native + j];

@@ -484,6 +484,48 @@ TEST(OcclusionFeatures, BadInputThrows) {
   EXPECT_THROW(f.compute({nan.data(), 1}, {n.data(), 1}, {}, out.data()), std::invalid_argument);
 }
 
+TEST(OcclusionFeatures, PredictModelGivesTheSameBitsRowByRowInBlocksAndOnAvx2) {
+  // predict_model evaluates 8 rows at a time (the same terms in the same order as one row's
+  // expansion) and one by one for the rest of a block: a row alone, the rows together and the
+  // AVX2 copy give the same bits, with the piece columns (F = 17 over F_native = 13), the
+  // bounds held and without them.
+  const int F = 17, FN = OcclusionFeatures::kCount, N = 203;
+  const int P = model_size(F, FN);
+  Rng rng(21);
+  std::vector<float> x(N * F), mean(F), scale(F), lo(F), hi(F), w(P);
+  for (float& v : x) v = 4 * rng.uniform() - 2;
+  for (int j = 0; j < F; ++j) {
+    mean[j] = rng.uniform() - 0.5f, scale[j] = 0.5f + rng.uniform();
+    lo[j] = -1.5f, hi[j] = 1.5f;
+  }
+  for (float& v : w) v = 0.2f * (rng.uniform() - 0.5f);
+  w[0] = 0.5f;
+  const bool was = occlusion_features_kernel_avx2();
+  bool has_avx2 = true;
+  try {
+    set_occlusion_features_kernel_avx2(true);
+  } catch (const std::invalid_argument&) {
+    has_avx2 = false;
+  }
+  for (const bool bounded : {false, true}) {
+    const float* l = bounded ? lo.data() : nullptr;
+    const float* h = bounded ? hi.data() : nullptr;
+    std::vector<float> alone(N), together(N), base(N);
+    for (int i = 0; i < N; ++i)
+      predict_model(&x[i * F], 1, F, FN, mean.data(), scale.data(), w.data(), l, h, &alone[i]);
+    set_occlusion_features_kernel_avx2(false);
+    predict_model(x.data(), N, F, FN, mean.data(), scale.data(), w.data(), l, h, base.data());
+    EXPECT_EQ(alone, base) << "bounded " << bounded;
+    if (has_avx2) {
+      set_occlusion_features_kernel_avx2(true);
+      predict_model(x.data(), N, F, FN, mean.data(), scale.data(), w.data(), l, h,
+                    together.data());
+      EXPECT_EQ(together, base) << "bounded " << bounded;
+    }
+  }
+  if (has_avx2) set_occlusion_features_kernel_avx2(was);
+}
+
 TEST(OcclusionFeatures, LinearModelExpandsAndPredictsAsDocumented) {
   // F = 3 features: φ = [1, z0, z1, z2, z0², z1², z2², z1·z0, z1·z2] (products with feature 1).
   const int F = 3;
