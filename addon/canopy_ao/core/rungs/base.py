@@ -52,6 +52,9 @@ class Rung:
     rays_see_instances: bool = False  # its AO comes from rays alone, which see the instances
     finds_buried: bool = False       # reads 0 at buried receivers by itself (no buried test)
     live: bool = False               # refits and evaluates fast enough for every frame
+    # its evaluation reads the fitted proxies (plan.fits, trunks, grass heights and layers):
+    # a live frame refits them (core/live.refit); the ray-free rung reads none of them
+    reads_proxies: bool = True
     # roles whose triangles a live frame keeps (grass blades and the GROUND surfaces, whose
     # walls occlude: core/walls.py; the ray-free rung's grid and leaf table need every one)
     frame_triangle_roles: tuple = ("GRASS", "GROUND")
