@@ -263,3 +263,26 @@ def test_native_prediction_equals_the_expanded_model(pieces):
         want = np.clip(m.expand(x).astype(np.float64) @ m.weights.astype(np.float64), 0, 1)
         np.testing.assert_allclose(m.predict(rows, bounded=bounded), want, atol=2e-5)
     assert np.abs(m.predict(rows, bounded=True) - m.predict(rows)).max() > 0.01
+
+
+def test_the_grids_thread_gives_the_serial_geometry_and_raises_its_errors_here():
+    """regression_geometry.geometry sweeps the grid on a worker thread beside the leaf tables:
+    its features are those of the grid built on this thread, and a bad occluder's error (a
+    non-finite vertex) reaches the caller as the grid raised it."""
+    from canopy_ao.core import regression_geometry
+    its = items()
+    occ = [it for it in its if it.role in regression.OCCLUDER_ROLES]
+    features, leaves, scene_frame, frames = regression_geometry.geometry(its, occ, None, 32, 24)
+    grid = _core.DensityGrid(*core.meshes.merged(occ), resolution=32)
+    serial = _core.OcclusionFeatures(grid, directions=24)
+    p = np.ascontiguousarray(its[1].positions, np.float32)
+    n = np.ascontiguousarray(its[1].normals, np.float32)
+    assert np.array_equal(np.asarray(features.compute(p, n, *scene_frame)),
+                          np.asarray(serial.compute(p, n, *scene_frame)))
+    assert set(leaves) == {it.name for it in its if it.role in ("CANOPY", "TRUNK")}
+    bad = occ[0]
+    pos = bad.positions.copy()
+    pos[0, 0] = np.nan
+    broken = [type(bad)(bad.name, bad.role, bad.tree, pos, bad.normals, bad.triangles)] + occ[1:]
+    with pytest.raises(ValueError, match="non-finite"):
+        regression_geometry.geometry(broken, broken, None, 32, 24)
