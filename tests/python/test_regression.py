@@ -158,6 +158,11 @@ def test_leaf_table_finds_each_leaf_and_places_points_on_it():
     # Unknown (-1) or no ids: the leaf's centre, all zero.
     assert not leaves.features(P[:2], leaves.labels_of({"vertex_ids": [-1, -1]}, 2), frame).any()
     assert not leaves.features(P[:2], leaves.labels_of(None, 2), frame).any()
+    # Points all on leaves (no masked copy) read what they read beside an unknown one.
+    some = leaves.labels_of({"vertex_ids": [0, 1, -1, 3, 4, 5, 6, 7]}, 8)
+    mixed = leaves.features(P, some, frame)
+    assert np.array_equal(mixed[[0, 1, 3, 4, 5, 6, 7]], by_vertex[[0, 1, 3, 4, 5, 6, 7]])
+    assert not mixed[2].any()
 
 
 def test_the_sample_never_exceeds_its_points():
