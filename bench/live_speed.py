@@ -2,7 +2,7 @@
 
     blender -b --factory-startup --python bench/live_speed.py -- \
         [--vertices 100000 1000000] [--methods sphere ellipsoid shells medium regression]
-        [--trees crown sapling] [--frames 6] [--accuracy]
+        [--trees crown sapling] [--frames 6] [--accuracy] [--cpu]
 
 Builds a tree swaying in the wind (a Simple Deform bend whose angle is keyed over the frames)
 above a ground plane, starts live AO with each rung and a given τ, then steps the frames with
@@ -22,6 +22,9 @@ Prints per tree, rung and size, as the median over the frames:
 - with/without: the whole frame with live AO over the frame without (issue #39 asks ≤ 2).
   Headless, nothing draws, so Blender's own frame computes no vertex normals; live AO reads
   them (a viewport's draw computes the same ones, which live AO then shares).
+With --cpu, also the CPU seconds per frame (process time, every thread summed: what a shared
+machine's load does not inflate as it does the wall clock): the refit alone (the fit stage),
+the whole frame with live AO and without, and their difference, live AO's own.
 With --accuracy, also the mean absolute error at the last frame of live AO and of a static
 bake of the same rung at that frame (and of one with the next seed, whose difference is the
 calibration's own noise), each against a ray-traced bake of that frame.
@@ -143,7 +146,25 @@ def _accuracy(scene, names, opts, frame, live_ao):
     return tuple(float(np.abs(x - rays).mean()) for x in (live_all, static, reseeded))
 
 
-def run(n_vertices, method, frames, tree="crown", accuracy=False):
+def _cpu_of_refit():
+    """(undo, seconds): core.live.refit made to add its process CPU seconds to seconds[0]."""
+    from canopy_ao.core import live as core_live
+    refit, seconds = core_live.refit, [0.0]
+
+    def timed(*args, **kwargs):
+        t0 = time.process_time()
+        try:
+            return refit(*args, **kwargs)
+        finally:
+            seconds[0] += time.process_time() - t0
+    core_live.refit = timed
+
+    def undo():
+        core_live.refit = refit
+    return undo, seconds
+
+
+def run(n_vertices, method, frames, tree="crown", accuracy=False, cpu=False):
     from canopy_ao.blender import job, live, properties
     scene, names = TREES[tree](n_vertices)
     n_vertices = sum(len(scene.objects[n].data.vertices) for n in names[:-1])  # the tree's
@@ -154,12 +175,16 @@ def run(n_vertices, method, frames, tree="crown", accuracy=False):
     first = time.perf_counter() - t0
     session = live.session_of(scene)
     stages, totals = {}, []
+    undo, fit_cpu = _cpu_of_refit()
+    c0 = time.process_time()
     for f in range(2, 2 + frames):
         t0 = time.perf_counter()
         scene.frame_set(f)
         totals.append(time.perf_counter() - t0)
         for k, v in session.timings.items():
             stages.setdefault(k, []).append(v)
+    live_cpu = (time.process_time() - c0) / frames
+    undo()
     assert session.frames == frames, "the handler did not run on every frame"
     live.stop(scene)  # the originals then hold the last frame's AO (Session.flush)
     if accuracy:
@@ -167,10 +192,12 @@ def run(n_vertices, method, frames, tree="crown", accuracy=False):
         live_ao = {n: mesh_io.read_ao_attribute(scene.objects[n], opts["attribute"])
                    for n in names}
     blender_only = []
+    c0 = time.process_time()
     for f in range(2 + frames, 2 + 2 * frames):
         t0 = time.perf_counter()
         scene.frame_set(f)
         blender_only.append(time.perf_counter() - t0)
+    alone_cpu = (time.process_time() - c0) / frames
     ms = {k: 1000.0 * _median(v) for k, v in stages.items()}
     frame_ms = 1000.0 * _median(totals)
     alone_ms = 1000.0 * _median(blender_only)
@@ -179,6 +206,11 @@ def run(n_vertices, method, frames, tree="crown", accuracy=False):
           f"write {ms['write']:.1f})  frame {frame_ms:7.1f} ms = {1000.0 / frame_ms:5.1f} fps  "
           f"blender only {alone_ms:6.1f} ms  with/without {frame_ms / alone_ms:5.2f}  "
           f"(first bake {first:.2f} s)", flush=True)
+    if cpu:
+        print(f"{'':<7} {'':>9}           {method:<10}  CPU per frame: fit "
+              f"{1000.0 * fit_cpu[0] / frames:.1f} ms, frame with live {1000.0 * live_cpu:.1f} ms, "
+              f"without {1000.0 * alone_cpu:.1f} ms, live's own "
+              f"{1000.0 * (live_cpu - alone_cpu):.1f} ms", flush=True)
     if accuracy:
         got, static, reseeded = _accuracy(scene, names, opts, 1 + frames, live_ao)
         print(f"{'':<7} {'':>9}           {method:<10}  MAE against frame {1 + frames}'s rays: "
@@ -196,6 +228,9 @@ def main(argv):
     ap.add_argument("--accuracy", action="store_true",
                     help="also the live AO's error at the last frame against that frame's "
                          "rays, beside a static bake's of the same rung there")
+    ap.add_argument("--cpu", action="store_true",
+                    help="also the CPU seconds per frame (every thread summed), which a shared "
+                         "machine's load does not inflate")
     a = ap.parse_args(argv)
     harness.enable_addon()
     print(f"live AO per frame, median of {a.frames} frames; {harness.load_note()}; "
@@ -203,7 +238,7 @@ def main(argv):
     for tree in a.trees:
         for n in a.vertices:
             for m in a.methods:
-                run(n, m, a.frames, tree, a.accuracy)
+                run(n, m, a.frames, tree, a.accuracy, a.cpu)
 
 
 if __name__ == "__main__":

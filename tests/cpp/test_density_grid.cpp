@@ -415,6 +415,60 @@ TEST_F(DensityBall, OcclusionFeaturesDoNotDependOnTheThreadCount) {
   EXPECT_EQ(one, all);
 }
 
+TEST_F(DensityBall, OcclusionFeaturesAreTheSameBitsWithAndWithoutTheBucketTiles) {
+  // compute() copies a bucket's τ corners into a tile when enough receivers share the bucket
+  // (occlusion_features.cpp, features_block); a receiver alone reads the field directly. Each
+  // receiver computed alone, then all together in their buckets: the same bits, whatever the
+  // directions (24 fill three 8-lane groups, 13 leave a padded one).
+  const DensityGrid g = ball_->grid(24);
+  std::vector<float> pos, nrm;
+  Rng rng(11);
+  for (int i = 0; i < 2000; ++i) {
+    const Vec3 p = rng.in_ball() * 1.2f, n = rng.unit();  // inside the box and a few outside
+    pos.insert(pos.end(), {p.x, p.y, p.z});
+    nrm.insert(nrm.end(), {n.x, n.y, n.z});
+  }
+  for (int k : {24, 13}) {
+    const OcclusionFeatures f(g, {k});
+    const auto together = features(f, pos, nrm);
+    for (std::size_t i = 0; i < pos.size() / 3; i += 37) {
+      const auto alone = features(f, {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]},
+                                  {nrm[3 * i], nrm[3 * i + 1], nrm[3 * i + 2]});
+      for (int c = 0; c < OcclusionFeatures::kCount; ++c)
+        ASSERT_EQ(alone[c], together[i * OcclusionFeatures::kCount + c])
+            << "receiver " << i << " feature " << c << " with " << k << " directions";
+    }
+  }
+}
+
+TEST_F(DensityBall, OcclusionFeaturesAreTheSameBitsOnTheAvx2Kernel) {
+  // The AVX2 copy of the per-receiver work is built without FMA, so it must give the
+  // baseline's bits (occlusion_features.h, occlusion_features_kernel_avx2).
+  const bool was = occlusion_features_kernel_avx2();
+  try {
+    set_occlusion_features_kernel_avx2(true);
+  } catch (const std::invalid_argument&) {
+    GTEST_SKIP() << "no AVX2 on this CPU";
+  }
+  const DensityGrid g = ball_->grid(32);
+  std::vector<float> pos, nrm;
+  Rng rng(12);
+  for (int i = 0; i < 3000; ++i) {
+    const Vec3 p = rng.in_ball() * 1.4f, n = rng.unit();
+    pos.insert(pos.end(), {p.x, p.y, p.z});
+    nrm.insert(nrm.end(), {n.x, n.y, n.z});
+  }
+  for (int k : {24, 13}) {
+    const OcclusionFeatures f(g, {k});
+    set_occlusion_features_kernel_avx2(true);
+    const auto avx = features(f, pos, nrm);
+    set_occlusion_features_kernel_avx2(false);
+    const auto base = features(f, pos, nrm);
+    EXPECT_EQ(avx, base) << k << " directions";
+  }
+  set_occlusion_features_kernel_avx2(was);
+}
+
 TEST(OcclusionFeatures, BadInputThrows) {
   Mesh m;
   m.quad({0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0});
@@ -428,6 +482,48 @@ TEST(OcclusionFeatures, BadInputThrows) {
   const std::vector<float> p = {0, 0, 0}, n = {0, 0, 1}, nan = {NAN, 0, 0};
   EXPECT_THROW(f.compute({p.data(), 1}, {n.data(), 1}, bad, out.data()), std::invalid_argument);
   EXPECT_THROW(f.compute({nan.data(), 1}, {n.data(), 1}, {}, out.data()), std::invalid_argument);
+}
+
+TEST(OcclusionFeatures, PredictModelGivesTheSameBitsRowByRowInBlocksAndOnAvx2) {
+  // predict_model evaluates 8 rows at a time (the same terms in the same order as one row's
+  // expansion) and one by one for the rest of a block: a row alone, the rows together and the
+  // AVX2 copy give the same bits, with the piece columns (F = 17 over F_native = 13), the
+  // bounds held and without them.
+  const int F = 17, FN = OcclusionFeatures::kCount, N = 203;
+  const int P = model_size(F, FN);
+  Rng rng(21);
+  std::vector<float> x(N * F), mean(F), scale(F), lo(F), hi(F), w(P);
+  for (float& v : x) v = 4 * rng.uniform() - 2;
+  for (int j = 0; j < F; ++j) {
+    mean[j] = rng.uniform() - 0.5f, scale[j] = 0.5f + rng.uniform();
+    lo[j] = -1.5f, hi[j] = 1.5f;
+  }
+  for (float& v : w) v = 0.2f * (rng.uniform() - 0.5f);
+  w[0] = 0.5f;
+  const bool was = occlusion_features_kernel_avx2();
+  bool has_avx2 = true;
+  try {
+    set_occlusion_features_kernel_avx2(true);
+  } catch (const std::invalid_argument&) {
+    has_avx2 = false;
+  }
+  for (const bool bounded : {false, true}) {
+    const float* l = bounded ? lo.data() : nullptr;
+    const float* h = bounded ? hi.data() : nullptr;
+    std::vector<float> alone(N), together(N), base(N);
+    for (int i = 0; i < N; ++i)
+      predict_model(&x[i * F], 1, F, FN, mean.data(), scale.data(), w.data(), l, h, &alone[i]);
+    set_occlusion_features_kernel_avx2(false);
+    predict_model(x.data(), N, F, FN, mean.data(), scale.data(), w.data(), l, h, base.data());
+    EXPECT_EQ(alone, base) << "bounded " << bounded;
+    if (has_avx2) {
+      set_occlusion_features_kernel_avx2(true);
+      predict_model(x.data(), N, F, FN, mean.data(), scale.data(), w.data(), l, h,
+                    together.data());
+      EXPECT_EQ(together, base) << "bounded " << bounded;
+    }
+  }
+  if (has_avx2) set_occlusion_features_kernel_avx2(was);
 }
 
 TEST(OcclusionFeatures, LinearModelExpandsAndPredictsAsDocumented) {

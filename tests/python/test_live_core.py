@@ -152,6 +152,23 @@ def test_the_ray_free_rung_runs_live_its_fit_kept_its_features_moved():
     assert np.abs(got - want).mean() <= max(2 * seeds, 0.01)
 
 
+def test_a_ray_free_frame_fits_no_proxy_and_needs_none():
+    """The ray-free rung reads no proxy (Rung.reads_proxies), so its frames skip their fits
+    (an ellipsoid at the live tolerance costs as much as the rung's grid): no fit in the frame's
+    plan, and the AO of every item equal to the bit to that of the same frame with them fitted."""
+    from canopy_ao.core import proxies
+    first = core.prepare(scene_items(0.0), core.BakeSettings(method="regression", tau=1.7))
+    frame, plan = _regression_frame(first, 0.15)
+    assert plan.fits == {} and plan.trunks == {} and plan.proxies == {}
+    proxies.fit_scene(plan, live.split_trees(frame))  # the fits a proxy rung's frame makes
+    assert plan.fits
+    for it in frame:
+        got = core.evaluate_receivers(plan, it, it.positions, it.normals, vertices=slice(None))
+        _f, again = _regression_frame(first, 0.15)
+        want = core.evaluate_receivers(again, it, it.positions, it.normals, vertices=slice(None))
+        assert np.array_equal(got, want), it.name
+
+
 def test_a_frame_holds_the_features_to_the_calibration_sample():
     """A feature all but constant in the first frame's sample (a ground point's shape feature
     under an unbent crown) that a later frame moves far outside it: held to the sample's range,

@@ -158,6 +158,11 @@ def test_leaf_table_finds_each_leaf_and_places_points_on_it():
     # Unknown (-1) or no ids: the leaf's centre, all zero.
     assert not leaves.features(P[:2], leaves.labels_of({"vertex_ids": [-1, -1]}, 2), frame).any()
     assert not leaves.features(P[:2], leaves.labels_of(None, 2), frame).any()
+    # Points all on leaves (no masked copy) read what they read beside an unknown one.
+    some = leaves.labels_of({"vertex_ids": [0, 1, -1, 3, 4, 5, 6, 7]}, 8)
+    mixed = leaves.features(P, some, frame)
+    assert np.array_equal(mixed[[0, 1, 3, 4, 5, 6, 7]], by_vertex[[0, 1, 3, 4, 5, 6, 7]])
+    assert not mixed[2].any()
 
 
 def test_the_sample_never_exceeds_its_points():
@@ -281,3 +286,26 @@ def test_the_trunk_sees_the_ground_patch_as_the_proxy_rungs_do():
     assert plan.walls and plan.regression.patches == plan.walls
     own, _rep = regression.bake(its, 20.0)  # the one-off bake multiplies them in too
     assert np.abs(own["Trunk"] - want).mean() < 0.0065, float(np.abs(own["Trunk"] - want).mean())
+
+
+def test_the_grids_thread_gives_the_serial_geometry_and_raises_its_errors_here():
+    """regression_geometry.geometry sweeps the grid on a worker thread beside the leaf tables:
+    its features are those of the grid built on this thread, and a bad occluder's error (a
+    non-finite vertex) reaches the caller as the grid raised it."""
+    from canopy_ao.core import regression_geometry
+    its = items()
+    occ = [it for it in its if it.role in regression.OCCLUDER_ROLES]
+    features, leaves, scene_frame, frames = regression_geometry.geometry(its, occ, None, 32, 24)
+    grid = _core.DensityGrid(*core.meshes.merged(occ), resolution=32)
+    serial = _core.OcclusionFeatures(grid, directions=24)
+    p = np.ascontiguousarray(its[1].positions, np.float32)
+    n = np.ascontiguousarray(its[1].normals, np.float32)
+    assert np.array_equal(np.asarray(features.compute(p, n, *scene_frame)),
+                          np.asarray(serial.compute(p, n, *scene_frame)))
+    assert set(leaves) == {it.name for it in its if it.role in ("CANOPY", "TRUNK")}
+    bad = occ[0]
+    pos = bad.positions.copy()
+    pos[0, 0] = np.nan
+    broken = [type(bad)(bad.name, bad.role, bad.tree, pos, bad.normals, bad.triangles)] + occ[1:]
+    with pytest.raises(ValueError, match="non-finite"):
+        regression_geometry.geometry(broken, broken, None, 32, 24)

@@ -52,18 +52,20 @@ class LeafTable:
         ok[ok] = self.size[labels[ok]] > 0
         if not ok.any():
             return out
-        lab = labels[ok]
-        u = (np.asarray(p, np.float64)[ok] - self.centroid[lab]) / self.size[lab][:, None]
+        # Every point on a leaf (a mesh's own vertices, as in a live frame): no masked copy.
+        rows = slice(None) if ok.all() else ok
+        lab = labels[rows]
+        u = (np.asarray(p, np.float64)[rows] - self.centroid[lab]) / self.size[lab][:, None]
         # The directions per leaf, then gathered per point (the same values: a leaf's points
         # share its centroid), a quarter of the work for quads.
         center, _r, z0, z1 = frame
         out_dir = self.centroid - np.asarray(center, np.float64)
         out_dir[:, 2] = 0.0
         mid = np.array([center[0], center[1], 0.5 * (z0 + z1)], np.float64)
-        out[ok, 0] = u[:, 2]
-        out[ok, 1] = np.einsum("ij,ij->i", u, _unit(out_dir)[lab])
-        out[ok, 2] = np.einsum("ij,ij->i", u, _unit(mid - self.centroid)[lab])
-        out[ok, 3] = np.linalg.norm(u, axis=1)
+        out[rows, 0] = u[:, 2]
+        out[rows, 1] = np.einsum("ij,ij->i", u, _unit(out_dir)[lab])
+        out[rows, 2] = np.einsum("ij,ij->i", u, _unit(mid - self.centroid)[lab])
+        out[rows, 3] = np.linalg.norm(u, axis=1)
         return out
 
 

@@ -82,8 +82,12 @@ def refit(base: Plan, items) -> Plan:
     plan.every_ground = base.every_ground
     plan.walls = walls.build(items) if base.every_ground or walls.has_wall(base.walls) else []
     parts = split_trees(items)
-    proxies.fit_scene(plan, parts)
-    if base.regression is not None and rungs.get(base.method).needs_regression:
+    rung = rungs.get(base.method)
+    # A rung that reads no proxy (the ray-free one) skips their fits: an ellipsoid at the live
+    # tolerance costs as much as its whole grid (DESIGN, 'Live and per-frame AO').
+    if rung.reads_proxies:
+        proxies.fit_scene(plan, parts)
+    if base.regression is not None and rung.needs_regression:
         plan.regression = base.regression.at_frame(parts, items)
     plan.proxies = {t: proxies.own_shells(plan, t, plan.method) for t in plan.fits}
     return plan

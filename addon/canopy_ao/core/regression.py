@@ -30,18 +30,17 @@ import time
 import numpy as np
 
 from . import buried as _buried
-from . import card_ao, card_area, native, walls
+from . import card_ao, native, walls
 from .leaf_features import LeafTable, tree_frame  # noqa: F401 (tree_frame: tests)
 from .meshes import bake_shading, merged
 from .native import CanopyAOError
 from .regression_fit import NATIVE, PIECES_GAIN, fit_group as _fit  # noqa: F401 (tests)
 from .regression_fit import (MIN_POINTS, MIN_SAMPLES, POINTS, RAYS_PER_RECEIVER,  # noqa: F401
                              _sample, calibration_size)
+from .regression_geometry import LEAF_TABLE_ROLES, geometry as _geometry  # noqa: F401
 from .scene import RECEIVER_ROLES, ray_length
 
 OCCLUDER_ROLES = ("CANOPY", "TRUNK", "GRASS")
-# Meshes whose connected pieces (a leaf card, a branch tube) give a receiver piece features.
-LEAF_TABLE_ROLES = ("CANOPY", "TRUNK")
 # Buried: the one test (buried.py) with twice auto's rays: with 16 rays more of the darkest
 # unburied points fail it and leave the fit, white birch MAE 0.047 against 0.046.
 BURIED_RAYS = 2 * _buried.BURIED_RAYS
@@ -245,33 +244,6 @@ class OpenSky:
 
     def at_frame(self, items, meshes=None):
         return self
-
-
-def _geometry(items, occ, meshes, resolution, directions, before=None, tables=True):
-    """(OcclusionFeatures over the occluders' density grid, {mesh: LeafTable or None} of the
-    CANOPY and TRUNK meshes (meshes: unsplit items; a name seen twice gets none; before: an
-    earlier frame's, pieces kept; tables=False: none at all, {}), the scene's tree frame,
-    {tree: its frame})."""
-    _core = native.require()
-    grid = _core.DensityGrid(*merged([card_area.counted_item(it) for it in occ]),
-                             resolution=resolution)  # cards by their opaque area
-    features = _core.OcclusionFeatures(grid, directions=directions)
-    whole = meshes if meshes is not None else [it for it in items if it.vertex_map is None]
-    leaves = {}
-    for it in whole if tables else ():
-        if it.role in LEAF_TABLE_ROLES:
-            old = (before or {}).get(it.name)
-            keep = old is not None and len(old.labels) == len(it.positions)
-            leaves[it.name] = None if it.name in leaves or (before and old is None) else \
-                LeafTable(it.positions, it.triangles, labels=old.labels if keep else None)
-    scene_frame = tree_frame(np.concatenate([it.positions for it in occ]))
-    frames = {}
-    for tree in sorted({it.tree for it in items if it.tree}):
-        own = [it for it in items if it.tree == tree and it.role in ("CANOPY", "TRUNK")]
-        same = len(own) == len(occ) and all(a is b for a, b in zip(own, occ))  # one tree
-        frames[tree] = tree_frame(np.concatenate([it.positions for it in own])) \
-            if own and not same else scene_frame
-    return features, leaves, scene_frame, frames
 
 
 def occludes(items) -> bool:

@@ -92,15 +92,34 @@ class OcclusionFeatures {
   };
   static Field sweep(const DensityGrid& g, int level, const std::vector<Vec3>& dirs);
   static float lerp3(const Field& f, const std::vector<float>& v, Vec3 p);
+  // compute()'s per-block work (occlusion_features.cpp), one body built twice: the baseline's
+  // and AVX2's (no FMA: the same bits).
+  struct FeatureContext;
+  static void features_block(const FeatureContext& c, std::size_t b, std::size_t e,
+                             float* taus, float* tr, float* sq, float* tile);
+  static void features_portable(const FeatureContext& c, std::size_t b, std::size_t e,
+                                float* taus, float* tr, float* sq, float* tile);
+  struct avx2 {
+    static void features(const FeatureContext& c, std::size_t b, std::size_t e, float* taus,
+                         float* tr, float* sq, float* tile);
+  };
   // τ_k for every direction at p into tau (K values): one trilinear stencil for all directions
   // inside the grid; outside, each direction reads where it enters the grid.
   void taus_at(Vec3 p, float* tau) const;
   // The receivers' indices in an order that walks the grid bucket by bucket (cache reuse).
-  std::vector<std::uint32_t> coherent_order(PointsView positions) const;
+  // bucket: null, or each receiver's bucket in that order.
+  std::vector<std::uint32_t> coherent_order(PointsView positions,
+                                            std::vector<std::uint32_t>* bucket = nullptr) const;
 
   std::vector<Vec3> dirs_;
   Field fine_;
 };
+
+/// Whether OcclusionFeatures::compute runs its AVX2 copy (chosen by the CPU on first use);
+/// both copies give the same bits. set_...(true) throws std::invalid_argument on a CPU without
+/// AVX2. For tests and benchmarks.
+bool occlusion_features_kernel_avx2();
+void set_occlusion_features_kernel_avx2(bool on);
 
 // === The linear model
 /// Number of expanded terms for F raw features: 1 + F + F + (F − 1), plus the 15 pairwise

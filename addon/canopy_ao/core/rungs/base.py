@@ -55,6 +55,9 @@ class Rung:
     # its evaluate multiplies the GROUND patches in (lighting.walls_ao): a live frame of a
     # ground alone multiplies the first bake's instead (live.held_ground)
     ground_patches: bool = False
+    # its evaluation reads the fitted proxies (plan.fits, trunks, grass heights and layers):
+    # a live frame refits them (core/live.refit); the ray-free rung reads none of them
+    reads_proxies: bool = True
     # roles whose triangles a live frame keeps (grass blades and the GROUND surfaces, whose
     # walls occlude: core/walls.py; the ray-free rung's grid and leaf table need every one)
     frame_triangle_roles: tuple = ("GRASS", "GROUND")

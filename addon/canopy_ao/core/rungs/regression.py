@@ -19,6 +19,6 @@ RUNG = Rung("regression", "Regression", "Ray-free: up to 1024 ray-traced points 
             "cheap per-vertex features of the density grid and the tree's shape; no rays "
             "beyond them, cost independent of the leaf count",
             evaluate=_evaluate, work=_work, needs_triangles=True, needs_regression=True,
-            live=True, ground_patches=True,
+            live=True, ground_patches=True, reads_proxies=False,
             frame_triangle_roles=("GRASS", "GROUND", "CANOPY", "TRUNK"),
             climbs=lambda plan: plan.regression is not None, number=7)
