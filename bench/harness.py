@@ -266,6 +266,22 @@ def enable_addon():
         raise RuntimeError(msg)
 
 
+def run_and_exit(main, name):
+    """Run ``main(argv)`` inside Blender with the arguments after ``--``, then leave at once
+    (os._exit: no teardown, so a live session's handlers still registered run no more); a
+    failure prints its traceback and ``name: error: ...`` and exits 1."""
+    try:
+        main(blender_args())
+    except Exception as exc:  # noqa: BLE001
+        import traceback
+        traceback.print_exc()
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        sys.stdout.flush()
+        os._exit(1)
+    sys.stdout.flush()
+    os._exit(0)
+
+
 def run_in_blender(main, name):
     """Run ``main(argv)`` inside Blender with the arguments after ``--``; a failure prints
     ``name: error: ...`` and exits non-zero (examples/blender_script.run)."""

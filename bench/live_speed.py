@@ -242,13 +242,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    try:
-        main(harness.blender_args())
-    except Exception as exc:  # noqa: BLE001
-        import traceback
-        traceback.print_exc()
-        print(f"live_speed: error: {exc}", file=sys.stderr)
-        sys.stdout.flush()
-        os._exit(1)
-    sys.stdout.flush()
-    os._exit(0)  # no teardown: the live session's handlers stay registered
+    harness.run_and_exit(main, "live_speed")

@@ -44,7 +44,7 @@ def _timed(owner, attr, label):
 
 
 def _instrument():
-    from canopy_ao.blender import live_render, live_session, loop, mesh_io, ownership
+    from canopy_ao.blender import live_render, live_session, loop, mesh_io
     from canopy_ao.core import live as core_live
     read = mesh_io.evaluated_arrays
 
@@ -130,12 +130,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    try:
-        main(harness.blender_args())
-    except Exception:  # noqa: BLE001
-        import traceback
-        traceback.print_exc()
-        sys.stdout.flush()
-        os._exit(1)
-    sys.stdout.flush()
-    os._exit(0)
+    harness.run_and_exit(main, "live_stages")

@@ -121,12 +121,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    try:
-        main(harness.blender_args())
-    except Exception:  # noqa: BLE001
-        import traceback
-        traceback.print_exc()
-        sys.stdout.flush()
-        os._exit(1)
-    sys.stdout.flush()
-    os._exit(0)
+    harness.run_and_exit(main, "regression_frame_stages")
