@@ -23,6 +23,7 @@ def corner_normals(mesh, n_loops):
     else:  # 3.4 - 4.0: split normals honour smooth/flat shading and custom normals
         mesh.calc_normals_split()
         mesh.loops.foreach_get("normal", out)
+        mesh.free_normals_split()  # the mesh as found (an original one is the user's)
     return out.reshape(n_loops, 3)
 
 
