@@ -157,9 +157,8 @@ def bake_targets(context, object_names, opts=None, on_mesh=True, notes=None):
               and getattr(o.data, "use_auto_smooth", True)]  # before 4.1: used with it only
     if custom and notes is not None:
         notes.append(f"{', '.join(custom)}: custom split normals, which Cycles' bake follows "
-                     "and this one in part: per vertex its rays turn around them, its proxies "
-                     "take the vertex normals, and per texel it reads further from Cycles "
-                     "than on plain normals")
+                     "and so do this one's rays, but not its proxies, grid and medium, which "
+                     "take the vertex normals")
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "

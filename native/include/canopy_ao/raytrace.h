@@ -259,7 +259,8 @@ struct BakeShading {
   /// corner then takes its vertex's normal. Cycles evaluates a face corner with that corner's
   /// own normal (the face normal on a flat face, split at sharp edges, custom normals where
   /// set), the terminator lift included (none on a flat face: all three equal the face
-  /// normal). Need not be unit length; a zero normal stands for its triangle's face normal.
+  /// normal); a texel's lift too. Need not be unit length; a zero normal stands for its
+  /// triangle's face normal.
   /// Needs vertex_normals. Equal to the vertex normals, the AO is bit for bit the same.
   const float* corner_normals = nullptr;
 };
