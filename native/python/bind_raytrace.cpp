@@ -109,7 +109,8 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
                                        const py::object& polygons = py::none(),
                                        const py::object& opacity_materials = py::none(),
                                        const py::object& opacity_uvs = py::none(),
-                                       const py::object& opacity_alphas = py::none()) {
+                                       const py::object& opacity_alphas = py::none(),
+                                       const py::object& corner_normals = py::none()) {
   const PointsView v = points_arg(vertices, "vertices", /*allow_empty=*/true);
   std::size_t m = 0;
   const std::int32_t* t = triangles_arg(triangles, "triangles", v.size, &m);
@@ -139,6 +140,26 @@ std::unique_ptr<RayTracer> make_tracer(const py::array& vertices, const py::arra
                             shape_str(polygons_keep));
     }
     shading.polygons = static_cast<const std::int32_t*>(polygons_keep.data());
+  }
+  py::array corners_keep;
+  if (!corner_normals.is_none()) {
+    if (normals.is_none()) {
+      throw py::value_error("corner_normals need normals (they shade the bake points)");
+    }
+    corners_keep = corner_normals.cast<py::array>();
+    require_dtype(corners_keep, "corner_normals", py::dtype::of<float>(), "float32");
+    const bool per_triangle = corners_keep.ndim() == 3 &&
+                              static_cast<std::size_t>(corners_keep.shape(0)) == m &&
+                              corners_keep.shape(1) == 3 && corners_keep.shape(2) == 3;
+    const bool rows = corners_keep.ndim() == 2 &&
+                      static_cast<std::size_t>(corners_keep.shape(0)) == 3 * m &&
+                      corners_keep.shape(1) == 3;
+    if (!per_triangle && !rows) {
+      throw py::value_error("corner_normals must be float32 (M, 3, 3) or (3M, 3) like "
+                            "triangles' corners, got " + shape_str(corners_keep));
+    }
+    corners_keep = py::array_t<float, py::array::c_style | py::array::forcecast>(corners_keep);
+    shading.corner_normals = static_cast<const float*>(corners_keep.data());
   }
   // Instanced meshes; `keep` holds their arrays until the build has copied them.
   std::vector<Prototype> protos;
@@ -237,9 +258,10 @@ void bind_raytrace(py::module_& m) {
            py::arg("instance_matrices") = py::none(), py::arg("normals") = py::none(),
            py::arg("polygons") = py::none(), py::arg("opacity_materials") = py::none(),
            py::arg("opacity_uvs") = py::none(), py::arg("opacity_alphas") = py::none(),
+           py::arg("corner_normals") = py::none(),
            "RayTracer(vertices, triangles, prototypes=None, instance_prototypes=None, "
            "instance_matrices=None, normals=None, polygons=None, opacity_materials=None, "
-           "opacity_uvs=None, opacity_alphas=None)\n\n"
+           "opacity_uvs=None, opacity_alphas=None, corner_normals=None)\n\n"
            "vertices: float32 (V, 3); triangles: int32 (M, 3), indices in [0, V). M may be 0 "
            "(nothing occludes: AO = 1). Instanced meshes (Embree instances: each prototype's "
            "BVH built once): prototypes, a sequence of (vertices float32 (P, 3), triangles "
@@ -251,7 +273,10 @@ void bind_raytrace(py::module_& m) {
            "bake starts it (each corner's bake point, raytrace.h 'Origins'), without them on "
            "the surface a hair from the vertex. polygons: int32 (M,), each triangle's face "
            "(a quad's two triangles share one), so a vertex has one corner per face as in "
-           "Blender's bake (needs normals). Opacity (raytrace.h, 'Opacity'): opacity_materials "
+           "Blender's bake (needs normals). corner_normals: float32 (M, 3, 3) or (3M, 3), each "
+           "triangle corner's own (split) normal, which a bake point's hemisphere and "
+           "terminator lift then follow as Cycles' do (flat faces, sharp edges, custom "
+           "normals; needs normals). Opacity (raytrace.h, 'Opacity'): opacity_materials "
            "int32 (M,), each triangle's index into opacity_alphas (-1 = opaque); "
            "opacity_alphas, each material's alpha: a float, or a float32 (H, W) texture "
            "(row 0 at v = 0, bilinear, repeat) read at the UVs opacity_uvs float32 (M, 3, 2), "

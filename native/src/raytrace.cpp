@@ -647,6 +647,7 @@ struct RayTracer::Impl {
   std::vector<std::uint32_t> first_tri, tris_of;
   std::size_t vertex_count = 0;
   std::vector<float> vertex_normals;  // 3V unit (or zero) normals, or empty: no bake point
+  std::vector<float> corner_normals;  // 9M unit (or zero) corner normals, or empty: vertices'
   std::vector<std::int32_t> polygons;  // M polygon ids (a quad's two triangles share one), or empty
   std::size_t triangle_count = 0;
   // Each vertex's corners where Cycles' bake evaluates them (CSR, vertex v's are
@@ -855,7 +856,10 @@ struct RayTracer::Impl {
     const std::uint32_t* t = indices.data() + 3 * static_cast<std::size_t>(tri);
     Vec3 N[3];
     for (int j = 0; j < 3; ++j) {
-      const float* q = vertex_normals.data() + 3 * static_cast<std::size_t>(t[j]);
+      // The corner's own normal where given (BakeShading::corner_normals), as Cycles shades it.
+      const float* q = corner_normals.empty()
+                           ? vertex_normals.data() + 3 * static_cast<std::size_t>(t[j])
+                           : corner_normals.data() + 9 * static_cast<std::size_t>(tri) + 3 * j;
       N[j] = Vec3{q[0], q[1], q[2]};
       if (!(length(N[j]) > 0.0f)) N[j] = ng;  // a zero vertex normal: the face's
     }
@@ -1047,6 +1051,20 @@ RayTracer::RayTracer(PointsView vertices, const std::int32_t* triangles,
       m.vertex_normals[3 * i] = u.x;
       m.vertex_normals[3 * i + 1] = u.y;
       m.vertex_normals[3 * i + 2] = u.z;
+    }
+  }
+  if (shading.corner_normals != nullptr && triangle_count > 0) {
+    if (vertex_normals.size == 0) {
+      throw std::invalid_argument("corner_normals need vertex_normals (they shade bake points)");
+    }
+    const PointsView cn{shading.corner_normals, 3 * triangle_count};
+    check_points(cn, "corner_normals");
+    m.corner_normals.resize(9 * triangle_count);
+    for (std::size_t i = 0; i < cn.size; ++i) {
+      const Vec3 u = unit_or_zero(cn[i]);
+      m.corner_normals[3 * i] = u.x;
+      m.corner_normals[3 * i + 1] = u.y;
+      m.corner_normals[3 * i + 2] = u.z;
     }
   }
   for (std::size_t k = 0; k < prototypes.size(); ++k) {

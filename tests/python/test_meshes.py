@@ -65,3 +65,58 @@ def test_a_tracer_of_instances_alone():
     assert int(tracer.instance_count) == 1 and int(tracer.triangle_count) == 0
     up = np.array([[0.0, 0.0, 0.0]], np.float32), np.array([[0.0, 0.0, 1.0]], np.float32)
     assert float(tracer.ao(*up, samples=64)[0]) < 0.95  # the crown above shades the point
+
+
+def _face_normals(item):
+    """float32 (M, 3, 3): every corner of each triangle given its face's normal (flat shading)."""
+    p = item.positions.astype(np.float64)[item.triangles]
+    f = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    f /= np.linalg.norm(f, axis=1, keepdims=True)
+    return np.repeat(f[:, None, :], 3, axis=1).astype(np.float32)
+
+
+def _vertex_ao(items):
+    """The exact rung's AO at every vertex of the merged items, each at Cycles' bake point."""
+    tracer = lighting.build_tracer(items)
+    p, _t = meshes.merged(items)
+    n = meshes.bake_shading(items)["normals"]
+    return np.asarray(tracer.ao(p, n, samples=64, vertex_ids=np.arange(len(p), dtype=np.int32)))
+
+
+def test_bake_shading_hands_the_tracer_corner_normals_where_an_item_has_them():
+    trunk, _hidden, _empty, ground = _items()
+    assert "corner_normals" not in meshes.bake_shading([trunk, ground])
+    trunk.corner_normals = _face_normals(trunk)
+    shading = meshes.bake_shading([trunk, ground])
+    cn = shading["corner_normals"]
+    assert cn.shape == (len(trunk.triangles) + len(ground.triangles), 3, 3)
+    assert np.array_equal(cn[:len(trunk.triangles)], trunk.corner_normals)
+    assert np.array_equal(cn[len(trunk.triangles):], ground.normals[ground.triangles])
+
+
+def test_the_rays_turn_around_the_corner_normals_and_equal_ones_change_nothing():
+    """A flat-shaded trunk on the ground bakes other hemispheres than its smooth vertex normals
+    (Cycles' corners, native raytrace.h 'Origins'); its vertex normals handed as corner normals
+    change no bit."""
+    trunk, _hidden, _empty, ground = _items()
+    smooth = _vertex_ao([trunk, ground])
+    trunk.corner_normals = trunk.normals[trunk.triangles]
+    assert np.array_equal(_vertex_ao([trunk, ground]), smooth)
+    trunk.corner_normals = _face_normals(trunk)
+    flat = _vertex_ao([trunk, ground])
+    k = len(trunk.positions)
+    assert np.abs(flat[:k] - smooth[:k]).max() > 0.05
+    assert np.array_equal(flat[k:], smooth[k:])  # the ground's corners are its vertex normals
+
+
+def test_corner_normals_of_the_wrong_shape_are_refused():
+    trunk, _hidden, _empty, ground = _items()
+    with pytest.raises(core.CanopyAOError, match="corner normals"):
+        core.SceneItem("T", "TRUNK", "T", trunk.positions, trunk.normals, trunk.triangles,
+                       corner_normals=np.zeros((1, 3, 3), np.float32))
+    p, t = meshes.merged([ground])
+    n = ground.normals
+    with pytest.raises(ValueError, match="corner_normals must be float32"):
+        _core.RayTracer(p, t, normals=n, corner_normals=np.zeros((len(t), 3), np.float32))
+    with pytest.raises(ValueError, match="corner_normals need normals"):
+        _core.RayTracer(p, t, corner_normals=n[t])

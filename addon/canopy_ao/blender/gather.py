@@ -157,8 +157,8 @@ def bake_targets(context, object_names, opts=None, on_mesh=True, notes=None):
               and getattr(o.data, "use_auto_smooth", True)]  # before 4.1: used with it only
     if custom and notes is not None:
         notes.append(f"{', '.join(custom)}: custom split normals, which Cycles' bake follows "
-                     "and this one only in part (per vertex it takes the vertex normals): the "
-                     "two differ where they part from the faces' own normals")
+                     "and so do this one's rays, but not its proxies, grid and medium, which "
+                     "take the vertex normals")
     shadowless = [o.name for o in targets if not casts_shadow(o)]
     if shadowless:
         raise CanopyAOError(f"{', '.join(shadowless)}: Ray Visibility > Shadow is off, so "
@@ -296,10 +296,10 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             opts["method"], opts["tau"], declared[0])
         # Only a target's result goes back onto its mesh: a non-target may change its
         # vertex count (it only occludes and shapes the proxies).
-        faces = []
+        faces, corners = [], []
         pos, nor, tris = mesh_io.evaluated_arrays(
             obj, depsgraph, same_count=opts["mode"] == 'VERTEX' and name in target_names,
-            triangles=tris_needed, timings=timings, polygons=faces)
+            triangles=tris_needed, timings=timings, polygons=faces, corners=corners)
         t0 = time.perf_counter()
         role, why = declared or role_of(obj, pos, tris)
         timings["roles"] = timings.get("roles", 0.0) + time.perf_counter() - t0
@@ -307,7 +307,8 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
             continue
         tree, source = tree_and_source(obj)
         polys = faces[0] if faces and len(faces[0]) == len(tris) else None
-        item = SceneItem(name, role, tree, pos, nor, tris, tree_source=source, polygons=polys)
+        item = SceneItem(name, role, tree, pos, nor, tris, tree_source=source, polygons=polys,
+                         corner_normals=corners[0] if corners else None)
         # A guessed mesh of parts of different roles (bark and leaves) bakes part by part.
         cut = parts_io.split(obj, item, depsgraph, opts, alphas, notes) if declared is None \
             else None
@@ -320,6 +321,7 @@ def scene_items(context, depsgraph, targets, opts, timings, notes=None):
         for it, _idx in cut or [(item, None)]:
             if id(it) not in kept:  # not part of this bake (kept only for the guess)
                 it.triangles, it.polygons, it.opacity = it.triangles[:0], None, None
+                it.corner_normals = None
             items.append(it)
             objects[it.name] = obj
             how[it.name] = f"part of {name}: {it.part_why}" if cut else why

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..core import native
 from ..core.native import CanopyAOError
+from . import corner_io
 from .ownership import mark_owned, owned_attributes, ownership, set_record  # noqa: F401
 
 
@@ -71,7 +72,7 @@ def _lap(timings, key, t0):
 
 
 def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=None,
-                     polygons=None, shared=False):
+                     polygons=None, shared=False, corners=None):
     """World-space arrays of an object's evaluated mesh (modifiers applied).
 
     Returns (positions float32 (V, 3), normals float32 (V, 3) unit, triangles int32 (F, 3)).
@@ -83,7 +84,8 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
     timings: a dict to which the seconds of each stage are added ("fetch", "positions",
     "normals", "triangles", "transform").
     polygons: a list to which each triangle's face index, int32 (F,), is appended (with
-    triangles; the ray tracer's bake points count one corner per face).
+    triangles; the ray tracer's bake points count one corner per face). corners: likewise,
+    corner_io.triangle_corner_normals (None or float32 (F, 3, 3): each corner's own normal).
     shared: read the evaluated object's own mesh, not a to_mesh() copy (live AO's read each
     frame): no copy, and its vertex normals are computed once for this evaluation, cached
     where the viewport's draw finds them (a copy computes them again: 10 ms per 100k
@@ -125,6 +127,8 @@ def evaluated_arrays(obj, depsgraph, same_count=True, triangles=True, timings=No
                 faces = np.empty(len(mesh.loop_triangles), dtype=np.int32)
                 mesh.loop_triangles.foreach_get("polygon_index", faces)
                 polygons.append(faces)
+            if corners is not None:
+                corners.append(corner_io.triangle_corner_normals(mesh, tris, nor, matrix))
         else:
             tris = np.zeros((0, 3), dtype=np.int32)
         t = _lap(timings, "triangles", t)
@@ -276,8 +280,7 @@ def evaluated_ao_attribute(obj, depsgraph, name):
 
 def write_evaluated_ao(attr, ao):
     """Fill an attribute of an evaluated mesh (evaluated_ao_attribute) with AO: no tag, no
-    ownership record (the depsgraph's copy is dropped at its next evaluation; the original
-    mesh is not touched)."""
+    ownership record (the depsgraph drops its copy at its next evaluation; nothing original)."""
     attr.data.foreach_set("color", gray_rgba(ao))
 
 
@@ -285,16 +288,14 @@ def write_float_attribute(obj, name, values, overwrite=False):
     """Write float (V,) as a POINT-domain FLOAT attribute (one frame of a frame-range bake's
     cache), under write_ao_attribute's ownership rules."""
     attr, values = _point_attribute(obj, name, values, 'FLOAT', overwrite)
-    mesh = obj.data
     attr.data.foreach_set("value", values)
-    mesh.update_tag()
+    obj.data.update_tag()
     mark_owned(obj, name, values)
     return attr
 
 
 def remove_owned_attribute(obj, name):
-    """Remove an attribute that is exactly as Canopy AO wrote it, and its record; True if one
-    went."""
+    """Remove an attribute exactly as Canopy AO wrote it, and its record; True if one went."""
     if ownership(obj.data, name) != 'ours':
         return False
     obj.data.attributes.remove(obj.data.attributes[name])

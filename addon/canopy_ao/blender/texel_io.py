@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import materials, mesh_io, ownership, texel_points
+from . import corner_io, materials, mesh_io, ownership, texel_points
 from .files_io import Output, check_outputs, image_path, write_own_file
 from ..core import texel_budget
 # Kept under their old names for code that writes image files of its own through texel_io.
@@ -43,16 +43,6 @@ def resolve_uv_map(obj, uv_map):
     return uv_map
 
 
-def _corner_normals(mesh, n_loops):
-    out = np.empty(n_loops * 3, dtype=np.float32)
-    if hasattr(mesh, "corner_normals"):  # 4.1+
-        mesh.corner_normals.foreach_get("vector", out)
-    else:  # 3.4 – 4.0: split normals honour smooth/flat shading and custom normals
-        mesh.calc_normals_split()
-        mesh.loops.foreach_get("normal", out)
-    return out.reshape(n_loops, 3)
-
-
 def gather_corner_triangles(obj, depsgraph, uv_map):
     """Triangulated corner data of obj's evaluated mesh, world space.
 
@@ -78,7 +68,7 @@ def gather_corner_triangles(obj, depsgraph, uv_map):
         mesh.vertices.foreach_get("co", co)
         uv = np.empty(n_loops * 2, dtype=np.float32)
         layer.data.foreach_get("uv", uv)
-        nor = _corner_normals(mesh, n_loops)
+        nor = corner_io.corner_normals(mesh, n_loops)
     finally:
         ob_eval.to_mesh_clear()
     pos, nrm = mesh_io._to_world(co.reshape(n_verts, 3)[loop_vert[corner]], nor[corner],

@@ -152,7 +152,8 @@ def cut(item: SceneItem, parts):
         sub = SceneItem(f"{item.name} [{q.name}]", q.role, item.tree, item.positions[idx],
                         item.normals[idx], remap[t], tree_source=item.tree_source,
                         polygons=item.polygons[q.triangles] if item.polygons is not None
-                        else None)
+                        else None, corner_normals=item.corner_normals[q.triangles]
+                        if item.corner_normals is not None else None)
         sub.opacity = opacity_of(item.opacity, q.triangles)
         out.append((sub, idx))
     return out

@@ -28,8 +28,12 @@ def merged(items):
 def bake_shading(items):
     """The tracer's bake-point data for items merged in order (native raytrace.h, 'Origins'):
     {"normals": float32 (V, 3), "polygons": int32 (M,)}, each item's faces numbered apart (an
-    item without face ids counts every triangle a face)."""
+    item without face ids counts every triangle a face), and "corner_normals" float32 (M, 3, 3)
+    when an item has its own (SceneItem.corner_normals; the others' are their vertices')."""
     nrms, polys, first = [], [], 0
+    corners = any(it.corner_normals is not None for it in items)
+    cns = [it.normals[it.triangles] if it.corner_normals is None else it.corner_normals
+           for it in items] if corners else []
     for it in items:
         nrms.append(it.normals)
         faces = it.polygons if it.polygons is not None else np.arange(len(it.triangles))
@@ -37,8 +41,11 @@ def bake_shading(items):
         first += int(faces.max()) + 1 if len(faces) else 0
     if not nrms:
         return {"normals": np.zeros((0, 3), np.float32), "polygons": np.zeros(0, np.int32)}
-    return {"normals": np.ascontiguousarray(np.concatenate(nrms), dtype=np.float32),
-            "polygons": np.ascontiguousarray(np.concatenate(polys), dtype=np.int32)}
+    out = {"normals": np.ascontiguousarray(np.concatenate(nrms), dtype=np.float32),
+           "polygons": np.ascontiguousarray(np.concatenate(polys), dtype=np.int32)}
+    if corners:
+        out["corner_normals"] = np.ascontiguousarray(np.concatenate(cns), dtype=np.float32)
+    return out
 
 
 def scene_triangles(items, bases=None, shading=None):

@@ -46,6 +46,10 @@ class SceneItem:
     # diagonal or an n-gon's fan is one face corner, as Cycles bakes it (native raytrace.h,
     # 'Origins'); None counts every triangle a corner.
     polygons: np.ndarray | None = None
+    # Each triangle corner's own (split) normal, float32 (M, 3, 3), or None: every corner's is
+    # its vertex's. Cycles bakes a face corner with it (flat faces, sharp edges, custom normals;
+    # native raytrace.h, BakeShading); the exact rung's bake points follow it.
+    corner_normals: np.ndarray | None = None
     # opacity.ItemOpacity: which of its triangles rays may pass (their material's alpha), or
     # None: every triangle opaque
     opacity: object = None
@@ -64,6 +68,12 @@ class SceneItem:
             if len(self.polygons) != len(self.triangles):
                 raise CanopyAOError(f"{self.name}: {len(self.polygons)} polygon ids for "
                                     f"{len(self.triangles)} triangles")
+        if self.corner_normals is not None:
+            self.corner_normals = np.ascontiguousarray(self.corner_normals,
+                                                       dtype=np.float32).reshape(-1, 3, 3)
+            if len(self.corner_normals) != len(self.triangles):
+                raise CanopyAOError(f"{self.name}: corner normals for {len(self.corner_normals)}"
+                                    f" triangles, not {len(self.triangles)}")
         if len(self.positions) != len(self.normals):
             raise CanopyAOError(f"{self.name}: {len(self.positions)} positions but "
                                 f"{len(self.normals)} normals")
@@ -193,7 +203,7 @@ def parts(item: SceneItem):
     tri_tree = item.tree_labels[item.triangles[:, 0]] if len(item.triangles) else None
     for k, tree in enumerate(item.tree_names):
         idx = np.flatnonzero(item.tree_labels == k)
-        tris, polys = np.zeros((0, 3), np.int32), None
+        tris, polys, corners = np.zeros((0, 3), np.int32), None, None
         if tri_tree is not None:
             keep = (tri_tree == k) & (item.tree_labels[item.triangles[:, 1]] == k) \
                 & (item.tree_labels[item.triangles[:, 2]] == k)
@@ -201,9 +211,11 @@ def parts(item: SceneItem):
             remap[idx] = np.arange(len(idx))
             tris = remap[item.triangles[keep]]
             polys = item.polygons[keep] if item.polygons is not None else None
+            corners = item.corner_normals[keep] if item.corner_normals is not None else None
         out.append((SceneItem(item.name, item.role, tree, item.positions[idx],
                               item.normals[idx], tris, tree_source=item.tree_source,
-                              tree_why=item.tree_why, vertex_map=idx, polygons=polys), idx))
+                              tree_why=item.tree_why, vertex_map=idx, polygons=polys,
+                              corner_normals=corners), idx))
     return out
 
 

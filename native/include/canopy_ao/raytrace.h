@@ -52,7 +52,8 @@
 // the hemisphere turns into the surface. A residue of exactly 0 (every product exact) is
 // Cycles' NaN normal again: open. For each traced corner:
 //  - the hemisphere is around the smooth normal interpolated there from the triangle's three
-//    vertex normals, the face normal taken on its side (where a vertex normal opposes its face,
+//    vertex normals (its corner normals when given, BakeShading), the face normal taken on its
+//    side (where a vertex normal opposes its face,
 //    which Blender's own normals never do, Cycles would bake the other hemisphere);
 //  - only the corner's triangle is skipped; a ray within cos⁻¹(0.1) of grazing the face (Cycles'
 //    default shadow-terminator geometry offset, 0.1) starts lifted onto the smooth surface the
@@ -254,6 +255,14 @@ struct BakeShading {
   /// vertex has one corner per polygon, on the polygon's first triangle using it (Blender bakes
   /// each face corner once); null makes every triangle a corner.
   const std::int32_t* polygons = nullptr;
+  /// #M by 3 by 3 corner (split) normals, row 3i + j triangle i's corner j, or null: each
+  /// corner then takes its vertex's normal. Cycles evaluates a face corner with that corner's
+  /// own normal (the face normal on a flat face, split at sharp edges, custom normals where
+  /// set), the terminator lift included (none on a flat face: all three equal the face
+  /// normal); a texel's lift too. Need not be unit length; a zero normal stands for its
+  /// triangle's face normal.
+  /// Needs vertex_normals. Equal to the vertex normals, the AO is bit for bit the same.
+  const float* corner_normals = nullptr;
 };
 
 /// One material's alpha (1 = opaque, 0 = transparent; raytrace.h, "Opacity").
