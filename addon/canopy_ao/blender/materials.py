@@ -61,13 +61,24 @@ def check_aov_name(aov_name):
 
 # === Node helpers
 
+def is_ours(node):
+    """True for a node wire_* added. A node the user duplicated from ours (Shift+D copies its
+    custom properties) has another name than the one recorded, and is the user's to keep. The
+    name is read from the node's path: in 3.4 an AOV Output's `name` is the AOV it writes."""
+    if node.get(TAG) is None:
+        return False
+    path = node.path_from_id()
+    return node.get(TAG + "_node", path) == path
+
+
 def _ours(nt, role):
-    return [n for n in nt.nodes if n.get(TAG) == role]
+    return [n for n in nt.nodes if n.get(TAG) == role and is_ours(n)]
 
 
 def _new(nt, bl_idname, role, label, location):
     node = nt.nodes.new(bl_idname)
     node[TAG] = role
+    node[TAG + "_node"] = node.path_from_id()
     node.label = label
     node.location = location
     return node
@@ -85,20 +96,31 @@ def _output_node(nt):
     return outs[0] if outs else None
 
 
-def _base_color_socket(nt):
-    """The surface shader's color input we multiply AO into, or None."""
+# Nodes that pass shaders through: the wiring looks behind them (a foliage material is often
+# Principled and Translucent mixed) for every shader's colour.
+_PASS_THROUGH = {"NodeReroute": (0,), "ShaderNodeMixShader": (1, 2), "ShaderNodeAddShader": (0, 1)}
+
+
+def _base_color_sockets(nt):
+    """The colour inputs of the surface shaders we multiply AO into (maybe none)."""
     out = _output_node(nt)
-    if out is None:
-        return None
-    surf = out.inputs.get("Surface")
-    if surf is None or not surf.is_linked:
-        return None
-    shader = surf.links[0].from_node
-    for name in _BASE_COLOR_INPUTS:
-        sock = shader.inputs.get(name)
-        if sock is not None and sock.type == "RGBA":
-            return sock
-    return None
+    surf = out.inputs.get("Surface") if out is not None else None
+    found, todo, seen = [], list(surf.links) if surf is not None else [], set()
+    while todo:
+        node = todo.pop(0).from_node
+        if node.name in seen:
+            continue
+        seen.add(node.name)
+        if node.bl_idname in _PASS_THROUGH:
+            for i in _PASS_THROUGH[node.bl_idname]:
+                todo.extend(node.inputs[i].links)
+            continue
+        sock = next((node.inputs.get(name) for name in _BASE_COLOR_INPUTS
+                     if node.inputs.get(name) is not None
+                     and node.inputs.get(name).type == "RGBA"), None)
+        if sock is not None:
+            found.append(sock)
+    return found
 
 
 def _mix_sockets(node):
@@ -242,22 +264,21 @@ def _wire_material(mat, make_source, source_kind, aov_name, uv_map=None):
         _link_once(nt, uv.outputs["UV"], src.inputs["Vector"])
 
     # Multiply into the surface shader's Base Color, where there is one.
+    # One multiply per shader colour on the first wiring; later ones reuse what is left of ours
+    # (a multiply the user unplugged stays unplugged).
     mixes = _ours(nt, "mix")
-    target = _base_color_socket(nt)
-    if mixes:
-        mix = mixes[0]
-    elif target is not None:
-        mix = _new_mix(nt, (x0 - 500, y0 - 100))
-        added += 1
-        a, _b, r = _mix_sockets(mix)
-        if target.is_linked:
-            nt.links.new(target.links[0].from_socket, a)
-        else:
-            a.default_value = target.default_value
-        nt.links.new(r, target)
-    else:
-        mix = None
-    if mix is not None:
+    if not mixes:
+        for i, target in enumerate(_base_color_sockets(nt)):
+            mix = _new_mix(nt, (x0 - 500, y0 - 100 + 220 * i))
+            added += 1
+            a, _b, r = _mix_sockets(mix)
+            if target.is_linked:
+                nt.links.new(target.links[0].from_socket, a)
+            else:
+                a.default_value = target.default_value
+            nt.links.new(r, target)
+            mixes.append(mix)
+    for mix in mixes:
         _a, b, _r = _mix_sockets(mix)
         _link_once(nt, color_out, b)
 
@@ -324,7 +345,7 @@ def _unwire_material(mat):
         if original is not None:
             for t in targets:
                 nt.links.new(original, t)
-    for node in [n for n in nt.nodes if n.get(TAG) is not None]:
+    for node in [n for n in nt.nodes if is_ours(n)]:
         nt.nodes.remove(node)
         removed += 1
     if mat.get(TAG + "_enabled_nodes"):
