@@ -414,10 +414,13 @@ def ensure_view_layer_aov(scene, aov_name, aov_type="VALUE", view_layer=None):
     return result
 
 
-def remove_view_layer_aov(scene, aov_name):
-    """Remove the view-layer AOV named aov_name from every view layer. Returns how many."""
+def remove_view_layer_aov(scene, aov_name, view_layers=None):
+    """Remove the view-layer AOV named aov_name from every view layer (or those named in
+    view_layers). Returns how many."""
     n = 0
     for vl in scene.view_layers:
+        if view_layers is not None and vl.name not in view_layers:
+            continue
         while True:
             idx = next((i for i, a in enumerate(vl.aovs) if a.name == aov_name), None)
             if idx is None:
