@@ -42,6 +42,19 @@ def test_inputs_from_folders_globs_files_and_manifest_in_order_once(tree):
     assert plan.expand_inputs(plan.read_manifest(manifest)) == [c, a, b]
 
 
+def test_a_folder_named_like_a_blend_file_is_no_input(tree):
+    """A folder `x.blend` beside the files (an unpacked asset, say) is not baked: a Blender
+    started on it could only fail, twice with the retry."""
+    tmp, (a, b, c) = tree
+    d = str(tmp / "in")
+    os.makedirs(os.path.join(d, "folder.blend"))
+    os.makedirs(os.path.join(d, "sub", "deep", "more.blend"))
+    assert plan.expand_inputs([d]) == [a]
+    assert plan.expand_inputs([os.path.join(d, "**", "*.blend")]) == [a, b, c]
+    with pytest.raises(plan.BatchError, match="no .blend file matches"):
+        plan.expand_inputs([os.path.join(d, "fold*.blend")])
+
+
 @pytest.mark.parametrize("entry, message", [
     ("missing.blend", "no such file"), ("*.nothing", "no .blend file matches"),
     ("in/notes.txt", "is not a .blend"), ("empty", "has no .blend file")])

@@ -57,11 +57,14 @@ def expand_inputs(entries: list[str]) -> list[str]:
     found, seen = [], set()
     for entry in entries:
         if glob.has_magic(entry):
-            paths = sorted(p for p in glob.glob(entry, recursive=True) if p.endswith(".blend"))
+            # A folder named *.blend is no file to open (each Blender would fail on it).
+            paths = sorted(p for p in glob.glob(entry, recursive=True)
+                           if p.endswith(".blend") and os.path.isfile(p))
             if not paths:
                 raise BatchError(f"no .blend file matches {entry}")
         elif os.path.isdir(entry):
-            paths = sorted(glob.glob(os.path.join(glob.escape(entry), "*.blend")))
+            paths = sorted(p for p in glob.glob(os.path.join(glob.escape(entry), "*.blend"))
+                           if os.path.isfile(p))
             if not paths:
                 raise BatchError(f"the folder {entry} has no .blend file")
         elif os.path.isfile(entry):
