@@ -238,3 +238,30 @@ def test_every_shader_behind_a_mix_shader_gets_the_ao(scene):
     assert materials.wire_vertex_ao(obj, "CanopyAO") == 0
     assert materials.unwire(obj) == 5
     assert H.tree_snapshot(mat) == before
+
+
+def test_a_material_with_no_shader_colour_is_named_in_the_report(scene):
+    """A surface shader with no colour input (a node group without one here) gets the AOV
+    only: the bake's notes say so, naming the material, where it is silent otherwise."""
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import run_bake
+    obj = H.add_plane(name="Ground")
+    obj.canopy_ao.role = 'GROUND'
+    mat = H.add_material(obj, name="Grouped")
+    nt = mat.node_tree
+    group = bpy.data.node_groups.new("Look", "ShaderNodeTree")
+    if hasattr(group, "interface"):  # 4.0+
+        group.interface.new_socket("Shader", in_out='OUTPUT', socket_type="NodeSocketShader")
+    else:
+        group.outputs.new("NodeSocketShader", "Shader")
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    assert materials.without_colour(obj) == ["Grouped"]
+    opts = dict(properties.scene_options(bpy.context.scene), method="sphere", tau=2.0,
+                distance=0.0, show_proxies=False, wire_material=True)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert any("'Grouped' has no surface shader colour" in n for n in rep["notes"]), rep["notes"]
+    nt.links.new(nt.nodes["Principled BSDF"].outputs[0],
+                 nt.nodes["Material Output"].inputs["Surface"])
+    assert materials.without_colour(obj) == []  # a colour to multiply into

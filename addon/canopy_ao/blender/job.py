@@ -251,6 +251,12 @@ class BakeJob:
         if o["channel"] != "RGBA" and o["wire_material"]:
             rep["notes"].append(f"the AO went into channel {o['channel']} only, so it was not "
                                 "multiplied into the materials (a packed map is for engines)")
+        elif o["wire_material"]:
+            for t in self.targets:
+                for name in materials.without_colour(t.obj):
+                    rep["notes"].append(
+                        f"{t.obj.name}: material '{name}' has no surface shader colour to "
+                        f"multiply the AO into (it reaches only the AOV '{o['aov_name']}')")
         rep["instances"] = instances.report(self.prototypes, self.how)
         for t in self.targets:
             e = rep["objects"][t.item.name]

@@ -11,8 +11,9 @@ Base Color), "aov" (AOV Output).
 """
 import bpy
 
-__all__ = ["wire_vertex_ao", "wire_texel_ao", "unwire", "ensure_view_layer_aov",
-           "remove_view_layer_aov", "check_aov_name", "RESERVED_PASS_NAMES"]
+__all__ = ["wire_vertex_ao", "wire_texel_ao", "unwire", "without_colour",
+           "ensure_view_layer_aov", "remove_view_layer_aov", "check_aov_name",
+           "RESERVED_PASS_NAMES"]
 
 TAG = "canopy_ao"
 # Material the add-on creates for an object that has none; marked so unwire can delete it.
@@ -121,6 +122,19 @@ def _base_color_sockets(nt):
         if sock is not None:
             found.append(sock)
     return found
+
+
+def without_colour(obj):
+    """Names of obj's node materials with no surface shader colour to multiply the AO into
+    (nor a multiply of ours): wiring gives them the AOV only."""
+    names = []
+    for slot in obj.material_slots:
+        mat = slot.material
+        if (mat is not None and mat.node_tree is not None and uses_nodes(mat)
+                and mat.name not in names and not _ours(mat.node_tree, "mix")
+                and not _base_color_sockets(mat.node_tree)):
+            names.append(mat.name)
+    return names
 
 
 def _mix_sockets(node):
