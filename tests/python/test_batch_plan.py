@@ -91,6 +91,25 @@ def test_outputs_never_overwrite_sources_unless_in_place(tree):
     plan.check_outputs(files, root, str(tmp / "out"), in_place=False)
 
 
+def test_a_file_at_an_output_path_that_no_report_claims_is_never_replaced(tree):
+    """--output pointing at a folder that already holds a file of that name (the user's own,
+    or another source's copy): refused before any Blender starts; the batch's own copy, whose
+    report names its source, is replaced by a rerun."""
+    tmp, (a, b, c) = tree
+    root, out = str(tmp / "in"), str(tmp / "out")
+    theirs = _touch(os.path.join(out, "sub", "b.blend"), "the user's")
+    with pytest.raises(plan.BatchError, match="not a batch's copy of .*b.blend"):
+        plan.check_outputs([a, b, c], root, out, False)
+    plan.write_report(plan.failed_report(c, theirs, [], 1, "x"), plan.report_path(b, root, out))
+    with pytest.raises(plan.BatchError, match="not a batch's copy"):  # another source's report
+        plan.check_outputs([a, b, c], root, out, False)
+    plan.write_report(plan.failed_report(b, theirs, [], 1, "x"), plan.report_path(b, root, out))
+    plan.check_outputs([a, b, c], root, out, False)
+    plan.check_outputs([a, b, c], root, out, True)  # in place: the sources are the outputs
+    with open(theirs) as f:
+        assert f.read() == "the user's"
+
+
 def test_reserved_bake_options_are_refused():
     plan.check_bake_args(["--method", "sphere", "--objects", "Leaves"])
     for bad in (["--save"], ["--report", "x.json"], ["--threads=2"]):

@@ -114,6 +114,16 @@ def check_outputs(sources: list[str], root: str, out_dir: str, in_place: bool) -
         if not in_place and os.path.realpath(s).startswith(out_real + os.sep):
             raise BatchError(f"{s} is inside the output folder {out_dir}; keep inputs and "
                              "outputs apart")
+        output = output_path(s, root, out_dir, in_place)
+        if not in_place and os.path.lexists(output):
+            # Every copy the batch saves has a report naming its source first (worker.py): a
+            # file without one is someone else's, never replaced unasked.
+            rep = read_report(report_path(s, root, out_dir))
+            if rep is None or os.path.realpath(str(rep.get("source", ""))) != \
+                    os.path.realpath(s):
+                raise BatchError(f"{output} already exists and is not a batch's copy of {s} "
+                                 "(no report of it beside); move it away or choose another "
+                                 "--output")
 
 
 # === Options
