@@ -265,3 +265,23 @@ def test_a_material_with_no_shader_colour_is_named_in_the_report(scene):
     nt.links.new(nt.nodes["Principled BSDF"].outputs[0],
                  nt.nodes["Material Output"].inputs["Surface"])
     assert materials.without_colour(obj) == []  # a colour to multiply into
+
+
+def test_shaders_behind_an_eevee_and_a_cycles_output_both_get_the_ao(scene):
+    """A material with one Material Output per engine: Cycles renders its own output's shader,
+    Eevee the other's; both multiply the AO, and unwire restores the material."""
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    nt = mat.node_tree
+    out = nt.nodes["Material Output"]
+    out.target = 'EEVEE'
+    cycles_out = nt.nodes.new("ShaderNodeOutputMaterial")
+    cycles_out.target = 'CYCLES'
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(diffuse.outputs[0], cycles_out.inputs["Surface"])
+    before = H.tree_snapshot(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    for sock in (nt.nodes["Principled BSDF"].inputs["Base Color"], diffuse.inputs["Color"]):
+        assert sock.is_linked and sock.links[0].from_node.get("canopy_ao") == "mix"
+    materials.unwire(obj)
+    assert H.tree_snapshot(mat) == before

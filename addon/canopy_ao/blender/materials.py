@@ -103,10 +103,12 @@ _PASS_THROUGH = {"NodeReroute": (0,), "ShaderNodeMixShader": (1, 2), "ShaderNode
 
 
 def _base_color_sockets(nt):
-    """The colour inputs of the surface shaders we multiply AO into (maybe none)."""
-    out = _output_node(nt)
-    surf = out.inputs.get("Surface") if out is not None else None
-    found, todo, seen = [], list(surf.links) if surf is not None else [], set()
+    """The colour inputs of the surface shaders we multiply AO into (maybe none), behind every
+    Material Output: one for Eevee and one for Cycles each render their own."""
+    found, todo, seen = [], [], set()
+    for out in nt.nodes:
+        if out.bl_idname == "ShaderNodeOutputMaterial" and "Surface" in out.inputs:
+            todo.extend(out.inputs["Surface"].links)
     while todo:
         node = todo.pop(0).from_node
         if node.name in seen:
