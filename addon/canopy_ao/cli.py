@@ -203,7 +203,7 @@ def run(args, profile=None):
     if args.save and not bpy.data.filepath:
         raise BakeFailed("--save needs a saved .blend (give the .blend before --python-expr)")
     if args.report:  # before the bake: a run that fails on its report leaves no images
-        _check_report_path(bpy.path.abspath(args.report))
+        _check_report_path(bpy.path.abspath(args.report), args.overwrite)
     try:
         world = None if args.distance is not None else gather.world_ao_distance(
             bpy.context.scene, bake=True)
@@ -290,12 +290,26 @@ def _with_progress(bake):
     return out
 
 
-def _check_report_path(path):
-    """Raise BakeFailed when the report could not be written at path (nothing changed yet)."""
+def _is_report(path):
+    try:
+        with open(path, encoding="utf-8") as f:
+            rep = json.load(f)
+    except (OSError, ValueError):
+        return False
+    return isinstance(rep, dict) and {"objects", "method", "notes"} <= set(rep)
+
+
+def _check_report_path(path, overwrite=False):
+    """Raise BakeFailed when the report could not be written at path, or would replace a file
+    that is not an earlier report (the .blend itself, say) without --overwrite (nothing
+    changed yet)."""
     import os
     folder = os.path.dirname(os.path.abspath(path))
     if os.path.isdir(path):
         why = "is a folder; give a file name"
+    elif os.path.isfile(path) and not overwrite and not _is_report(path):
+        why = ("already exists and is not a Canopy AO report; give another file name, or "
+               "--overwrite to replace it")
     elif not os.path.isdir(folder):
         why = f"is in a folder that does not exist ({folder})"
     elif not os.access(folder, os.W_OK) or (os.path.exists(path)

@@ -577,6 +577,31 @@ def test_a_report_that_cannot_be_written_is_refused_before_the_bake(tree_scene_o
     assert not images.exists() or list(images.iterdir()) == []
 
 
+def test_a_report_would_replace_only_an_earlier_report_unless_overwrite(tree_scene_objects,
+                                                                         capsys, tmp_path):
+    """--report naming the .blend (a slip of the hand) or any file that is not an earlier
+    report is refused before the bake, the file untouched; an earlier report is replaced, and
+    --overwrite replaces anything."""
+    from canopy_ao import cli
+    blend = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    before = blend.read_bytes()
+    base = ["--objects", "Ground", "--method", "sphere", "--tau", "2", "--distance", "0"]
+    _refused(cli, capsys, base + ["--report", str(blend)], "is not a Canopy AO report")
+    assert blend.read_bytes() == before
+    assert ATTR not in bpy.data.objects["Ground"].data.attributes
+    report = tmp_path / "r.json"
+    for _ in range(2):  # the second run replaces the first's report
+        with pytest.raises(SystemExit) as exc:
+            cli.main(base + ["--report", str(report)])
+        assert exc.value.code == 0, capsys.readouterr().err
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(base + ["--report", str(notes), "--overwrite"])
+    assert exc.value.code == 0 and json.loads(notes.read_text())["objects"]
+
+
 def test_linked_library_meshes_are_refused(tree_scene_objects, capsys, tmp_path):
     from canopy_ao import cli
     lib = str(tmp_path / "lib.blend")

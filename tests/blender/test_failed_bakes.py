@@ -130,3 +130,26 @@ def test_a_failure_after_the_writes_undoes_them(two_objects, monkeypatch):
                 method="sphere", tau=2.0, distance=0.0, mode=mode, resolution=32,
                 image_dir=images, show_proxies=False))
         _nothing_left(ground, bad, images, before)
+
+
+def test_a_failed_bake_takes_its_aov_off_only_the_view_layers_that_lacked_it(two_objects,
+                                                                             monkeypatch):
+    """Add AOV puts the pass on every view layer; one that already had it (the user's) keeps
+    it when the bake fails, and the others lose it again."""
+    from canopy_ao.blender import job as job_mod
+    ground, bad, images = two_objects
+    scene = bpy.context.scene
+    first = scene.view_layers[0]
+    second = scene.view_layers.new("Second")
+    first.aovs.add().name = "BakedAO"
+
+    def broken(self, rep):
+        raise RuntimeError("boom: the panel line")
+    monkeypatch.setattr(job_mod.BakeJob, "_result_texts", broken)
+    with pytest.raises(RuntimeError, match="boom"):
+        job_mod.run_bake(bpy.context, ["Ground"], dict(
+            method="sphere", tau=2.0, distance=0.0, mode="VERTEX", add_aov=True,
+            aov_name="BakedAO", show_proxies=False))
+    assert [a.name for a in first.aovs] == ["BakedAO"]
+    assert [a.name for a in second.aovs] == []
+    assert ATTR not in ground.data.attributes

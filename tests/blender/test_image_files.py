@@ -313,3 +313,26 @@ def test_a_file_whose_record_names_no_blend_file_needs_overwrite_once(tree):
         run_bake(bpy.context, ["Ground"], _texel(tree))
     run_bake(bpy.context, ["Ground"], _texel(tree, overwrite=True))
     run_bake(bpy.context, ["Ground"], _texel(tree, tau=3.0))  # now its own
+
+
+@pytest.mark.parametrize("fmt", ["EXR", "PNG"])
+def test_an_image_painted_in_blender_and_not_saved_is_refused_without_overwrite(tree, fmt):
+    """A re-bake reloads its image from the file: unsaved paint on it would go unasked."""
+    run_bake(bpy.context, ["Ground"], _texel(tree, image_format=fmt, wire_material=True))
+    img = bpy.data.images["Ground_CanopyAO"]
+    assert not img.is_dirty
+    path = bpy.path.abspath(img.filepath)
+    before = _bytes(path)
+    paint = np.full(len(img.pixels), 0.1, np.float32)
+    img.pixels.foreach_set(paint)
+    img.pixels.foreach_get(paint)  # as the image holds it (8 bits in a PNG's)
+    with pytest.raises(CanopyAOError, match="changes not saved"):
+        run_bake(bpy.context, ["Ground"], _texel(tree, image_format=fmt, wire_material=True,
+                                                 tau=3.0))
+    assert _bytes(path) == before
+    got = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(got)
+    assert np.abs(got - paint).max() < 1e-6  # the paint is still there
+    run_bake(bpy.context, ["Ground"], _texel(tree, image_format=fmt, wire_material=True,
+                                             tau=3.0, overwrite=True))
+    assert _bytes(path) != before and not img.is_dirty

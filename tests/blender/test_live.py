@@ -436,6 +436,26 @@ def test_frames_blender_cannot_show_or_a_cache_that_would_not_fit_are_refused(an
     assert all(not o.modifiers for o in animated.objects)
 
 
+def test_a_users_modifier_named_like_the_frame_cache_is_left_alone(animated):
+    """A geometry-nodes modifier of the user's called "Canopy AO Frames": a frame-range bake
+    is refused (it repointed the modifier at its own group), Clear Frame Cache keeps it (it
+    removed it), and live AO is not blocked by it."""
+    ground = animated.objects["Ground"]
+    group = bpy.data.node_groups.new("UserNodes", "GeometryNodeTree")
+    mod = ground.modifiers.new(frames.MODIFIER, 'NODES')
+    mod.node_group = group
+    mod.show_viewport = mod.show_render = False  # an empty group: the mesh as it is
+    with pytest.raises(CanopyAOError, match="not Canopy AO's frame cache"):
+        frames.FrameBake(bpy.context, list(NAMES), opts(), 1, 3).run()
+    assert mod.node_group == group
+    assert all(not any(a.name.startswith("CanopyAO_") for a in animated.objects[n].data.attributes)
+               for n in NAMES)
+    ground.select_set(True)
+    assert bpy.ops.canopy_ao.clear_frames() == {'FINISHED'}
+    assert ground.modifiers.get(mod.name) is not None and mod.node_group == group
+    ground.modifiers.remove(mod)
+
+
 def test_the_command_line_bakes_frames_and_renders_with_live_ao(animated, tmp_path,
                                                                  user_scripts):
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))

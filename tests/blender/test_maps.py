@@ -109,6 +109,44 @@ def test_channel_into_a_float_and_a_byte_image_keeps_the_other_channels(tree):
     assert ground.name  # the object itself is untouched by packing
 
 
+@pytest.mark.parametrize("packed", [False, True], ids=["generated", "packed"])
+def test_an_image_without_a_file_keeps_its_packed_channel_through_a_save(tree, packed,
+                                                                          monkeypatch):
+    """A .blend keeps a generated image's recipe and a packed one's packed bytes, not the
+    pixels: the bake packs the new pixels, so a save and reload show the AO, not the old
+    pixels; a failed bake leaves the packed bytes as they were."""
+    from canopy_ao.blender import job as job_mod
+    res = 32
+    img = bpy.data.images.new("ORM", res, res, alpha=True)
+    img.use_fake_user = True
+    vals = np.tile(np.array([0.2, 0.6, 0.4, 1.0], np.float32), res * res)
+    img.pixels.foreach_set(vals)
+    if packed:
+        img.pack()
+        old = bytes(img.packed_file.data)
+
+        def broken(self, rep):
+            raise RuntimeError("boom")
+        with monkeypatch.context() as m:
+            m.setattr(job_mod.BakeJob, "_result_texts", broken)
+            with pytest.raises(RuntimeError, match="boom"):
+                run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res,
+                                                       channel="R", pack_image="ORM"))
+        assert bytes(img.packed_file.data) == old
+    run_bake(bpy.context, ["Ground"], opts(mode='TEXEL', resolution=res, channel="R",
+                                           pack_image="ORM"))
+    baked = np.empty(res * res * 4, np.float32)
+    img.pixels.foreach_get(baked)
+    assert baked[0::4].min() < 0.9  # the crown shades the ground
+    path = os.path.join(tree["image_dir"], "packed.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    got = np.empty(res * res * 4, np.float32)
+    bpy.data.images["ORM"].pixels.foreach_get(got)
+    assert np.abs(got - baked).max() < 1e-6  # AO in R, the other channels as they were
+    assert np.abs(got[1::4] - 0.6).max() < 0.5 / 255 + 1e-6
+
+
 def test_refusals_before_anything_is_written(tree):
     for name in ("", "CanopyAO", "BakedAO"):  # no name, the AO's attribute, the AO's AOV
         with pytest.raises(CanopyAOError, match="a name of its own"):

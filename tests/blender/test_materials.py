@@ -197,3 +197,91 @@ def test_an_unbaked_object_sharing_the_material_keeps_its_colour(scene, tmp_path
     px = np.array(img.pixels[:]).reshape(50, 100, 4)
     assert px[25, 25, :3] == pytest.approx([0.5] * 3, abs=0.01)  # the baked one: its AO
     assert px[25, 75, :3] == pytest.approx([1.0] * 3, abs=0.01)  # the other: unshaded
+
+
+def test_a_node_the_user_duplicated_from_ours_is_theirs(scene):
+    """Shift+D copies a node's custom properties, our tag too: the user's copy of our attribute
+    node (feeding Roughness here) survives wiring again and Remove Wiring."""
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    nt = mat.node_tree
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    src = _source(mat)[0]
+    copy = nt.nodes.new("ShaderNodeVertexColor")
+    for key in src.keys():
+        copy[key] = src[key]
+    copy.layer_name = "CanopyAO"
+    nt.links.new(copy.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Roughness"])
+    assert materials.wire_vertex_ao(obj, "CanopyAO") == 0
+    assert copy.name in nt.nodes
+    assert materials.unwire(obj) == 4
+    assert copy.name in nt.nodes and copy.outputs["Color"].is_linked
+
+
+def test_every_shader_behind_a_mix_shader_gets_the_ao(scene):
+    """A foliage material mixes Principled and Translucent (through a reroute here): the AO
+    multiplies both colours, and Remove Wiring gives the material back as it was."""
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    nt = mat.node_tree
+    principled, out = nt.nodes["Principled BSDF"], nt.nodes["Material Output"]
+    mix, trans = nt.nodes.new("ShaderNodeMixShader"), nt.nodes.new("ShaderNodeBsdfTranslucent")
+    reroute = nt.nodes.new("NodeReroute")
+    nt.links.new(principled.outputs[0], mix.inputs[1])
+    nt.links.new(trans.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], reroute.inputs[0])
+    nt.links.new(reroute.outputs[0], out.inputs["Surface"])
+    before = H.tree_snapshot(mat)
+    assert materials.wire_vertex_ao(obj, "CanopyAO") == 5  # attribute, where baked, 2 × mix, AOV
+    for sock in (principled.inputs["Base Color"], trans.inputs["Color"]):
+        assert sock.is_linked and sock.links[0].from_node.get("canopy_ao") == "mix"
+    assert materials.wire_vertex_ao(obj, "CanopyAO") == 0
+    assert materials.unwire(obj) == 5
+    assert H.tree_snapshot(mat) == before
+
+
+def test_a_material_with_no_shader_colour_is_named_in_the_report(scene):
+    """A surface shader with no colour input (a node group without one here) gets the AOV
+    only: the bake's notes say so, naming the material, where it is silent otherwise."""
+    from canopy_ao.blender import properties
+    from canopy_ao.blender.job import run_bake
+    obj = H.add_plane(name="Ground")
+    obj.canopy_ao.role = 'GROUND'
+    mat = H.add_material(obj, name="Grouped")
+    nt = mat.node_tree
+    group = bpy.data.node_groups.new("Look", "ShaderNodeTree")
+    if hasattr(group, "interface"):  # 4.0+
+        group.interface.new_socket("Shader", in_out='OUTPUT', socket_type="NodeSocketShader")
+    else:
+        group.outputs.new("NodeSocketShader", "Shader")
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    assert materials.without_colour(obj) == ["Grouped"]
+    opts = dict(properties.scene_options(bpy.context.scene), method="sphere", tau=2.0,
+                distance=0.0, show_proxies=False, wire_material=True)
+    _job, rep = run_bake(bpy.context, ["Ground"], opts)
+    assert any("'Grouped' has no surface shader colour" in n for n in rep["notes"]), rep["notes"]
+    nt.links.new(nt.nodes["Principled BSDF"].outputs[0],
+                 nt.nodes["Material Output"].inputs["Surface"])
+    assert materials.without_colour(obj) == []  # a colour to multiply into
+
+
+def test_shaders_behind_an_eevee_and_a_cycles_output_both_get_the_ao(scene):
+    """A material with one Material Output per engine: Cycles renders its own output's shader,
+    Eevee the other's; both multiply the AO, and unwire restores the material."""
+    obj = H.add_plane()
+    mat = H.add_material(obj)
+    nt = mat.node_tree
+    out = nt.nodes["Material Output"]
+    out.target = 'EEVEE'
+    cycles_out = nt.nodes.new("ShaderNodeOutputMaterial")
+    cycles_out.target = 'CYCLES'
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    nt.links.new(diffuse.outputs[0], cycles_out.inputs["Surface"])
+    before = H.tree_snapshot(mat)
+    materials.wire_vertex_ao(obj, "CanopyAO")
+    for sock in (nt.nodes["Principled BSDF"].inputs["Base Color"], diffuse.inputs["Color"]):
+        assert sock.is_linked and sock.links[0].from_node.get("canopy_ao") == "mix"
+    materials.unwire(obj)
+    assert H.tree_snapshot(mat) == before

@@ -42,6 +42,19 @@ def test_inputs_from_folders_globs_files_and_manifest_in_order_once(tree):
     assert plan.expand_inputs(plan.read_manifest(manifest)) == [c, a, b]
 
 
+def test_a_folder_named_like_a_blend_file_is_no_input(tree):
+    """A folder `x.blend` beside the files (an unpacked asset, say) is not baked: a Blender
+    started on it could only fail, twice with the retry."""
+    tmp, (a, b, c) = tree
+    d = str(tmp / "in")
+    os.makedirs(os.path.join(d, "folder.blend"))
+    os.makedirs(os.path.join(d, "sub", "deep", "more.blend"))
+    assert plan.expand_inputs([d]) == [a]
+    assert plan.expand_inputs([os.path.join(d, "**", "*.blend")]) == [a, b, c]
+    with pytest.raises(plan.BatchError, match="no .blend file matches"):
+        plan.expand_inputs([os.path.join(d, "fold*.blend")])
+
+
 @pytest.mark.parametrize("entry, message", [
     ("missing.blend", "no such file"), ("*.nothing", "no .blend file matches"),
     ("in/notes.txt", "is not a .blend"), ("empty", "has no .blend file")])
@@ -76,6 +89,25 @@ def test_outputs_never_overwrite_sources_unless_in_place(tree):
         plan.check_outputs(files, root, str(tmp), in_place=False)
     plan.check_outputs(files, root, root, in_place=True)
     plan.check_outputs(files, root, str(tmp / "out"), in_place=False)
+
+
+def test_a_file_at_an_output_path_that_no_report_claims_is_never_replaced(tree):
+    """--output pointing at a folder that already holds a file of that name (the user's own,
+    or another source's copy): refused before any Blender starts; the batch's own copy, whose
+    report names its source, is replaced by a rerun."""
+    tmp, (a, b, c) = tree
+    root, out = str(tmp / "in"), str(tmp / "out")
+    theirs = _touch(os.path.join(out, "sub", "b.blend"), "the user's")
+    with pytest.raises(plan.BatchError, match="not a batch's copy of .*b.blend"):
+        plan.check_outputs([a, b, c], root, out, False)
+    plan.write_report(plan.failed_report(c, theirs, [], 1, "x"), plan.report_path(b, root, out))
+    with pytest.raises(plan.BatchError, match="not a batch's copy"):  # another source's report
+        plan.check_outputs([a, b, c], root, out, False)
+    plan.write_report(plan.failed_report(b, theirs, [], 1, "x"), plan.report_path(b, root, out))
+    plan.check_outputs([a, b, c], root, out, False)
+    plan.check_outputs([a, b, c], root, out, True)  # in place: the sources are the outputs
+    with open(theirs) as f:
+        assert f.read() == "the user's"
 
 
 def test_reserved_bake_options_are_refused():

@@ -57,11 +57,14 @@ def expand_inputs(entries: list[str]) -> list[str]:
     found, seen = [], set()
     for entry in entries:
         if glob.has_magic(entry):
-            paths = sorted(p for p in glob.glob(entry, recursive=True) if p.endswith(".blend"))
+            # A folder named *.blend is no file to open (each Blender would fail on it).
+            paths = sorted(p for p in glob.glob(entry, recursive=True)
+                           if p.endswith(".blend") and os.path.isfile(p))
             if not paths:
                 raise BatchError(f"no .blend file matches {entry}")
         elif os.path.isdir(entry):
-            paths = sorted(glob.glob(os.path.join(glob.escape(entry), "*.blend")))
+            paths = sorted(p for p in glob.glob(os.path.join(glob.escape(entry), "*.blend"))
+                           if os.path.isfile(p))
             if not paths:
                 raise BatchError(f"the folder {entry} has no .blend file")
         elif os.path.isfile(entry):
@@ -111,6 +114,16 @@ def check_outputs(sources: list[str], root: str, out_dir: str, in_place: bool) -
         if not in_place and os.path.realpath(s).startswith(out_real + os.sep):
             raise BatchError(f"{s} is inside the output folder {out_dir}; keep inputs and "
                              "outputs apart")
+        output = output_path(s, root, out_dir, in_place)
+        if not in_place and os.path.lexists(output):
+            # Every copy the batch saves has a report naming its source first (worker.py): a
+            # file without one is someone else's, never replaced unasked.
+            rep = read_report(report_path(s, root, out_dir))
+            if rep is None or os.path.realpath(str(rep.get("source", ""))) != \
+                    os.path.realpath(s):
+                raise BatchError(f"{output} already exists and is not a batch's copy of {s} "
+                                 "(no report of it beside); move it away or choose another "
+                                 "--output")
 
 
 # === Options

@@ -153,6 +153,7 @@ def _record_failure(p, source, attempts, outcome, log):
     rep = plan.read_report(report)
     key = plan.options_key(p["bake_args"], p["in_place"])
     fresh = (rep is not None and rep.get("status") == "failed" and rep.get("options") == key
+             and not rep.get("started")  # the worker's note before the copy: no reason yet
              and os.path.getmtime(report) >= os.path.getmtime(log))
     if not fresh:
         tail = _log_tail(log)

@@ -73,6 +73,9 @@ def bake_one(source, args, bake_args, key):
             bpy.ops.wm.open_mainfile(filepath=source, load_ui=False)
         if not args.in_place:
             os.makedirs(os.path.dirname(output), exist_ok=True)
+            # The report first: a copy left by a Blender killed mid-bake is still known as
+            # the batch's own (plan.check_outputs), and the rerun replaces it.
+            plan.write_report(dict(rep, error="stopped before it finished", started=True), report)
             bpy.ops.wm.save_as_mainfile(filepath=output, relative_remap=True)
             saved_copy = True
         cli_args = cli.build_parser().parse_args(

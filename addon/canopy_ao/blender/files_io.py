@@ -222,10 +222,27 @@ def _read_record(path):
     return rec if pixels == rec["pixels"] else None
 
 
+def _edited_image(path):
+    """The Blender image showing the file path with changes not saved to it (painted in
+    Texture Paint, say), or None: a bake reloads its image from the file and they would go."""
+    key = os.path.normcase(os.path.realpath(path))
+    for img in bpy.data.images:
+        if (img.source == 'FILE' and img.packed_file is None and img.is_dirty and img.filepath
+                and os.path.normcase(os.path.realpath(bpy.path.abspath(
+                    img.filepath, library=img.library))) == key):
+            return img
+    return None
+
+
 def check_file(path, output, overwrite=False):
     """None when a bake may write path for output (an Output): no file there, Overwrite, or
-    Canopy AO's own unchanged file of that same output written from this .blend; else the
-    reason it may not."""
+    Canopy AO's own unchanged file of that same output written from this .blend, not edited in
+    Blender since; else the reason it may not."""
+    edited = None if overwrite else _edited_image(path)
+    if edited is not None:
+        return (f"the image '{edited.name}' shows '{path}' with changes not saved to it (painted "
+                "in Blender?); tick Overwrite to replace them by the bake, or choose another "
+                "Image Folder")
     if not os.path.lexists(path) or (overwrite and not os.path.isdir(path)):
         return None
     if os.path.isdir(path):

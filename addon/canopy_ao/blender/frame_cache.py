@@ -13,6 +13,7 @@ socket's order is not the order its links were made in).
 import bpy
 
 from . import mesh_io
+from ..core.native import CanopyAOError
 
 MODIFIER = "Canopy AO Frames"
 GROUP_TAG = "canopy_ao_frames"  # the node group's custom property: the attribute it reads
@@ -62,8 +63,29 @@ def node_group(attribute, start, end, txn):
     return ng
 
 
+def cache_modifier(obj):
+    """obj's frame-cache modifier: the one named MODIFIER whose node group is ours, or None. A
+    modifier of the user's that has that name is theirs: never repointed nor removed."""
+    mod = obj.modifiers.get(MODIFIER)
+    if (mod is not None and mod.type == 'NODES' and mod.node_group is not None
+            and mod.node_group.get(GROUP_TAG) is not None):
+        return mod
+    return None
+
+
+def check_modifier(obj):
+    """Why obj cannot take a frame cache (a modifier of the user's has its name), or None."""
+    if obj.modifiers.get(MODIFIER) is not None and cache_modifier(obj) is None:
+        return (f"{obj.name}: its modifier '{MODIFIER}' is not Canopy AO's frame cache; "
+                "rename it to bake frames")
+    return None
+
+
 def attach(obj, group, txn):
     """Point obj's "Canopy AO Frames" modifier (added last if missing) at ``group``."""
+    why = check_modifier(obj)
+    if why:
+        raise CanopyAOError(why)
     mod = obj.modifiers.get(MODIFIER)
     if mod is None:
         mod = obj.modifiers.new(MODIFIER, 'NODES')
@@ -77,7 +99,7 @@ def attach(obj, group, txn):
 def clear(obj):
     """Remove obj's frame cache: its modifier and every ``<attribute>_<frame>`` attribute
     Canopy AO made for the attribute the modifier reads. Returns the attributes removed."""
-    mod = obj.modifiers.get(MODIFIER)
+    mod = cache_modifier(obj)
     if mod is None:
         return 0
     group = mod.node_group

@@ -13,7 +13,9 @@ import bpy
 
 from . import gather, live_session, mesh_io
 from .commit import Transaction
-from .frame_cache import GROUP_TAG, MODIFIER, attach, cache_name, clear, node_group
+# MODIFIER: re-exported for callers and tests.
+from .frame_cache import (GROUP_TAG, MODIFIER, attach, cache_modifier,  # noqa: F401
+                          cache_name, check_modifier, clear, node_group)
 from .job import BakeJob
 from .modal import start_modal
 from ..core import texel_budget
@@ -89,6 +91,9 @@ class FrameBake:
                                 "available; bake a shorter range (nothing was changed)")
         for name in self.session.targets:
             obj = self.scene.objects[name]
+            why = check_modifier(obj)
+            if why:
+                raise CanopyAOError(why + " (nothing was changed)")
             for n in [o["attribute"]] + [cache_name(o["attribute"], f) for f in self.frames]:
                 why = mesh_io.check_attribute(obj, n, o["overwrite"])
                 if why:
@@ -251,7 +256,7 @@ class CANOPY_AO_OT_clear_frames(bpy.types.Operator):
 
     def execute(self, context):
         obs = [o for o in (context.selected_objects or context.scene.objects)
-               if o.type == 'MESH' and o.modifiers.get(MODIFIER) is not None]
+               if o.type == 'MESH' and cache_modifier(o) is not None]
         removed = sum(clear(o) for o in obs)
         self.report({'INFO'}, f"Canopy AO: removed {removed} cached frame(s) from "
                               f"{len(obs)} object(s)")

@@ -55,7 +55,7 @@ def check(obj):
                 return (f"material '{mat.name}' of '{obj.name}': its node group "
                         f"'{node.node_tree.name}' has no Occlusion input for the glTF exporter")
             for link in sock.links:
-                if link.from_node.get(materials.TAG) is None:
+                if not materials.is_ours(link.from_node):
                     return (f"material '{mat.name}' of '{obj.name}': node '{node.name}' already "
                             f"feeds its Occlusion from '{link.from_node.name}'; unlink it to "
                             "export the baked AO (nothing was changed)")

@@ -194,10 +194,12 @@ class BakeJob:
             extra = self.kind.write_all(self.targets, txn, o, last=attributes_only,
                                         checked=self.blocking)
             self.prototypes.commit(txn, o, skip={t.item.name for t in self.targets})
-            if o["add_aov"]:
-                if not any(a.name == o["aov_name"] for vl in self.scene.view_layers
-                           for a in vl.aovs):
-                    txn.add(lambda: materials.remove_view_layer_aov(self.scene, o["aov_name"]))
+            if o["add_aov"]:  # undone only on the view layers that lacked it
+                lacking = [vl.name for vl in self.scene.view_layers
+                           if not any(a.name == o["aov_name"] for a in vl.aovs)]
+                if lacking:
+                    txn.add(lambda: materials.remove_view_layer_aov(
+                        self.scene, o["aov_name"], lacking))
                 materials.ensure_view_layer_aov(self.scene, o["aov_name"])
             t0 = self._lap("write", t0)
             if rep is None:
@@ -249,6 +251,12 @@ class BakeJob:
         if o["channel"] != "RGBA" and o["wire_material"]:
             rep["notes"].append(f"the AO went into channel {o['channel']} only, so it was not "
                                 "multiplied into the materials (a packed map is for engines)")
+        elif o["wire_material"]:
+            for t in self.targets:
+                for name in materials.without_colour(t.obj):
+                    rep["notes"].append(
+                        f"{t.obj.name}: material '{name}' has no surface shader colour to "
+                        f"multiply the AO into (it reaches only the AOV '{o['aov_name']}')")
         rep["instances"] = instances.report(self.prototypes, self.how)
         for t in self.targets:
             e = rep["objects"][t.item.name]

@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from . import live_render, mesh_io
-from .frame_cache import MODIFIER
+from .frame_cache import MODIFIER, cache_modifier
 from .live_render import is_render
 from .loop import Loop
 from .vertex_target import VertexTarget
@@ -40,7 +40,7 @@ def check_job(job):
     """Refuse, before its commit, a prepared live bake that cannot run live: what auto chose
     may be the grid or rays, and a frame cache's read-back would hide the live attribute."""
     core_live.check_method(job.plan.method, core.rung(job.settings.method).chooses)
-    cached = [t.obj.name for t in job.targets if t.obj.modifiers.get(MODIFIER) is not None]
+    cached = [t.obj.name for t in job.targets if cache_modifier(t.obj) is not None]
     if cached:
         raise CanopyAOError(f"{', '.join(cached)}: a frame cache ('{MODIFIER}' modifier) would "
                             "hide live AO; clear it first (Clear Frame Cache)")

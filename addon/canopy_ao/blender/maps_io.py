@@ -92,7 +92,7 @@ def pack_image_channel(image, img, channel, txn):
     """Write img (float32 (H, W), row 0 = bottom) into channel 'R', 'G', 'B' or 'A' of a
     Blender image of the same size; the other channels keep their values (a byte image's
     unchanged bytes write back as themselves). Recorded in txn: undo puts the old pixels back
-    (and the image's file, when it is saved to one)."""
+    (and the image's file, when it is saved to one, or its packed bytes)."""
     from .atomic_io import keep_file, replace_file
     w, h = image.size
     c = channel_index(channel)
@@ -102,10 +102,20 @@ def pack_image_channel(image, img, channel, txn):
     buf = np.empty(w * h * image.channels, np.float32)
     image.pixels.foreach_get(buf)
     old = buf.copy()
+    # The .blend saves a packed image's packed bytes and a generated one's recipe, not its
+    # pixels: such an image is packed with the new pixels (Blender packs a changed image's),
+    # else a save and reload bring back the old ones (a generated image becomes a packed one).
+    repack = image.source == 'GENERATED' or (image.source == 'FILE'
+                                             and image.packed_file is not None)
+    old_packed = bytes(image.packed_file.data) if image.packed_file is not None else None
 
     def undo():
         image.pixels.foreach_set(old)
         image.update()
+        if old_packed is not None:
+            image.pack(data=old_packed, data_len=len(old_packed))
+        elif repack:  # a generated image stays packed, with its old pixels
+            image.pack()
     txn.add(undo)
     buf[c::image.channels] = (np.clip(img, 0.0, 1.0) if not image.is_float else img).ravel()
     image.pixels.foreach_set(buf)
@@ -122,6 +132,8 @@ def pack_image_channel(image, img, channel, txn):
             finally:
                 image.filepath_raw = raw
         replace_file(path, save)
+    elif repack:
+        image.pack()
     return image
 
 

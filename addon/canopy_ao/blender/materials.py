@@ -11,8 +11,9 @@ Base Color), "aov" (AOV Output).
 """
 import bpy
 
-__all__ = ["wire_vertex_ao", "wire_texel_ao", "unwire", "ensure_view_layer_aov",
-           "remove_view_layer_aov", "check_aov_name", "RESERVED_PASS_NAMES"]
+__all__ = ["wire_vertex_ao", "wire_texel_ao", "unwire", "without_colour",
+           "ensure_view_layer_aov", "remove_view_layer_aov", "check_aov_name",
+           "RESERVED_PASS_NAMES"]
 
 TAG = "canopy_ao"
 # Material the add-on creates for an object that has none; marked so unwire can delete it.
@@ -61,13 +62,24 @@ def check_aov_name(aov_name):
 
 # === Node helpers
 
+def is_ours(node):
+    """True for a node wire_* added. A node the user duplicated from ours (Shift+D copies its
+    custom properties) has another name than the one recorded, and is the user's to keep. The
+    name is read from the node's path: in 3.4 an AOV Output's `name` is the AOV it writes."""
+    if node.get(TAG) is None:
+        return False
+    path = node.path_from_id()
+    return node.get(TAG + "_node", path) == path
+
+
 def _ours(nt, role):
-    return [n for n in nt.nodes if n.get(TAG) == role]
+    return [n for n in nt.nodes if n.get(TAG) == role and is_ours(n)]
 
 
 def _new(nt, bl_idname, role, label, location):
     node = nt.nodes.new(bl_idname)
     node[TAG] = role
+    node[TAG + "_node"] = node.path_from_id()
     node.label = label
     node.location = location
     return node
@@ -85,20 +97,46 @@ def _output_node(nt):
     return outs[0] if outs else None
 
 
-def _base_color_socket(nt):
-    """The surface shader's color input we multiply AO into, or None."""
-    out = _output_node(nt)
-    if out is None:
-        return None
-    surf = out.inputs.get("Surface")
-    if surf is None or not surf.is_linked:
-        return None
-    shader = surf.links[0].from_node
-    for name in _BASE_COLOR_INPUTS:
-        sock = shader.inputs.get(name)
-        if sock is not None and sock.type == "RGBA":
-            return sock
-    return None
+# Nodes that pass shaders through: the wiring looks behind them (a foliage material is often
+# Principled and Translucent mixed) for every shader's colour.
+_PASS_THROUGH = {"NodeReroute": (0,), "ShaderNodeMixShader": (1, 2), "ShaderNodeAddShader": (0, 1)}
+
+
+def _base_color_sockets(nt):
+    """The colour inputs of the surface shaders we multiply AO into (maybe none), behind every
+    Material Output: one for Eevee and one for Cycles each render their own."""
+    found, todo, seen = [], [], set()
+    for out in nt.nodes:
+        if out.bl_idname == "ShaderNodeOutputMaterial" and "Surface" in out.inputs:
+            todo.extend(out.inputs["Surface"].links)
+    while todo:
+        node = todo.pop(0).from_node
+        if node.name in seen:
+            continue
+        seen.add(node.name)
+        if node.bl_idname in _PASS_THROUGH:
+            for i in _PASS_THROUGH[node.bl_idname]:
+                todo.extend(node.inputs[i].links)
+            continue
+        sock = next((node.inputs.get(name) for name in _BASE_COLOR_INPUTS
+                     if node.inputs.get(name) is not None
+                     and node.inputs.get(name).type == "RGBA"), None)
+        if sock is not None:
+            found.append(sock)
+    return found
+
+
+def without_colour(obj):
+    """Names of obj's node materials with no surface shader colour to multiply the AO into
+    (nor a multiply of ours): wiring gives them the AOV only."""
+    names = []
+    for slot in obj.material_slots:
+        mat = slot.material
+        if (mat is not None and mat.node_tree is not None and uses_nodes(mat)
+                and mat.name not in names and not _ours(mat.node_tree, "mix")
+                and not _base_color_sockets(mat.node_tree)):
+            names.append(mat.name)
+    return names
 
 
 def _mix_sockets(node):
@@ -242,22 +280,21 @@ def _wire_material(mat, make_source, source_kind, aov_name, uv_map=None):
         _link_once(nt, uv.outputs["UV"], src.inputs["Vector"])
 
     # Multiply into the surface shader's Base Color, where there is one.
+    # One multiply per shader colour on the first wiring; later ones reuse what is left of ours
+    # (a multiply the user unplugged stays unplugged).
     mixes = _ours(nt, "mix")
-    target = _base_color_socket(nt)
-    if mixes:
-        mix = mixes[0]
-    elif target is not None:
-        mix = _new_mix(nt, (x0 - 500, y0 - 100))
-        added += 1
-        a, _b, r = _mix_sockets(mix)
-        if target.is_linked:
-            nt.links.new(target.links[0].from_socket, a)
-        else:
-            a.default_value = target.default_value
-        nt.links.new(r, target)
-    else:
-        mix = None
-    if mix is not None:
+    if not mixes:
+        for i, target in enumerate(_base_color_sockets(nt)):
+            mix = _new_mix(nt, (x0 - 500, y0 - 100 + 220 * i))
+            added += 1
+            a, _b, r = _mix_sockets(mix)
+            if target.is_linked:
+                nt.links.new(target.links[0].from_socket, a)
+            else:
+                a.default_value = target.default_value
+            nt.links.new(r, target)
+            mixes.append(mix)
+    for mix in mixes:
         _a, b, _r = _mix_sockets(mix)
         _link_once(nt, color_out, b)
 
@@ -324,7 +361,7 @@ def _unwire_material(mat):
         if original is not None:
             for t in targets:
                 nt.links.new(original, t)
-    for node in [n for n in nt.nodes if n.get(TAG) is not None]:
+    for node in [n for n in nt.nodes if is_ours(n)]:
         nt.nodes.remove(node)
         removed += 1
     if mat.get(TAG + "_enabled_nodes"):
@@ -393,10 +430,13 @@ def ensure_view_layer_aov(scene, aov_name, aov_type="VALUE", view_layer=None):
     return result
 
 
-def remove_view_layer_aov(scene, aov_name):
-    """Remove the view-layer AOV named aov_name from every view layer. Returns how many."""
+def remove_view_layer_aov(scene, aov_name, view_layers=None):
+    """Remove the view-layer AOV named aov_name from every view layer (or those named in
+    view_layers). Returns how many."""
     n = 0
     for vl in scene.view_layers:
+        if view_layers is not None and vl.name not in view_layers:
+            continue
         while True:
             idx = next((i for i, a in enumerate(vl.aovs) if a.name == aov_name), None)
             if idx is None:

@@ -150,6 +150,6 @@ def check_wiring(obj, opts):
 def wire_undo(txn, obj):
     """Before wiring obj's materials: when none has our nodes yet, undoing unwires them."""
     mats = [s.material for s in obj.material_slots if s.material is not None]
-    if not any(n.get(materials.TAG) for m in mats if m.node_tree for n in m.node_tree.nodes):
+    if not any(materials.is_ours(n) for m in mats if m.node_tree for n in m.node_tree.nodes):
         txn.add(lambda: materials.unwire(obj))
 
